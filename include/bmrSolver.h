@@ -1,0 +1,139 @@
+// Total Lagrangian explicit dynamics (TLED) solver: one set of force kernels,
+// two integrators (time-accurate central difference, adaptive dynamic relaxation).
+#ifndef bmrSolver_h
+#define bmrSolver_h
+
+#include "bmrModel.h"
+
+#include <Eigen/Core>
+
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace bmr
+{
+
+enum class Integrator
+{
+  DynamicRelaxation, // steady state (Joldes, Wittek, Miller 2009, 2011)
+  ExplicitDynamics   // time-accurate central difference
+};
+
+enum class TetrahedronFormulation
+{
+  AverageNodalPressure, // non-locking ANP (Joldes et al. 2009/2010), default
+  Linear                // plain constant-strain tetrahedron, for comparison
+};
+
+struct SolverSettings
+{
+  Integrator             integrator = Integrator::DynamicRelaxation;
+  TetrahedronFormulation tetrahedron = TetrahedronFormulation::AverageNodalPressure;
+
+  /** Flanagan-Belytschko hourglass coefficient k of the one-point hexahedron:
+   *  hourglass stiffness k (lambda + 2 mu) V (B:B) / 8 per element. */
+  double hourglassCoefficient = 0.075;
+
+  /** Fraction of the critical time step actually used. */
+  double timeStepSafetyFactor = 0.8;
+  /** Explicit dynamics: time step in s; 0 = automatic (critical step x safety). */
+  double timeStep = 0.0;
+  /** Explicit dynamics: end time in s. */
+  double endTime = 1.0;
+  /** Explicit dynamics: mass-proportional damping coefficient in 1/s. */
+  double dampingCoefficient = 0.0;
+
+  /** Dynamic relaxation: steps over which loads are ramped (smooth ramp). */
+  int loadSteps = 200;
+  /** Dynamic relaxation: stop when the estimated distance to the solution
+   *  (max nodal displacement error, mm) is below this. */
+  double tolerance = 1e-3;
+  /** Dynamic relaxation: step limit; at the limit the result is marked not converged. */
+  int maxSteps = 100000;
+  /** Dynamic relaxation: steps between updates of the lowest-eigenvalue estimate. */
+  int adaptInterval = 20;
+
+  /** Compute Cauchy stress per cell at the end. */
+  bool computeStress = false;
+
+  /** Worker threads (OpenMP); 0 = OpenMP default. Results do not depend on it. */
+  int threads = 0;
+};
+
+/** Progress report: fraction done in [0,1] (explicit dynamics) or -1 when
+ *  unknown, and the current estimated error (mm) for dynamic relaxation. */
+using ProgressCallback = std::function<void(int step, double fraction, double estimatedError)>;
+
+struct SolveResult
+{
+  std::vector<Vector3>         displacements;  // mm, per node
+  std::vector<Vector3>         reactionForces; // N, per node; nonzero only at constrained or contacting nodes
+  std::vector<Eigen::Matrix3d> cauchyStress;   // Pa, per cell, only if SolverSettings::computeStress
+
+  bool        converged = false; // explicit dynamics: reached end time
+  int         steps = 0;
+  double      timeStep = 0.0;         // s (explicit) or pseudo-time step (dynamic relaxation)
+  double      criticalTimeStep = 0.0; // s, physical density, before the safety factor
+  double      estimatedError = 0.0;   // mm, dynamic relaxation
+  double      convergenceRate = 0.0;  // dynamic relaxation: estimated spectral radius per step
+  double      wallSeconds = 0.0;
+  double      maxDisplacement = 0.0;  // mm
+  double      strainEnergy = 0.0;     // J (N*m)
+  double      hourglassEnergy = 0.0;  // J, hexahedra only
+  double      kineticEnergy = 0.0;    // J, explicit dynamics
+  int         contactNodes = 0;       // nodes on a contact surface at the end
+  double      maxPenetration = 0.0;   // mm, after the last projection
+  std::vector<std::string> activeComponents;
+  std::string message; // why it stopped
+};
+
+/** Thrown when a solve fails (inverted element, NaN, unbounded energy). */
+class SolveError : public Error
+{
+public:
+  SolveError(const std::string & what, int step, Index element)
+    : Error(what)
+    , m_Step(step)
+    , m_Element(element)
+  {}
+  int   Step() const { return m_Step; }
+  Index Element() const { return m_Element; }
+
+private:
+  int   m_Step;
+  Index m_Element;
+};
+
+/** Precomputes everything the Total Lagrangian formulation allows (shape
+ *  function derivatives, volumes, hourglass vectors, masses, contact trees) on
+ *  construction; Solve() then only time-steps. Validates the model first. */
+class Solver
+{
+public:
+  Solver(const Model & model, const SolverSettings & settings);
+  ~Solver();
+  Solver(const Solver &) = delete;
+  Solver & operator=(const Solver &) = delete;
+
+  SolveResult Solve(const ProgressCallback & progress = {});
+
+  /** Components built for this model (e.g. "hexahedra", "hourglass-control",
+   *  "anp-tetrahedra", "contact", "dynamic-relaxation"). */
+  const std::vector<std::string> & ActiveComponents() const;
+
+  /** Critical time step (s) for the model's physical densities, before the safety factor. */
+  double CriticalTimeStep() const;
+
+  /** Internal nodal forces (N) for given nodal displacements (mm); for tests. */
+  std::vector<Vector3> InternalForces(const std::vector<Vector3> & displacements);
+
+private:
+  struct Impl;
+  std::unique_ptr<Impl> m_Impl;
+};
+
+} // namespace bmr
+
+#endif

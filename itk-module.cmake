@@ -1,0 +1,17 @@
+# ITK remote module description: read by ITK's module system when this folder
+# sits in ITK's Modules/Remote.
+get_filename_component(MY_CURRENT_DIR "${CMAKE_CURRENT_LIST_FILE}" PATH)
+file(READ "${MY_CURRENT_DIR}/README.md" DOCUMENTATION)
+
+itk_module(BiomechanicalRegistration
+  DEPENDS
+    ITKCommon
+    ITKIOImageBase
+    ITKMesh
+  TEST_DEPENDS
+    ITKTestKernel
+  DESCRIPTION
+    "${DOCUMENTATION}"
+  EXCLUDE_FROM_DEFAULT
+  ENABLE_SHARED
+)
