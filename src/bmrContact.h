@@ -1,0 +1,46 @@
+// Frictionless rigid contact with separation (Joldes et al., MICCAI 2009):
+// after each step, slave nodes that crossed the rigid master surface are moved
+// to its closest point. No penalty parameters. Private to the core.
+#ifndef bmrContact_h
+#define bmrContact_h
+
+#include "bmrModel.h"
+
+#include <memory>
+#include <vector>
+
+namespace bmr
+{
+
+class RigidContact
+{
+public:
+  /** Builds the AABB tree and pseudo-normals. Closed surfaces are oriented
+   *  outward; open ones keep their orientation (normals point outside). */
+  RigidContact(const ContactSurface & surface, std::vector<Index> slaveNodes, const std::vector<Vector3> & reference);
+  ~RigidContact();
+  RigidContact(const RigidContact &) = delete;
+  RigidContact & operator=(const RigidContact &) = delete;
+
+  /** Moves penetrating slave nodes (u: 3 per node, mm) onto the surface and
+   *  marks them in `inContact`. Nodes whose `skip` flag is set are left alone. */
+  void Enforce(double * u, const std::vector<char> & skip, std::vector<char> & inContact, int threads);
+
+  /** Largest penetration (mm) of any slave node at displacements u. */
+  double MaxPenetration(const double * u) const;
+
+  bool IsClosed() const;
+  const std::vector<Index> & SlaveNodes() const { return m_SlaveNodes; }
+
+private:
+  struct Tree;
+  std::unique_ptr<Tree>  m_Tree;
+  std::vector<Index>     m_SlaveNodes;
+  std::vector<Vector3>   m_Reference;     // reference positions of slave nodes
+  std::vector<Vector3>   m_LastQueried;   // position at the last exact query
+  std::vector<double>    m_SafeDistance;  // distance to the surface at that query (allowed side), else 0
+};
+
+} // namespace bmr
+
+#endif

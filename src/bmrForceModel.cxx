@@ -1,0 +1,655 @@
+#include "bmrForceModel.h"
+
+#include "bmrShape.h"
+#include "bmrUnits.h"
+
+#include <Eigen/Dense>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <set>
+
+namespace bmr
+{
+
+namespace
+{
+
+// Cofactor matrix cof(F) = J F^-T, columns from cross products of F's columns.
+inline Eigen::Matrix3d
+Cofactor(const Eigen::Matrix3d & F)
+{
+  Eigen::Matrix3d cof;
+  cof.col(0) = F.col(1).cross(F.col(2));
+  cof.col(1) = F.col(2).cross(F.col(0));
+  cof.col(2) = F.col(0).cross(F.col(1));
+  return cof;
+}
+
+// First Piola-Kirchhoff stress of the compressible neo-Hookean solid,
+// W = mu/2 (J^-2/3 I1 - 3) + kappa/2 (J - 1)^2. The volumetric part takes the
+// dilatation `volumeRatio` (the element's own J, or the averaged nodal J of the
+// ANP tetrahedron); the isochoric part always uses the element's F.
+inline Eigen::Matrix3d
+FirstPiola(const Eigen::Matrix3d & F, const Eigen::Matrix3d & cof, double J, double volumeRatio, double mu, double kappa)
+{
+  const double cubeRoot = std::cbrt(J);
+  const double isochoricFactor = mu / (cubeRoot * cubeRoot);
+  const double I1 = F.squaredNorm();
+  return isochoricFactor * F + (kappa * (volumeRatio - 1.0) - isochoricFactor * I1 / (3.0 * J)) * cof;
+}
+
+inline double
+StrainEnergyDensity(const Eigen::Matrix3d & F, double J, double volumeRatio, double mu, double kappa)
+{
+  const double cubeRoot = std::cbrt(J);
+  return 0.5 * mu * (F.squaredNorm() / (cubeRoot * cubeRoot) - 3.0) +
+         0.5 * kappa * (volumeRatio - 1.0) * (volumeRatio - 1.0);
+}
+
+template <int N>
+inline Eigen::Matrix3d
+DeformationGradient(const double * u, const std::array<Index, N> & nodes, const double * B)
+{
+  Eigen::Matrix3d F = Eigen::Matrix3d::Identity();
+  for (int a = 0; a < N; ++a)
+  {
+    const double * ua = u + 3 * static_cast<std::size_t>(nodes[a]);
+    const double * Ba = B + 3 * a;
+    for (int i = 0; i < 3; ++i)
+    {
+      for (int j = 0; j < 3; ++j)
+      {
+        F(i, j) += ua[i] * Ba[j];
+      }
+    }
+  }
+  return F;
+}
+
+// f_a = V0 P B_a for the N nodes of a cell, written to its slots.
+template <int N>
+inline void
+NodalForces(const Eigen::Matrix3d & P, double volume, const double * B, double * slots)
+{
+  const Eigen::Matrix3d VP = volume * P;
+  for (int a = 0; a < N; ++a)
+  {
+    const double * Ba = B + 3 * a;
+    for (int i = 0; i < 3; ++i)
+    {
+      slots[3 * a + i] = VP(i, 0) * Ba[0] + VP(i, 1) * Ba[1] + VP(i, 2) * Ba[2];
+    }
+  }
+}
+
+using TriangleKey = std::array<Index, 3>;
+
+TriangleKey
+SortedTriangle(Index a, Index b, Index c)
+{
+  TriangleKey key{ a, b, c };
+  std::sort(key.begin(), key.end());
+  return key;
+}
+
+// Faces of all tetrahedra, to find hexahedron faces that meet tetrahedra.
+std::set<TriangleKey>
+TetrahedronFaces(const Model & model)
+{
+  std::set<TriangleKey> faces;
+  for (const Cell & cell : model.cells)
+  {
+    if (cell.type == CellType::Tetrahedron)
+    {
+      const auto & n = cell.nodes;
+      faces.insert(SortedTriangle(n[0], n[1], n[2]));
+      faces.insert(SortedTriangle(n[0], n[1], n[3]));
+      faces.insert(SortedTriangle(n[0], n[2], n[3]));
+      faces.insert(SortedTriangle(n[1], n[2], n[3]));
+    }
+  }
+  return faces;
+}
+
+// b_a = integral of dN_a/dX over the hexahedron = integral of N_a n over its
+// boundary. A face shared with two tetrahedra is integrated as those two
+// triangles instead of as a bilinear quad, so that the hexahedron and its
+// tetrahedral neighbours see the same face: mixed meshes then pass the patch
+// test without pyramid transition cells.
+void
+UseTetrahedronFacesOfHexahedron(const std::array<Index, 8> & nodes,
+                                const HexahedronCoordinates & x,
+                                const std::set<TriangleKey> & tetFaces,
+                                HexahedronIntegralsResult &   integrals)
+{
+  static constexpr int faces[6][4] = { { 0, 3, 2, 1 }, { 4, 5, 6, 7 }, { 0, 1, 5, 4 },
+                                       { 1, 2, 6, 5 }, { 2, 3, 7, 6 }, { 3, 0, 4, 7 } };
+  bool changed = false;
+  for (const auto & face : faces)
+  {
+    const Index n0 = nodes[face[0]], n1 = nodes[face[1]], n2 = nodes[face[2]], n3 = nodes[face[3]];
+    int         diagonal = -1; // 0: triangles (0,1,2),(0,2,3); 1: (0,1,3),(1,2,3)
+    if (tetFaces.count(SortedTriangle(n0, n1, n2)) && tetFaces.count(SortedTriangle(n0, n2, n3)))
+    {
+      diagonal = 0;
+    }
+    else if (tetFaces.count(SortedTriangle(n0, n1, n3)) && tetFaces.count(SortedTriangle(n1, n2, n3)))
+    {
+      diagonal = 1;
+    }
+    if (diagonal < 0)
+    {
+      continue;
+    }
+    changed = true;
+    // Remove the bilinear face integral (2x2 Gauss is exact for it) ...
+    const double g = 1.0 / std::sqrt(3.0);
+    for (const double r : { -g, g })
+    {
+      for (const double s : { -g, g })
+      {
+        const double  shape[4] = { 0.25 * (1 - r) * (1 - s), 0.25 * (1 + r) * (1 - s), 0.25 * (1 + r) * (1 + s),
+                                   0.25 * (1 - r) * (1 + s) };
+        Eigen::Vector3d dxdr = Eigen::Vector3d::Zero(), dxds = Eigen::Vector3d::Zero();
+        const double    dr[4] = { -(1 - s), (1 - s), (1 + s), -(1 + s) };
+        const double    ds[4] = { -(1 - r), -(1 + r), (1 + r), (1 - r) };
+        for (int k = 0; k < 4; ++k)
+        {
+          dxdr += 0.25 * dr[k] * x.row(face[k]).transpose();
+          dxds += 0.25 * ds[k] * x.row(face[k]).transpose();
+        }
+        const Eigen::Vector3d normalArea = dxdr.cross(dxds);
+        for (int k = 0; k < 4; ++k)
+        {
+          integrals.b.row(face[k]) -= shape[k] * normalArea.transpose();
+        }
+      }
+    }
+    // ... and add the two triangles' integrals (a third of the area vector per corner).
+    const int triangles[2][2][3] = { { { 0, 1, 2 }, { 0, 2, 3 } }, { { 0, 1, 3 }, { 1, 2, 3 } } };
+    for (const auto & triangle : triangles[diagonal])
+    {
+      const Eigen::Vector3d a = x.row(face[triangle[0]]).transpose();
+      const Eigen::Vector3d areaVector =
+        0.5 * (x.row(face[triangle[1]]).transpose() - a).cross(x.row(face[triangle[2]]).transpose() - a);
+      for (const int k : triangle)
+      {
+        integrals.b.row(face[k]) += areaVector.transpose() / 3.0;
+      }
+    }
+  }
+  if (changed)
+  {
+    // Volume of the polyhedron with those faces, consistent with b: sum_a X_a b_a^T = V I.
+    integrals.volume = (x.transpose() * integrals.b).trace() / 3.0;
+  }
+}
+
+} // namespace
+
+ForceModel::ForceModel(const Model & model, const SolverSettings & settings, int threads)
+  : m_Threads(std::max(1, threads))
+  , m_NodeCount(static_cast<Index>(model.nodes.size()))
+  , m_AverageNodalPressure(settings.tetrahedron == TetrahedronFormulation::AverageNodalPressure)
+{
+  for (Index c = 0; c < static_cast<Index>(model.cells.size()); ++c)
+  {
+    if (model.cells[c].type == CellType::Hexahedron)
+    {
+      m_ModelCell.push_back(c);
+    }
+  }
+  for (Index c = 0; c < static_cast<Index>(model.cells.size()); ++c)
+  {
+    if (model.cells[c].type == CellType::Tetrahedron)
+    {
+      m_ModelCell.push_back(c);
+    }
+  }
+  const std::size_t cellCount = m_ModelCell.size();
+  m_Volume.resize(cellCount);
+  m_Mu.resize(cellCount);
+  m_Kappa.resize(cellCount);
+  m_Density.resize(cellCount);
+  m_WaveBound.resize(cellCount);
+
+  const auto & hourglassBase = [] {
+    // Hourglass base vectors xi2 xi3, xi3 xi1, xi1 xi2, xi1 xi2 xi3 at the nodes.
+    Eigen::Matrix<double, 8, 4> h;
+    const auto &                xi = HexahedronNaturalCoordinates();
+    for (int a = 0; a < 8; ++a)
+    {
+      h(a, 0) = xi(a, 1) * xi(a, 2);
+      h(a, 1) = xi(a, 2) * xi(a, 0);
+      h(a, 2) = xi(a, 0) * xi(a, 1);
+      h(a, 3) = xi(a, 0) * xi(a, 1) * xi(a, 2);
+    }
+    return h;
+  }();
+
+  const std::set<TriangleKey> tetFaces = m_ModelCell.empty() || model.cells[m_ModelCell.front()].type != CellType::Hexahedron
+                                           ? std::set<TriangleKey>{}
+                                           : TetrahedronFaces(model);
+  for (std::size_t k = 0; k < cellCount; ++k)
+  {
+    const Cell &     cell = model.cells[m_ModelCell[k]];
+    const Material & material = model.materials[cell.material];
+    const double     mu = material.ShearModulus() * units::PascalToInternal;
+    const double     kappa = material.BulkModulus() * units::PascalToInternal;
+    const double     pWaveModulus = kappa + 4.0 * mu / 3.0; // lambda + 2 mu
+    m_Mu[k] = mu;
+    m_Kappa[k] = kappa;
+    m_Density[k] = material.density * units::DensityToInternal;
+
+    if (cell.type == CellType::Hexahedron)
+    {
+      HexahedronCoordinates x;
+      std::array<Index, 8>  nodes;
+      for (int a = 0; a < 8; ++a)
+      {
+        nodes[a] = cell.nodes[a];
+        x.row(a) = model.nodes[nodes[a]].transpose();
+      }
+      HexahedronIntegralsResult integrals = HexahedronIntegrals(x);
+      if (!tetFaces.empty())
+      {
+        UseTetrahedronFacesOfHexahedron(nodes, x, tetFaces, integrals);
+      }
+      const HexahedronGradients       B = integrals.b / integrals.volume;
+      // Flanagan-Belytschko hourglass shape vectors: orthogonal to every linear field.
+      const Eigen::Matrix<double, 8, 4> gamma = hourglassBase - B * (x.transpose() * hourglassBase);
+      const double                      BB = B.squaredNorm();
+      const double stiffness = settings.hourglassCoefficient * pWaveModulus * integrals.volume * BB / 8.0;
+      const double gammaNorm = (gamma.transpose() * gamma).selfadjointView<Eigen::Lower>().eigenvalues().maxCoeff();
+
+      m_HexNodes.push_back(nodes);
+      for (int a = 0; a < 8; ++a)
+      {
+        for (int j = 0; j < 3; ++j)
+        {
+          m_HexB.push_back(B(a, j));
+        }
+        for (int alpha = 0; alpha < 4; ++alpha)
+        {
+          m_HexGamma.push_back(gamma(a, alpha));
+        }
+      }
+      m_HexHourglassStiffness.push_back(stiffness);
+      m_Volume[k] = integrals.volume;
+      m_WaveBound[k] = 8.0 * BB * (1.0 + settings.hourglassCoefficient * gammaNorm / 8.0);
+    }
+    else
+    {
+      TetrahedronCoordinates x;
+      std::array<Index, 4>   nodes;
+      for (int a = 0; a < 4; ++a)
+      {
+        nodes[a] = cell.nodes[a];
+        x.row(a) = model.nodes[nodes[a]].transpose();
+      }
+      const TetrahedronGradients B = TetrahedronShapeGradients(x);
+      m_TetNodes.push_back(nodes);
+      for (int a = 0; a < 4; ++a)
+      {
+        for (int j = 0; j < 3; ++j)
+        {
+          m_TetB.push_back(B(a, j));
+        }
+      }
+      m_Volume[k] = TetrahedronVolume(model.nodes[nodes[0]], model.nodes[nodes[1]], model.nodes[nodes[2]], model.nodes[nodes[3]]);
+      m_WaveBound[k] = 4.0 * B.squaredNorm();
+    }
+    // Largest eigenvalue of the cell's stiffness over its lumped mass is at most
+    // (lambda + 2 mu) / rho * q (Rayleigh bound); stored here without the density.
+    m_WaveBound[k] *= pWaveModulus;
+  }
+
+  // Node -> slot incidence (counting sort keeps slots ascending per node).
+  const Index hexCount = HexahedronCount();
+  const Index slotCount = 8 * hexCount + 4 * TetrahedronCount();
+  m_SlotForces.assign(3 * static_cast<std::size_t>(slotCount), 0.0);
+  m_NodeSlotOffsets.assign(m_NodeCount + 1, 0);
+  auto slotNode = [&](Index slot) -> Index {
+    return slot < 8 * hexCount ? m_HexNodes[slot / 8][slot % 8] : m_TetNodes[(slot - 8 * hexCount) / 4][(slot - 8 * hexCount) % 4];
+  };
+  for (Index s = 0; s < slotCount; ++s)
+  {
+    ++m_NodeSlotOffsets[slotNode(s) + 1];
+  }
+  for (Index n = 0; n < m_NodeCount; ++n)
+  {
+    m_NodeSlotOffsets[n + 1] += m_NodeSlotOffsets[n];
+  }
+  m_NodeSlots.resize(slotCount);
+  {
+    std::vector<Index> fill(m_NodeSlotOffsets.begin(), m_NodeSlotOffsets.end() - 1);
+    for (Index s = 0; s < slotCount; ++s)
+    {
+      m_NodeSlots[fill[slotNode(s)]++] = s;
+    }
+  }
+
+  if (UsesAverageNodalPressure())
+  {
+    const Index tetCount = TetrahedronCount();
+    m_TetJacobian.assign(tetCount, 1.0);
+    m_NodalJacobian.assign(m_NodeCount, 1.0);
+    m_NodeTetOffsets.assign(m_NodeCount + 1, 0);
+    for (const auto & nodes : m_TetNodes)
+    {
+      for (const Index n : nodes)
+      {
+        ++m_NodeTetOffsets[n + 1];
+      }
+    }
+    for (Index n = 0; n < m_NodeCount; ++n)
+    {
+      m_NodeTetOffsets[n + 1] += m_NodeTetOffsets[n];
+    }
+    m_NodeTets.resize(m_NodeTetOffsets.back());
+    m_NodeTetWeights.resize(m_NodeTetOffsets.back());
+    std::vector<Index>  fill(m_NodeTetOffsets.begin(), m_NodeTetOffsets.end() - 1);
+    std::vector<double> nodalVolume(m_NodeCount, 0.0);
+    for (Index t = 0; t < tetCount; ++t)
+    {
+      for (const Index n : m_TetNodes[t])
+      {
+        m_NodeTets[fill[n]++] = t;
+        nodalVolume[n] += m_Volume[hexCount + t];
+      }
+    }
+    for (Index n = 0; n < m_NodeCount; ++n)
+    {
+      for (Index k = m_NodeTetOffsets[n]; k < m_NodeTetOffsets[n + 1]; ++k)
+      {
+        m_NodeTetWeights[k] = m_Volume[hexCount + m_NodeTets[k]] / nodalVolume[n];
+      }
+    }
+  }
+}
+
+Index
+ForceModel::ComputeInternalForces(const double * u, double * f)
+{
+  const Index hexCount = HexahedronCount();
+  const Index tetCount = TetrahedronCount();
+  const bool  anp = UsesAverageNodalPressure();
+  Index       firstInverted = std::numeric_limits<Index>::max();
+  double *    slots = m_SlotForces.data();
+
+#pragma omp parallel num_threads(m_Threads) reduction(min : firstInverted)
+  {
+#pragma omp for schedule(static) nowait
+    for (Index e = 0; e < hexCount; ++e)
+    {
+      const auto &          nodes = m_HexNodes[e];
+      const double *        B = &m_HexB[24 * static_cast<std::size_t>(e)];
+      const Eigen::Matrix3d F = DeformationGradient<8>(u, nodes, B);
+      const Eigen::Matrix3d cof = Cofactor(F);
+      const double          J = F.col(0).dot(cof.col(0));
+      if (!(J > 0.0))
+      {
+        firstInverted = std::min(firstInverted, e);
+        continue;
+      }
+      double * cellSlots = slots + 24 * static_cast<std::size_t>(e);
+      NodalForces<8>(FirstPiola(F, cof, J, J, m_Mu[e], m_Kappa[e]), m_Volume[e], B, cellSlots);
+
+      // Hourglass forces k Gamma (Gamma^T u): hourglass modes only, zero for linear fields.
+      const double * gamma = &m_HexGamma[32 * static_cast<std::size_t>(e)];
+      double         modes[4][3] = {};
+      for (int a = 0; a < 8; ++a)
+      {
+        const double * ua = u + 3 * static_cast<std::size_t>(nodes[a]);
+        for (int alpha = 0; alpha < 4; ++alpha)
+        {
+          const double g = gamma[4 * a + alpha];
+          modes[alpha][0] += g * ua[0];
+          modes[alpha][1] += g * ua[1];
+          modes[alpha][2] += g * ua[2];
+        }
+      }
+      const double k = m_HexHourglassStiffness[e];
+      for (int a = 0; a < 8; ++a)
+      {
+        for (int i = 0; i < 3; ++i)
+        {
+          const double hourglass = gamma[4 * a] * modes[0][i] + gamma[4 * a + 1] * modes[1][i] +
+                                   gamma[4 * a + 2] * modes[2][i] + gamma[4 * a + 3] * modes[3][i];
+          cellSlots[3 * a + i] += k * hourglass;
+        }
+      }
+    }
+
+    if (anp)
+    {
+      // Pass 1: element dilatations; pass 2: volume-weighted nodal averages.
+#pragma omp for schedule(static)
+      for (Index t = 0; t < tetCount; ++t)
+      {
+        m_TetJacobian[t] = DeformationGradient<4>(u, m_TetNodes[t], &m_TetB[12 * static_cast<std::size_t>(t)]).determinant();
+      }
+#pragma omp for schedule(static)
+      for (Index n = 0; n < m_NodeCount; ++n)
+      {
+        double J = 0.0;
+        for (Index k = m_NodeTetOffsets[n]; k < m_NodeTetOffsets[n + 1]; ++k)
+        {
+          J += m_NodeTetWeights[k] * m_TetJacobian[m_NodeTets[k]];
+        }
+        m_NodalJacobian[n] = J;
+      }
+    }
+
+#pragma omp for schedule(static)
+    for (Index t = 0; t < tetCount; ++t)
+    {
+      const auto &          nodes = m_TetNodes[t];
+      const double *        B = &m_TetB[12 * static_cast<std::size_t>(t)];
+      const Eigen::Matrix3d F = DeformationGradient<4>(u, nodes, B);
+      const Eigen::Matrix3d cof = Cofactor(F);
+      const double          J = F.col(0).dot(cof.col(0));
+      if (!(J > 0.0))
+      {
+        firstInverted = std::min(firstInverted, hexCount + t);
+        continue;
+      }
+      // Average nodal pressure: the dilatation is the mean of the nodal averages,
+      // so pressure stays continuous across cells (and across material interfaces,
+      // since J, not pressure, is averaged).
+      const double volumeRatio =
+        anp ? 0.25 * (m_NodalJacobian[nodes[0]] + m_NodalJacobian[nodes[1]] + m_NodalJacobian[nodes[2]] +
+                      m_NodalJacobian[nodes[3]])
+            : J;
+      const Index k = hexCount + t;
+      NodalForces<4>(FirstPiola(F, cof, J, volumeRatio, m_Mu[k], m_Kappa[k]), m_Volume[k], B,
+                     slots + 3 * (8 * static_cast<std::size_t>(hexCount) + 4 * static_cast<std::size_t>(t)));
+    }
+
+#pragma omp for schedule(static)
+    for (Index n = 0; n < m_NodeCount; ++n)
+    {
+      double fx = 0.0, fy = 0.0, fz = 0.0;
+      for (Index k = m_NodeSlotOffsets[n]; k < m_NodeSlotOffsets[n + 1]; ++k)
+      {
+        const double * s = slots + 3 * static_cast<std::size_t>(m_NodeSlots[k]);
+        fx += s[0];
+        fy += s[1];
+        fz += s[2];
+      }
+      f[3 * n] = fx;
+      f[3 * n + 1] = fy;
+      f[3 * n + 2] = fz;
+    }
+  }
+  return firstInverted == std::numeric_limits<Index>::max() ? Index{ -1 } : m_ModelCell[firstInverted];
+}
+
+std::vector<double>
+ForceModel::LumpedMasses() const
+{
+  std::vector<double> masses(m_NodeCount, 0.0);
+  auto                add = [&](Index k, const Index * nodes, int count) {
+    const double share = m_Density[k] * m_Volume[k] / count;
+    for (int a = 0; a < count; ++a)
+    {
+      masses[nodes[a]] += share;
+    }
+  };
+  for (Index e = 0; e < HexahedronCount(); ++e)
+  {
+    add(e, m_HexNodes[e].data(), 8);
+  }
+  for (Index t = 0; t < TetrahedronCount(); ++t)
+  {
+    add(HexahedronCount() + t, m_TetNodes[t].data(), 4);
+  }
+  return masses;
+}
+
+std::vector<double>
+ForceModel::ScaledMasses(double timeStep, double safety) const
+{
+  // Critical step 2 / sqrt(q M / rho) = timeStep / safety  =>  rho = q M (timeStep / safety)^2 / 4.
+  const double        factor = 0.25 * (timeStep / safety) * (timeStep / safety);
+  std::vector<double> masses(m_NodeCount, 0.0);
+  auto                add = [&](Index k, const Index * nodes, int count) {
+    const double share = factor * m_WaveBound[k] * m_Volume[k] / count;
+    for (int a = 0; a < count; ++a)
+    {
+      masses[nodes[a]] += share;
+    }
+  };
+  for (Index e = 0; e < HexahedronCount(); ++e)
+  {
+    add(e, m_HexNodes[e].data(), 8);
+  }
+  for (Index t = 0; t < TetrahedronCount(); ++t)
+  {
+    add(HexahedronCount() + t, m_TetNodes[t].data(), 4);
+  }
+  return masses;
+}
+
+double
+ForceModel::CriticalTimeStep(Index * cell) const
+{
+  double smallest = std::numeric_limits<double>::infinity();
+  Index  where = -1;
+  for (std::size_t k = 0; k < m_Volume.size(); ++k)
+  {
+    const double step = 2.0 / std::sqrt(m_WaveBound[k] / m_Density[k]);
+    if (step < smallest)
+    {
+      smallest = step;
+      where = m_ModelCell[k];
+    }
+  }
+  if (cell)
+  {
+    *cell = where;
+  }
+  return smallest;
+}
+
+Energies
+ForceModel::ComputeEnergies(const double * u) const
+{
+  Energies    energies;
+  const Index hexCount = HexahedronCount();
+  for (Index e = 0; e < hexCount; ++e)
+  {
+    const double *        B = &m_HexB[24 * static_cast<std::size_t>(e)];
+    const Eigen::Matrix3d F = DeformationGradient<8>(u, m_HexNodes[e], B);
+    const double          J = F.determinant();
+    energies.strain += m_Volume[e] * StrainEnergyDensity(F, J, J, m_Mu[e], m_Kappa[e]);
+    const double * gamma = &m_HexGamma[32 * static_cast<std::size_t>(e)];
+    for (int alpha = 0; alpha < 4; ++alpha)
+    {
+      Eigen::Vector3d mode = Eigen::Vector3d::Zero();
+      for (int a = 0; a < 8; ++a)
+      {
+        mode += gamma[4 * a + alpha] * Eigen::Vector3d(u + 3 * static_cast<std::size_t>(m_HexNodes[e][a]));
+      }
+      energies.hourglass += 0.5 * m_HexHourglassStiffness[e] * mode.squaredNorm();
+    }
+  }
+  // Nodal dilatations recomputed here so this stays const and independent of the last force call.
+  std::vector<double> tetJ(TetrahedronCount());
+  for (Index t = 0; t < TetrahedronCount(); ++t)
+  {
+    tetJ[t] = DeformationGradient<4>(u, m_TetNodes[t], &m_TetB[12 * static_cast<std::size_t>(t)]).determinant();
+  }
+  std::vector<double> nodalJ;
+  if (UsesAverageNodalPressure())
+  {
+    nodalJ.assign(m_NodeCount, 0.0);
+    for (Index n = 0; n < m_NodeCount; ++n)
+    {
+      for (Index k = m_NodeTetOffsets[n]; k < m_NodeTetOffsets[n + 1]; ++k)
+      {
+        nodalJ[n] += m_NodeTetWeights[k] * tetJ[m_NodeTets[k]];
+      }
+    }
+  }
+  for (Index t = 0; t < TetrahedronCount(); ++t)
+  {
+    const auto &          nodes = m_TetNodes[t];
+    const Eigen::Matrix3d F = DeformationGradient<4>(u, nodes, &m_TetB[12 * static_cast<std::size_t>(t)]);
+    const double          volumeRatio =
+      nodalJ.empty() ? tetJ[t] : 0.25 * (nodalJ[nodes[0]] + nodalJ[nodes[1]] + nodalJ[nodes[2]] + nodalJ[nodes[3]]);
+    const Index k = hexCount + t;
+    energies.strain += m_Volume[k] * StrainEnergyDensity(F, tetJ[t], volumeRatio, m_Mu[k], m_Kappa[k]);
+  }
+  energies.strain += energies.hourglass;
+  return energies;
+}
+
+std::vector<Eigen::Matrix3d>
+ForceModel::CauchyStress(const double * u) const
+{
+  std::vector<Eigen::Matrix3d> stress(m_ModelCell.size());
+  const Index                  hexCount = HexahedronCount();
+  std::vector<double>          nodalJ;
+  if (UsesAverageNodalPressure())
+  {
+    nodalJ.assign(m_NodeCount, 0.0);
+    for (Index n = 0; n < m_NodeCount; ++n)
+    {
+      for (Index k = m_NodeTetOffsets[n]; k < m_NodeTetOffsets[n + 1]; ++k)
+      {
+        const Index t = m_NodeTets[k];
+        nodalJ[n] += m_NodeTetWeights[k] *
+                     DeformationGradient<4>(u, m_TetNodes[t], &m_TetB[12 * static_cast<std::size_t>(t)]).determinant();
+      }
+    }
+  }
+  for (std::size_t k = 0; k < m_ModelCell.size(); ++k)
+  {
+    const Index     index = static_cast<Index>(k);
+    Eigen::Matrix3d F;
+    double          volumeRatio = 0.0;
+    if (index < hexCount)
+    {
+      F = DeformationGradient<8>(u, m_HexNodes[index], &m_HexB[24 * k]);
+      volumeRatio = F.determinant();
+    }
+    else
+    {
+      const Index t = index - hexCount;
+      const auto &nodes = m_TetNodes[t];
+      F = DeformationGradient<4>(u, nodes, &m_TetB[12 * static_cast<std::size_t>(t)]);
+      volumeRatio = nodalJ.empty() ? F.determinant()
+                                   : 0.25 * (nodalJ[nodes[0]] + nodalJ[nodes[1]] + nodalJ[nodes[2]] + nodalJ[nodes[3]]);
+    }
+    const Eigen::Matrix3d cof = Cofactor(F);
+    const double          J = F.col(0).dot(cof.col(0));
+    const Eigen::Matrix3d P = FirstPiola(F, cof, J, volumeRatio, m_Mu[k], m_Kappa[k]);
+    stress[m_ModelCell[k]] = (P * F.transpose() / J) * units::InternalToPascal;
+  }
+  return stress;
+}
+
+} // namespace bmr

@@ -1,0 +1,102 @@
+// Internal-force kernels of the Total Lagrangian formulation (private to the core).
+//
+// Everything that depends only on the reference configuration is computed once:
+// shape-function gradients, volumes, hourglass shape vectors and stiffnesses,
+// nodal volumes for the average-nodal-pressure tetrahedron, and the node-to-slot
+// incidence used to assemble forces without atomics (deterministic for any
+// thread count).
+#ifndef bmrForceModel_h
+#define bmrForceModel_h
+
+#include "bmrModel.h"
+#include "bmrSolver.h"
+
+#include <Eigen/Core>
+
+#include <vector>
+
+namespace bmr
+{
+
+struct Energies
+{
+  double strain = 0.0;    // N*mm, includes hourglass energy
+  double hourglass = 0.0; // N*mm
+};
+
+class ForceModel
+{
+public:
+  ForceModel(const Model & model, const SolverSettings & settings, int threads);
+
+  Index NodeCount() const { return m_NodeCount; }
+  Index HexahedronCount() const { return static_cast<Index>(m_HexNodes.size()); }
+  Index TetrahedronCount() const { return static_cast<Index>(m_TetNodes.size()); }
+  bool  UsesAverageNodalPressure() const { return m_AverageNodalPressure && !m_TetNodes.empty(); }
+
+  /** Internal forces f (3 per node, N) at displacements u (3 per node, mm).
+   *  Returns -1, or the smallest index of a cell whose Jacobian is not positive
+   *  (forces are then meaningless). */
+  Index ComputeInternalForces(const double * u, double * f);
+
+  /** Lumped nodal masses (t) of the physical densities. */
+  std::vector<double> LumpedMasses() const;
+
+  /** Lumped nodal masses chosen so that every cell's critical time step equals
+   *  timeStep / safety (mass scaling of dynamic relaxation). */
+  std::vector<double> ScaledMasses(double timeStep, double safety) const;
+
+  /** Smallest cell critical time step (s) for the physical densities, and its cell. */
+  double CriticalTimeStep(Index * cell = nullptr) const;
+
+  Energies ComputeEnergies(const double * u) const;
+
+  /** Cauchy stress per cell (Pa), cells in model order. */
+  std::vector<Eigen::Matrix3d> CauchyStress(const double * u) const;
+
+  /** Model cell index of the given kernel cell (hexahedra first, then tetrahedra). */
+  Index ModelCell(Index kernelCell) const { return m_ModelCell[kernelCell]; }
+
+private:
+  void Gather(double * f) const;
+
+  int   m_Threads;
+  Index m_NodeCount;
+  bool  m_AverageNodalPressure;
+
+  // Hexahedra: nodes, B = (1/V) integral dN/dX (8x3, row-major), hourglass
+  // shape vectors Gamma (8x4, row-major), stiffness per cell.
+  std::vector<std::array<Index, 8>> m_HexNodes;
+  std::vector<double>               m_HexB;
+  std::vector<double>               m_HexGamma;
+  std::vector<double>               m_HexHourglassStiffness; // N/mm
+
+  // Tetrahedra: nodes, dN/dX (4x3, row-major).
+  std::vector<std::array<Index, 4>> m_TetNodes;
+  std::vector<double>               m_TetB;
+  std::vector<double>               m_TetJacobian; // per step, ANP
+  std::vector<double>               m_NodalJacobian;
+  // Nodal averaging of J: per node, the tetrahedra around it and their weights V_e / sum V_e.
+  std::vector<Index>  m_NodeTetOffsets;
+  std::vector<Index>  m_NodeTets;
+  std::vector<double> m_NodeTetWeights;
+
+  // Per kernel cell (hexahedra first): reference volume, material constants
+  // (internal units), characteristic wave-number bound q = n B:B (1 + hourglass).
+  std::vector<double> m_Volume;
+  std::vector<double> m_Mu;
+  std::vector<double> m_Kappa;
+  std::vector<double> m_Density;
+  std::vector<double> m_WaveBound;
+  std::vector<Index>  m_ModelCell;
+
+  // Element force slots (3 doubles each; hexahedra 8 per cell, then tetrahedra 4)
+  // and, per node, the slots to sum in fixed order.
+  std::vector<double> m_SlotForces;
+  std::vector<Index>  m_NodeSlotOffsets;
+  std::vector<Index>  m_NodeSlots;
+};
+
+} // namespace bmr
+
+#endif

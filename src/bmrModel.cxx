@@ -1,0 +1,411 @@
+#include "bmrModel.h"
+
+#include "bmrShape.h"
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+#include <sstream>
+#include <unordered_map>
+
+namespace bmr
+{
+
+const char *
+CellTypeName(CellType type)
+{
+  return type == CellType::Hexahedron ? "hexahedron" : "tetrahedron";
+}
+
+double
+LoadCurve::Factor(double fraction) const
+{
+  const double s = std::clamp(fraction, 0.0, 1.0);
+  switch (shape)
+  {
+    case Shape::Step:
+      return 1.0;
+    case Shape::Linear:
+      return s;
+    case Shape::Smooth:
+      break;
+  }
+  // Quintic smoothstep: zero velocity and acceleration at both ends.
+  return s * s * s * (10.0 + s * (-15.0 + 6.0 * s));
+}
+
+const std::vector<Index> &
+Model::NodeSet(const std::string & name) const
+{
+  const auto found = nodeSets.find(name);
+  if (found == nodeSets.end())
+  {
+    std::ostringstream message;
+    message << "node set '" << name << "' does not exist; defined sets:";
+    for (const auto & set : nodeSets)
+    {
+      message << " '" << set.first << "'";
+    }
+    if (nodeSets.empty())
+    {
+      message << " none";
+    }
+    message << ". Define it in the scene's node_sets or use one of these names.";
+    throw Error(message.str());
+  }
+  return found->second;
+}
+
+double
+CellVolume(const Model & model, Index cellIndex)
+{
+  const Cell & cell = model.cells[cellIndex];
+  if (cell.type == CellType::Tetrahedron)
+  {
+    return TetrahedronVolume(model.nodes[cell.nodes[0]],
+                             model.nodes[cell.nodes[1]],
+                             model.nodes[cell.nodes[2]],
+                             model.nodes[cell.nodes[3]]);
+  }
+  HexahedronCoordinates x;
+  for (int a = 0; a < 8; ++a)
+  {
+    x.row(a) = model.nodes[cell.nodes[a]].transpose();
+  }
+  return HexahedronIntegrals(x).volume;
+}
+
+namespace
+{
+
+std::string
+CellLabel(const Model & model, Index cellIndex)
+{
+  std::ostringstream label;
+  label << CellTypeName(model.cells[cellIndex].type) << " cell " << cellIndex;
+  return label.str();
+}
+
+void
+CheckNodeIds(const Model & model, const std::vector<Index> & ids, const std::string & owner)
+{
+  const auto nodeCount = static_cast<Index>(model.nodes.size());
+  for (const Index id : ids)
+  {
+    if (id < 0 || id >= nodeCount)
+    {
+      std::ostringstream message;
+      message << owner << " refers to node " << id << ", but the mesh has nodes 0.." << nodeCount - 1
+              << ". Fix the node ids.";
+      throw Error(message.str());
+    }
+  }
+}
+
+void
+CheckCell(const Model & model, Index cellIndex, double lengthScale)
+{
+  const Cell & cell = model.cells[cellIndex];
+  if (cell.type != CellType::Hexahedron && cell.type != CellType::Tetrahedron)
+  {
+    throw Error(CellLabel(model, cellIndex) + " has an unknown cell type; supported: hexahedron, tetrahedron.");
+  }
+  const int  count = NodesPerCell(cell.type);
+  const auto nodeCount = static_cast<Index>(model.nodes.size());
+  for (int a = 0; a < count; ++a)
+  {
+    const Index node = cell.nodes[a];
+    if (node < 0 || node >= nodeCount)
+    {
+      std::ostringstream message;
+      message << CellLabel(model, cellIndex) << " refers to node " << node << ", but the mesh has nodes 0.."
+              << nodeCount - 1 << ". The mesh file is inconsistent.";
+      throw Error(message.str());
+    }
+    for (int b = 0; b < a; ++b)
+    {
+      if (cell.nodes[b] == node)
+      {
+        std::ostringstream message;
+        message << CellLabel(model, cellIndex) << " is degenerate: node " << node
+                << " appears twice. Remove or repair the cell.";
+        throw Error(message.str());
+      }
+    }
+  }
+  if (cell.material < 0 || cell.material >= static_cast<Index>(model.materials.size()))
+  {
+    std::ostringstream message;
+    message << CellLabel(model, cellIndex) << " has material index " << cell.material << ", but "
+            << model.materials.size() << " material(s) are defined. Add the material or fix the cell labels.";
+    throw Error(message.str());
+  }
+
+  // A cell is degenerate below a tiny fraction of a cube of the mesh's length scale.
+  const double degenerateVolume = 1e-12 * lengthScale * lengthScale * lengthScale;
+  double       worst = 0.0;
+  if (cell.type == CellType::Tetrahedron)
+  {
+    worst = CellVolume(model, cellIndex);
+  }
+  else
+  {
+    // The trilinear map must be orientation-preserving at every corner, not just on average.
+    HexahedronCoordinates x;
+    for (int a = 0; a < 8; ++a)
+    {
+      x.row(a) = model.nodes[cell.nodes[a]].transpose();
+    }
+    worst = HexahedronMinimumCornerJacobian(x) / 8.0; // a corner Jacobian is an eighth of the volume scale
+  }
+  if (!std::isfinite(worst) || std::abs(worst) <= degenerateVolume)
+  {
+    throw Error(CellLabel(model, cellIndex) +
+                " is degenerate (zero volume). Remove the cell or repair the mesh.");
+  }
+  if (worst < 0.0)
+  {
+    throw Error(CellLabel(model, cellIndex) +
+                " is inverted (negative volume or corner Jacobian). Check its node ordering (VTK convention) "
+                "or repair the mesh.");
+  }
+}
+
+} // namespace
+
+void
+Model::Validate() const
+{
+  if (nodes.empty() || cells.empty())
+  {
+    throw Error("the model has no nodes or no cells. Give a mesh with hexahedra or tetrahedra.");
+  }
+  Eigen::AlignedBox3d box;
+  for (std::size_t i = 0; i < nodes.size(); ++i)
+  {
+    if (!nodes[i].allFinite())
+    {
+      throw Error("node " + std::to_string(i) + " has a non-finite coordinate. Repair the mesh.");
+    }
+    box.extend(nodes[i]);
+  }
+  if (materials.empty())
+  {
+    throw Error("no material is defined. Add at least one material.");
+  }
+  for (std::size_t m = 0; m < materials.size(); ++m)
+  {
+    const Material & material = materials[m];
+    const std::string label = "material " + std::to_string(m) + (material.name.empty() ? "" : " ('" + material.name + "')");
+    if (!(material.youngsModulus > 0.0) || !std::isfinite(material.youngsModulus))
+    {
+      throw Error(label + " has Young's modulus " + std::to_string(material.youngsModulus) +
+                  " Pa; it must be positive.");
+    }
+    if (!(material.poissonRatio > -1.0 && material.poissonRatio < 0.5))
+    {
+      throw Error(label + " has Poisson's ratio " + std::to_string(material.poissonRatio) +
+                  "; it must lie in (-1, 0.5). Use 0.49 or 0.499 for nearly incompressible tissue.");
+    }
+    if (!(material.density > 0.0) || !std::isfinite(material.density))
+    {
+      throw Error(label + " has density " + std::to_string(material.density) + " kg/m^3; it must be positive.");
+    }
+  }
+  const double lengthScale = std::max(box.diagonal().norm(), 1e-300);
+  for (Index c = 0; c < static_cast<Index>(cells.size()); ++c)
+  {
+    CheckCell(*this, c, lengthScale);
+  }
+  for (const auto & set : nodeSets)
+  {
+    CheckNodeIds(*this, set.second, "node set '" + set.first + "'");
+  }
+  for (std::size_t i = 0; i < fixedConstraints.size(); ++i)
+  {
+    NodeSet(fixedConstraints[i].nodeSet); // throws naming the missing set
+  }
+  for (std::size_t i = 0; i < prescribedDisplacements.size(); ++i)
+  {
+    const PrescribedDisplacement & load = prescribedDisplacements[i];
+    const std::string              label = "prescribed displacement " + std::to_string(i);
+    if (load.nodes.size() != load.displacements.size())
+    {
+      throw Error(label + " has " + std::to_string(load.nodes.size()) + " nodes but " +
+                  std::to_string(load.displacements.size()) + " displacement vectors; give one per node.");
+    }
+    CheckNodeIds(*this, load.nodes, label);
+    for (std::size_t k = 0; k < load.displacements.size(); ++k)
+    {
+      if (!load.displacements[k].allFinite())
+      {
+        throw Error(label + " has a non-finite displacement at node " + std::to_string(load.nodes[k]) + ".");
+      }
+    }
+    if (load.curve.shape != LoadCurve::Shape::Step && !(load.curve.rampTime > 0.0))
+    {
+      throw Error(label + " has a ramp time of " + std::to_string(load.curve.rampTime) + " s; it must be positive.");
+    }
+  }
+  if (!bodyAcceleration.allFinite())
+  {
+    throw Error("the body acceleration (gravity) is not finite.");
+  }
+  for (const ContactSurface & surface : contactSurfaces)
+  {
+    const std::string label = "contact surface '" + surface.name + "'";
+    if (surface.vertices.empty() || surface.triangles.empty())
+    {
+      throw Error(label + " has no triangles. Give a triangulated surface (.stl, .vtk, .obj).");
+    }
+    for (std::size_t t = 0; t < surface.triangles.size(); ++t)
+    {
+      for (const Index v : surface.triangles[t])
+      {
+        if (v < 0 || v >= static_cast<Index>(surface.vertices.size()))
+        {
+          throw Error(label + " triangle " + std::to_string(t) + " refers to vertex " + std::to_string(v) +
+                      ", which does not exist.");
+        }
+      }
+    }
+    if (!surface.slaveNodeSet.empty())
+    {
+      NodeSet(surface.slaveNodeSet);
+    }
+  }
+}
+
+namespace
+{
+
+using Face = std::array<Index, 4>; // triangle faces use -1 as 4th entry
+
+// Outward faces in VTK ordering.
+constexpr int kHexFaces[6][4] = { { 0, 3, 2, 1 }, { 4, 5, 6, 7 }, { 0, 1, 5, 4 },
+                                  { 1, 2, 6, 5 }, { 2, 3, 7, 6 }, { 3, 0, 4, 7 } };
+constexpr int kTetFaces[4][3] = { { 0, 2, 1 }, { 0, 1, 3 }, { 1, 2, 3 }, { 0, 3, 2 } };
+
+struct FaceHash
+{
+  std::size_t operator()(const Face & f) const
+  {
+    std::size_t h = 1469598103934665603ull;
+    for (const Index i : f)
+    {
+      h = (h ^ static_cast<std::size_t>(i + 1)) * 1099511628211ull;
+    }
+    return h;
+  }
+};
+
+Face
+SortedKey(Face face, int count)
+{
+  std::sort(face.begin(), face.begin() + count);
+  return face;
+}
+
+// Boundary faces in outward orientation. A hexahedron quad that meets two
+// tetrahedron triangles (mixed meshes, either diagonal) is interior.
+std::vector<Face>
+BoundaryFaces(const Model & model)
+{
+  struct Entry
+  {
+    Face oriented;
+    int  count = 0;
+  };
+  std::unordered_map<Face, Entry, FaceHash> faces;
+  auto add = [&faces](const Face & oriented, int count) {
+    Entry & entry = faces[SortedKey(oriented, count)];
+    entry.oriented = oriented;
+    ++entry.count;
+  };
+  for (const Cell & cell : model.cells)
+  {
+    if (cell.type == CellType::Hexahedron)
+    {
+      for (const auto & f : kHexFaces)
+      {
+        add({ cell.nodes[f[0]], cell.nodes[f[1]], cell.nodes[f[2]], cell.nodes[f[3]] }, 4);
+      }
+    }
+    else
+    {
+      for (const auto & f : kTetFaces)
+      {
+        add({ cell.nodes[f[0]], cell.nodes[f[1]], cell.nodes[f[2]], -1 }, 3);
+      }
+    }
+  }
+  auto triangleKey = [](Index a, Index b, Index c) { return SortedKey({ a, b, c, -1 }, 3); };
+  for (auto & item : faces)
+  {
+    if (item.first[3] < 0 || item.second.count != 1)
+    {
+      continue;
+    }
+    const Face & q = item.second.oriented;
+    const Face   diagonals[2][2] = { { triangleKey(q[0], q[1], q[2]), triangleKey(q[0], q[2], q[3]) },
+                                     { triangleKey(q[0], q[1], q[3]), triangleKey(q[1], q[2], q[3]) } };
+    for (const auto & pair : diagonals)
+    {
+      auto first = faces.find(pair[0]);
+      auto second = faces.find(pair[1]);
+      if (first != faces.end() && second != faces.end() && first->second.count == 1 && second->second.count == 1)
+      {
+        first->second.count = second->second.count = item.second.count = 2;
+        break;
+      }
+    }
+  }
+  std::vector<Face> boundary;
+  for (const auto & item : faces)
+  {
+    if (item.second.count == 1)
+    {
+      boundary.push_back(item.second.oriented);
+    }
+  }
+  std::sort(boundary.begin(), boundary.end()); // deterministic order
+  return boundary;
+}
+
+} // namespace
+
+std::vector<Index>
+Model::BoundaryNodes() const
+{
+  std::set<Index> nodesOnBoundary;
+  for (const Face & face : BoundaryFaces(*this))
+  {
+    for (const Index i : face)
+    {
+      if (i >= 0)
+      {
+        nodesOnBoundary.insert(i);
+      }
+    }
+  }
+  return { nodesOnBoundary.begin(), nodesOnBoundary.end() };
+}
+
+std::vector<std::array<Index, 3>>
+Model::BoundaryTriangles() const
+{
+  std::vector<std::array<Index, 3>> triangles;
+  for (const Face & face : BoundaryFaces(*this))
+  {
+    triangles.push_back({ face[0], face[1], face[2] });
+    if (face[3] >= 0)
+    {
+      triangles.push_back({ face[0], face[2], face[3] });
+    }
+  }
+  return triangles;
+}
+
+} // namespace bmr

@@ -1,0 +1,659 @@
+#include "bmrSolver.h"
+
+#include "bmrContact.h"
+#include "bmrForceModel.h"
+#include "bmrUnits.h"
+
+#include <Eigen/Geometry>
+#include <omp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <deque>
+#include <limits>
+#include <sstream>
+
+namespace bmr
+{
+
+namespace
+{
+
+// Fixed block partition: sums do not depend on the number of threads.
+constexpr Index kReductionBlocks = 64;
+
+template <typename Term>
+double
+DeterministicSum(Index count, int threads, const Term & term)
+{
+  double partial[kReductionBlocks];
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (Index b = 0; b < kReductionBlocks; ++b)
+  {
+    const Index begin = static_cast<Index>(static_cast<std::int64_t>(count) * b / kReductionBlocks);
+    const Index end = static_cast<Index>(static_cast<std::int64_t>(count) * (b + 1) / kReductionBlocks);
+    double      sum = 0.0;
+    for (Index i = begin; i < end; ++i)
+    {
+      sum += term(i);
+    }
+    partial[b] = sum;
+  }
+  double total = 0.0;
+  for (const double p : partial)
+  {
+    total += p;
+  }
+  return total;
+}
+
+struct ConstrainedDof
+{
+  Index  dof;
+  double value; // mm at full load
+  int    curve; // index into the solver's curves; -1 for fixed (value 0)
+};
+
+std::string
+StepLabel(int step)
+{
+  return "step " + std::to_string(step);
+}
+
+} // namespace
+
+struct Solver::Impl
+{
+  Model                                      model;
+  SolverSettings                             settings;
+  int                                        threads = 1;
+  std::unique_ptr<ForceModel>                forces;
+  std::vector<std::unique_ptr<RigidContact>> contacts;
+  std::vector<double>                        physicalMass;
+  std::vector<ConstrainedDof>                constrained;
+  std::vector<LoadCurve>                     curves;
+  std::vector<char>                          dofConstrained;
+  std::vector<char>                          nodeConstrained;
+  std::vector<double>                        gravityForce; // N at full load
+  std::vector<std::string>                   components;
+  double                                     criticalTimeStep = 0.0;
+  Index                                      criticalCell = -1;
+  double                                     lengthScale = 1.0;
+
+  Impl(const Model & m, const SolverSettings & s);
+  void        CheckSettings() const;
+  void        BuildConstraints();
+  void        ApplyConstraints(double * u, const std::vector<double> & curveFactors) const;
+  void        EnforceContact(double * u, std::vector<char> & inContact);
+  void        CheckForces(Index inverted, int step, bool explicitDynamics, double timeStep) const;
+  void        CheckIncrement(const double * du, int step, bool explicitDynamics, double timeStep) const;
+  SolveResult Finish(const std::vector<double> & u, const std::vector<char> & inContact, double gravityFactor);
+  SolveResult SolveDynamicRelaxation(const ProgressCallback & progress);
+  SolveResult SolveExplicitDynamics(const ProgressCallback & progress);
+};
+
+Solver::Impl::Impl(const Model & m, const SolverSettings & s)
+  : model(m)
+  , settings(s)
+{
+  CheckSettings();
+  model.Validate();
+  threads = settings.threads > 0 ? settings.threads : omp_get_max_threads();
+  forces = std::make_unique<ForceModel>(model, settings, threads);
+  physicalMass = forces->LumpedMasses();
+  criticalTimeStep = forces->CriticalTimeStep(&criticalCell);
+
+  Eigen::AlignedBox3d box;
+  for (const Vector3 & x : model.nodes)
+  {
+    box.extend(x);
+  }
+  lengthScale = box.diagonal().norm();
+
+  components.push_back("neo-hookean");
+  components.push_back("lumped-mass");
+  if (forces->HexahedronCount() > 0)
+  {
+    components.push_back("hexahedra");
+    if (settings.hourglassCoefficient > 0.0)
+    {
+      components.push_back("hourglass-control");
+    }
+  }
+  if (forces->TetrahedronCount() > 0)
+  {
+    components.push_back(forces->UsesAverageNodalPressure() ? "anp-tetrahedra" : "linear-tetrahedra");
+  }
+  components.push_back(settings.integrator == Integrator::DynamicRelaxation ? "dynamic-relaxation"
+                                                                            : "explicit-dynamics");
+  if (settings.integrator == Integrator::DynamicRelaxation)
+  {
+    components.push_back("mass-scaling");
+  }
+  BuildConstraints();
+  if (!model.fixedConstraints.empty())
+  {
+    components.push_back("fixed-constraints");
+  }
+  if (!model.prescribedDisplacements.empty())
+  {
+    components.push_back("prescribed-displacements");
+  }
+  if (!model.bodyAcceleration.isZero())
+  {
+    components.push_back("body-force");
+    gravityForce.resize(3 * model.nodes.size());
+    for (std::size_t n = 0; n < model.nodes.size(); ++n)
+    {
+      for (int i = 0; i < 3; ++i)
+      {
+        gravityForce[3 * n + i] = physicalMass[n] * model.bodyAcceleration[i];
+      }
+    }
+  }
+  if (!model.contactSurfaces.empty())
+  {
+    components.push_back("contact");
+    const std::vector<Index> boundary = model.BoundaryNodes();
+    for (const ContactSurface & surface : model.contactSurfaces)
+    {
+      contacts.push_back(std::make_unique<RigidContact>(
+        surface, surface.slaveNodeSet.empty() ? boundary : model.NodeSet(surface.slaveNodeSet), model.nodes));
+    }
+  }
+  if (settings.computeStress)
+  {
+    components.push_back("stress-recovery");
+  }
+}
+
+void
+Solver::Impl::CheckSettings() const
+{
+  auto require = [](bool ok, const std::string & what) {
+    if (!ok)
+    {
+      throw Error("solver setting " + what);
+    }
+  };
+  require(settings.timeStepSafetyFactor > 0.0 && settings.timeStepSafetyFactor <= 1.0,
+          "safety_factor must lie in (0, 1]; 0.8 is a good default.");
+  require(settings.hourglassCoefficient >= 0.0 && settings.hourglassCoefficient < 1.0,
+          "hourglass_coefficient must lie in [0, 1); 0.05 to 0.1 is usual.");
+  require(settings.timeStep >= 0.0, "time_step must be 0 (automatic) or positive.");
+  require(settings.dampingCoefficient >= 0.0, "damping must not be negative.");
+  if (settings.integrator == Integrator::DynamicRelaxation)
+  {
+    require(settings.tolerance > 0.0, "tolerance must be positive (mm).");
+    require(settings.maxSteps > 0, "max_steps must be positive.");
+    require(settings.loadSteps >= 1, "load_steps must be at least 1.");
+    require(settings.adaptInterval >= 2, "adapt_interval must be at least 2.");
+  }
+  else
+  {
+    require(settings.endTime > 0.0, "end_time must be positive (s).");
+  }
+}
+
+void
+Solver::Impl::BuildConstraints()
+{
+  const std::size_t dofCount = 3 * model.nodes.size();
+  dofConstrained.assign(dofCount, 0);
+  nodeConstrained.assign(model.nodes.size(), 0);
+  std::vector<int> owner(dofCount, -2); // -2 free, -1 fixed, k: curve of prescribed displacement k
+  std::vector<double> value(dofCount, 0.0);
+
+  auto constrain = [&](Index node, int axis, double target, int curve, const std::string & source) {
+    const std::size_t dof = 3 * static_cast<std::size_t>(node) + axis;
+    if (owner[dof] != -2 && (value[dof] != target || owner[dof] != curve))
+    {
+      std::ostringstream message;
+      message << source << " conflicts with an earlier constraint on node " << node << " component " << "xyz"[axis]
+              << " (different value or load curve). Give each degree of freedom one constraint.";
+      throw Error(message.str());
+    }
+    owner[dof] = curve;
+    value[dof] = target;
+  };
+  for (const FixedConstraint & fixed : model.fixedConstraints)
+  {
+    for (const Index node : model.NodeSet(fixed.nodeSet))
+    {
+      for (int axis = 0; axis < 3; ++axis)
+      {
+        if (fixed.components[axis])
+        {
+          constrain(node, axis, 0.0, -1, "fixed constraint on set '" + fixed.nodeSet + "'");
+        }
+      }
+    }
+  }
+  for (std::size_t k = 0; k < model.prescribedDisplacements.size(); ++k)
+  {
+    const PrescribedDisplacement & load = model.prescribedDisplacements[k];
+    curves.push_back(load.curve);
+    for (std::size_t j = 0; j < load.nodes.size(); ++j)
+    {
+      for (int axis = 0; axis < 3; ++axis)
+      {
+        if (load.components[axis])
+        {
+          constrain(load.nodes[j], axis, load.displacements[j][axis], static_cast<int>(k),
+                    "prescribed displacement " + std::to_string(k));
+        }
+      }
+    }
+  }
+  for (std::size_t dof = 0; dof < dofCount; ++dof)
+  {
+    if (owner[dof] != -2)
+    {
+      constrained.push_back({ static_cast<Index>(dof), value[dof], owner[dof] });
+      dofConstrained[dof] = 1;
+      nodeConstrained[dof / 3] = 1;
+    }
+  }
+}
+
+void
+Solver::Impl::ApplyConstraints(double * u, const std::vector<double> & curveFactors) const
+{
+  for (const ConstrainedDof & c : constrained)
+  {
+    u[c.dof] = c.curve < 0 ? 0.0 : c.value * curveFactors[c.curve];
+  }
+}
+
+void
+Solver::Impl::EnforceContact(double * u, std::vector<char> & inContact)
+{
+  std::fill(inContact.begin(), inContact.end(), 0);
+  for (auto & contact : contacts)
+  {
+    contact->Enforce(u, nodeConstrained, inContact, threads);
+  }
+}
+
+void
+Solver::Impl::CheckForces(Index inverted, int step, bool explicitDynamics, double timeStep) const
+{
+  if (inverted < 0)
+  {
+    return;
+  }
+  std::ostringstream message;
+  message << CellTypeName(model.cells[inverted].type) << " cell " << inverted << " inverted (J <= 0) at "
+          << StepLabel(step) << ". Likely cause: ";
+  if (explicitDynamics && timeStep > criticalTimeStep)
+  {
+    message << "the time step " << timeStep << " s exceeds the critical time step " << criticalTimeStep
+            << " s; use the automatic time step.";
+  }
+  else
+  {
+    message << "a load too large or applied too fast for the mesh (increase load_steps or the ramp time, "
+               "refine the mesh near the load), a material too soft for the load, or a time step too large "
+               "(lower safety_factor).";
+  }
+  throw SolveError(message.str(), step, inverted);
+}
+
+void
+Solver::Impl::CheckIncrement(const double * du, int step, bool explicitDynamics, double timeStep) const
+{
+  const Index dofCount = static_cast<Index>(3 * model.nodes.size());
+  Index       bad = -1;
+  for (Index d = 0; d < dofCount; ++d)
+  {
+    // One step moving a node further than the body's size means the motion is unbounded.
+    if (!(std::abs(du[d]) <= lengthScale))
+    {
+      bad = d;
+      break;
+    }
+  }
+  if (bad < 0)
+  {
+    return;
+  }
+  std::ostringstream message;
+  message << "the solution became unstable at " << StepLabel(step) << ": node " << bad / 3
+          << (std::isfinite(du[bad]) ? " moved further in one step than the body's size" : " has a NaN or infinite displacement")
+          << " (kinetic energy growing without bound). Likely cause: ";
+  if (explicitDynamics && timeStep > criticalTimeStep)
+  {
+    message << "the time step " << timeStep << " s exceeds the critical time step " << criticalTimeStep << " s.";
+  }
+  else
+  {
+    message << "a time step too large for the deformed mesh (lower safety_factor), or a load too large.";
+  }
+  throw SolveError(message.str(), step, -1);
+}
+
+SolveResult
+Solver::Impl::Finish(const std::vector<double> & u, const std::vector<char> & inContact, double gravityFactor)
+{
+  const std::size_t   nodeCount = model.nodes.size();
+  std::vector<double> f(3 * nodeCount);
+  forces->ComputeInternalForces(u.data(), f.data());
+  SolveResult result;
+  result.displacements.resize(nodeCount);
+  result.reactionForces.assign(nodeCount, Vector3::Zero());
+  for (std::size_t n = 0; n < nodeCount; ++n)
+  {
+    result.displacements[n] = Vector3(u[3 * n], u[3 * n + 1], u[3 * n + 2]);
+    result.maxDisplacement = std::max(result.maxDisplacement, result.displacements[n].norm());
+    if (nodeConstrained[n] || inContact[n])
+    {
+      // Reaction = internal minus external force: what the support or surface must supply.
+      for (int i = 0; i < 3; ++i)
+      {
+        const double external = gravityForce.empty() ? 0.0 : gravityFactor * gravityForce[3 * n + i];
+        result.reactionForces[n][i] = f[3 * n + i] - external;
+      }
+    }
+    result.contactNodes += inContact[n] ? 1 : 0;
+  }
+  const Energies energies = forces->ComputeEnergies(u.data());
+  result.strainEnergy = energies.strain * units::InternalEnergyToJoule;
+  result.hourglassEnergy = energies.hourglass * units::InternalEnergyToJoule;
+  for (const auto & contact : contacts)
+  {
+    result.maxPenetration = std::max(result.maxPenetration, contact->MaxPenetration(u.data()));
+  }
+  if (settings.computeStress)
+  {
+    result.cauchyStress = forces->CauchyStress(u.data());
+  }
+  result.criticalTimeStep = criticalTimeStep;
+  result.activeComponents = components;
+  return result;
+}
+
+SolveResult
+Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
+{
+  // Pseudo-time step 1 and masses scaled so that every cell's critical step is
+  // 1 / safety: the iteration is preconditioned by the local stiffness, and only
+  // the lowest eigenvalue of M^-1 K needs estimating (Joldes et al. 2011).
+  constexpr double          h = 1.0;
+  const double              safety = settings.timeStepSafetyFactor;
+  const std::vector<double> mass = forces->ScaledMasses(h, safety);
+  const double              omegaMax = 2.0 * safety / h;
+  const Index               dofCount = static_cast<Index>(3 * model.nodes.size());
+
+  std::vector<double> u(dofCount, 0.0), uPrevious(dofCount, 0.0), uNext(dofCount, 0.0);
+  std::vector<double> f(dofCount, 0.0), fPrevious(dofCount, 0.0), increment(dofCount, 0.0);
+  std::vector<double> inverseMass(dofCount);
+  for (Index d = 0; d < dofCount; ++d)
+  {
+    inverseMass[d] = 1.0 / mass[d / 3];
+  }
+  std::vector<char>   inContact(model.nodes.size(), 0);
+  std::vector<double> curveFactors(curves.size(), 0.0);
+
+  // Damping for the current estimate of the lowest eigenvalue: critical damping
+  // of that mode, c = omega sqrt(4 - h^2 omega^2), double root sqrt(beta).
+  double lowestEigenvalue = 0.01 * omegaMax * omegaMax;
+  double alpha = 0.0, beta = 0.0;
+  auto   setDamping = [&](double lambda) {
+    lowestEigenvalue = std::clamp(lambda, 1e-16 * omegaMax * omegaMax, omegaMax * omegaMax);
+    const double omega = std::sqrt(lowestEigenvalue);
+    const double c = omega * std::sqrt(std::max(0.0, 4.0 - h * h * lowestEigenvalue));
+    alpha = 2.0 * h * h / (2.0 + c * h);
+    beta = (2.0 - c * h) / (2.0 + c * h);
+  };
+  setDamping(lowestEigenvalue);
+
+  const int           window = settings.adaptInterval;
+  std::deque<double>  incrementNorms; // last window + 1 values of ||du||_2
+  double              estimatedError = std::numeric_limits<double>::infinity();
+  double              rate = 1.0;
+  int                 satisfied = 0;
+  SolveResult         result;
+  int                 step = 0;
+  bool                converged = false;
+  double              gravityFactor = 0.0;
+  auto                loadFactor = [&](const LoadCurve & curve, int k) {
+    return curve.Factor(static_cast<double>(k) / settings.loadSteps);
+  };
+
+  for (step = 0; step < settings.maxSteps; ++step)
+  {
+    CheckForces(forces->ComputeInternalForces(u.data(), f.data()), step, false, h);
+
+    if (step > 0 && step % window == 0)
+    {
+      // Rayleigh quotient of the last increment: tends to the lowest eigenvalue
+      // as the higher modes die out.
+      const double numerator = DeterministicSum(dofCount, threads, [&](Index d) {
+        return dofConstrained[d] ? 0.0 : (u[d] - uPrevious[d]) * (f[d] - fPrevious[d]);
+      });
+      const double denominator = DeterministicSum(dofCount, threads, [&](Index d) {
+        const double du = u[d] - uPrevious[d];
+        return dofConstrained[d] ? 0.0 : mass[d / 3] * du * du;
+      });
+      if (numerator > 0.0 && denominator > 0.0)
+      {
+        setDamping(numerator / denominator);
+      }
+    }
+
+    gravityFactor = gravityForce.empty() ? 0.0 : loadFactor(model.bodyForceCurve, step);
+    const double * g = gravityForce.empty() ? nullptr : gravityForce.data();
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (Index d = 0; d < dofCount; ++d)
+    {
+      const double residual = (g ? gravityFactor * g[d] : 0.0) - f[d];
+      uNext[d] = u[d] + beta * (u[d] - uPrevious[d]) + alpha * residual * inverseMass[d];
+    }
+    for (std::size_t k = 0; k < curves.size(); ++k)
+    {
+      curveFactors[k] = loadFactor(curves[k], step + 1);
+    }
+    ApplyConstraints(uNext.data(), curveFactors);
+    EnforceContact(uNext.data(), inContact);
+
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (Index d = 0; d < dofCount; ++d)
+    {
+      increment[d] = uNext[d] - u[d];
+    }
+    CheckIncrement(increment.data(), step, false, h);
+    std::swap(uPrevious, u);
+    std::swap(u, uNext);
+    std::swap(f, fPrevious);
+
+    double maxIncrement = 0.0;
+    for (Index d = 0; d < dofCount; ++d)
+    {
+      maxIncrement = std::max(maxIncrement, std::abs(increment[d]));
+    }
+    const double incrementNorm =
+      std::sqrt(DeterministicSum(dofCount, threads, [&](Index d) { return increment[d] * increment[d]; }));
+    incrementNorms.push_back(incrementNorm);
+    if (static_cast<int>(incrementNorms.size()) > window + 1)
+    {
+      incrementNorms.pop_front();
+    }
+
+    // Termination (Joldes et al. 2009): distance to the solution estimated as
+    // rate / (1 - rate) * ||du||_inf, with the rate the larger of the observed
+    // decay and the lowest mode's theoretical rate sqrt(beta).
+    if (step + 1 >= settings.loadSteps && static_cast<int>(incrementNorms.size()) == window + 1)
+    {
+      const double observed = incrementNorms.front() > 0.0
+                                ? std::pow(incrementNorms.back() / incrementNorms.front(), 1.0 / window)
+                                : 0.0;
+      rate = std::max(observed, std::sqrt(std::max(beta, 0.0)));
+      estimatedError = rate < 1.0 ? rate / (1.0 - rate) * maxIncrement : std::numeric_limits<double>::infinity();
+      satisfied = estimatedError < settings.tolerance ? satisfied + 1 : 0;
+      if (satisfied >= window)
+      {
+        converged = true;
+        ++step;
+        break;
+      }
+    }
+    if (progress && (step + 1) % 200 == 0)
+    {
+      progress(step + 1, -1.0, estimatedError);
+    }
+  }
+
+  result = Finish(u, inContact, gravityFactor);
+  result.converged = converged;
+  result.steps = step;
+  result.timeStep = h;
+  result.estimatedError = estimatedError;
+  result.convergenceRate = rate;
+  std::ostringstream message;
+  if (converged)
+  {
+    message << "converged: estimated error " << estimatedError << " mm < tolerance " << settings.tolerance << " mm";
+  }
+  else
+  {
+    message << "NOT CONVERGED: estimated error " << estimatedError << " mm after " << step
+            << " steps is above the tolerance " << settings.tolerance
+            << " mm. Increase max_steps, loosen the tolerance, or check that the model is constrained "
+               "against rigid-body motion.";
+  }
+  result.message = message.str();
+  return result;
+}
+
+SolveResult
+Solver::Impl::SolveExplicitDynamics(const ProgressCallback & progress)
+{
+  const double requested = settings.timeStep > 0.0 ? settings.timeStep : settings.timeStepSafetyFactor * criticalTimeStep;
+  const int    steps = static_cast<int>(std::ceil(settings.endTime / requested - 1e-9));
+  const double h = settings.endTime / steps; // land exactly on the end time
+  const double c = settings.dampingCoefficient;
+  const double alpha = 2.0 * h * h / (2.0 + c * h);
+  const double beta = (2.0 - c * h) / (2.0 + c * h);
+  const Index  dofCount = static_cast<Index>(3 * model.nodes.size());
+
+  std::vector<double> u(dofCount, 0.0), uPrevious(dofCount, 0.0), uNext(dofCount, 0.0);
+  std::vector<double> f(dofCount, 0.0), increment(dofCount, 0.0), inverseMass(dofCount);
+  for (Index d = 0; d < dofCount; ++d)
+  {
+    inverseMass[d] = 1.0 / physicalMass[d / 3];
+  }
+  std::vector<char>   inContact(model.nodes.size(), 0);
+  std::vector<double> curveFactors(curves.size(), 0.0);
+  auto                loadFactor = [](const LoadCurve & curve, double time) {
+    return curve.shape == LoadCurve::Shape::Step ? 1.0 : curve.Factor(time / curve.rampTime);
+  };
+  double gravityFactor = 0.0;
+  const int reportEvery = std::max(1, steps / 200);
+
+  for (int step = 0; step < steps; ++step)
+  {
+    CheckForces(forces->ComputeInternalForces(u.data(), f.data()), step, true, h);
+    gravityFactor = gravityForce.empty() ? 0.0 : loadFactor(model.bodyForceCurve, step * h);
+    const double * g = gravityForce.empty() ? nullptr : gravityForce.data();
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (Index d = 0; d < dofCount; ++d)
+    {
+      const double residual = (g ? gravityFactor * g[d] : 0.0) - f[d];
+      uNext[d] = u[d] + beta * (u[d] - uPrevious[d]) + alpha * residual * inverseMass[d];
+    }
+    for (std::size_t k = 0; k < curves.size(); ++k)
+    {
+      curveFactors[k] = loadFactor(curves[k], (step + 1) * h);
+    }
+    ApplyConstraints(uNext.data(), curveFactors);
+    EnforceContact(uNext.data(), inContact);
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (Index d = 0; d < dofCount; ++d)
+    {
+      increment[d] = uNext[d] - u[d];
+    }
+    CheckIncrement(increment.data(), step, true, h);
+    std::swap(uPrevious, u);
+    std::swap(u, uNext);
+    if (progress && (step + 1) % reportEvery == 0)
+    {
+      progress(step + 1, static_cast<double>(step + 1) / steps, 0.0);
+    }
+  }
+
+  SolveResult result = Finish(u, inContact, gravityFactor);
+  result.converged = true;
+  result.steps = steps;
+  result.timeStep = h;
+  result.kineticEnergy = 0.5 *
+                         DeterministicSum(dofCount, threads, [&](Index d) {
+                           const double v = (u[d] - uPrevious[d]) / h;
+                           return physicalMass[d / 3] * v * v;
+                         }) *
+                         units::InternalEnergyToJoule;
+  result.message = "reached end time " + std::to_string(settings.endTime) + " s in " + std::to_string(steps) + " steps";
+  return result;
+}
+
+Solver::Solver(const Model & model, const SolverSettings & settings)
+  : m_Impl(std::make_unique<Impl>(model, settings))
+{}
+
+Solver::~Solver() = default;
+
+SolveResult
+Solver::Solve(const ProgressCallback & progress)
+{
+  const auto  start = std::chrono::steady_clock::now();
+  SolveResult result = m_Impl->settings.integrator == Integrator::DynamicRelaxation
+                         ? m_Impl->SolveDynamicRelaxation(progress)
+                         : m_Impl->SolveExplicitDynamics(progress);
+  result.wallSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return result;
+}
+
+const std::vector<std::string> &
+Solver::ActiveComponents() const
+{
+  return m_Impl->components;
+}
+
+double
+Solver::CriticalTimeStep() const
+{
+  return m_Impl->criticalTimeStep;
+}
+
+std::vector<Vector3>
+Solver::InternalForces(const std::vector<Vector3> & displacements)
+{
+  const std::size_t nodeCount = m_Impl->model.nodes.size();
+  if (displacements.size() != nodeCount)
+  {
+    throw Error("InternalForces: " + std::to_string(displacements.size()) + " displacement vectors for " +
+                std::to_string(nodeCount) + " nodes.");
+  }
+  std::vector<double> u(3 * nodeCount), f(3 * nodeCount);
+  for (std::size_t n = 0; n < nodeCount; ++n)
+  {
+    for (int i = 0; i < 3; ++i)
+    {
+      u[3 * n + i] = displacements[n][i];
+    }
+  }
+  const Index inverted = m_Impl->forces->ComputeInternalForces(u.data(), f.data());
+  if (inverted >= 0)
+  {
+    throw SolveError("InternalForces: cell " + std::to_string(inverted) + " is inverted by the given displacements.", 0,
+                     inverted);
+  }
+  std::vector<Vector3> result(nodeCount);
+  for (std::size_t n = 0; n < nodeCount; ++n)
+  {
+    result[n] = Vector3(f[3 * n], f[3 * n + 1], f[3 * n + 2]);
+  }
+  return result;
+}
+
+} // namespace bmr
