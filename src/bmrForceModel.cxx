@@ -187,6 +187,87 @@ UseTetrahedronFacesOfHexahedron(const std::array<Index, 8> & nodes,
   }
 }
 
+// Hourglass base vectors xi2 xi3, xi3 xi1, xi1 xi2, xi1 xi2 xi3 at the nodes.
+constexpr double kHourglassBase[8][4] = { { 1, 1, 1, -1 },  { 1, -1, -1, 1 }, { -1, -1, 1, -1 }, { -1, 1, -1, 1 },
+                                          { -1, -1, 1, 1 }, { -1, 1, -1, -1 }, { 1, 1, 1, 1 },  { 1, -1, -1, -1 } };
+
+// Hourglass mode amplitudes m_alpha = Gamma_alpha^T u, with the Flanagan-Belytschko
+// vectors Gamma = h - B (X^T h) expanded so that only X^T h (3x4) is stored:
+// m_alpha = h_alpha^T u - (F - I) (X^T h)_alpha.
+inline void
+HourglassModes(const double (&u)[8][3], const Eigen::Matrix3d & F, const double * XH, double (&modes)[4][3])
+{
+  for (int alpha = 0; alpha < 4; ++alpha)
+  {
+    for (int i = 0; i < 3; ++i)
+    {
+      double m = 0.0;
+      for (int a = 0; a < 8; ++a)
+      {
+        m += kHourglassBase[a][alpha] * u[a][i];
+      }
+      for (int j = 0; j < 3; ++j)
+      {
+        m -= (F(i, j) - (i == j ? 1.0 : 0.0)) * XH[4 * j + alpha];
+      }
+      modes[alpha][i] = m;
+    }
+  }
+}
+
+// Greedy colouring: cells of one colour share no node, so their forces are
+// scattered in parallel without races, and every node receives its cell
+// contributions in colour order whatever the number of threads.
+std::vector<std::vector<Index>>
+ColourCells(const Model & model, CellType type)
+{
+  std::vector<int> valence(model.nodes.size(), 0);
+  for (const Cell & cell : model.cells)
+  {
+    for (int a = 0; a < NodesPerCell(cell.type); ++a)
+    {
+      ++valence[cell.nodes[a]];
+    }
+  }
+  const int maxValence = valence.empty() ? 0 : *std::max_element(valence.begin(), valence.end());
+  const int words = (8 * maxValence + 64) / 64 + 1; // greedy never needs more colours than this
+  std::vector<std::uint64_t>      used(model.nodes.size() * words, 0);
+  std::vector<std::vector<Index>> colours;
+  for (Index c = 0; c < static_cast<Index>(model.cells.size()); ++c)
+  {
+    const Cell & cell = model.cells[c];
+    if (cell.type != type)
+    {
+      continue;
+    }
+    const int count = NodesPerCell(type);
+    int       colour = 0;
+    for (int w = 0; w < words; ++w)
+    {
+      std::uint64_t taken = 0;
+      for (int a = 0; a < count; ++a)
+      {
+        taken |= used[cell.nodes[a] * static_cast<std::size_t>(words) + w];
+      }
+      if (~taken != 0)
+      {
+        colour = 64 * w + __builtin_ctzll(~taken);
+        break;
+      }
+    }
+    for (int a = 0; a < count; ++a)
+    {
+      used[cell.nodes[a] * static_cast<std::size_t>(words) + colour / 64] |= std::uint64_t{ 1 } << (colour % 64);
+    }
+    if (colour >= static_cast<int>(colours.size()))
+    {
+      colours.resize(colour + 1);
+    }
+    colours[colour].push_back(c);
+  }
+  return colours;
+}
+
 } // namespace
 
 ForceModel::ForceModel(const Model & model, const SolverSettings & settings, int threads)
@@ -194,19 +275,19 @@ ForceModel::ForceModel(const Model & model, const SolverSettings & settings, int
   , m_NodeCount(static_cast<Index>(model.nodes.size()))
   , m_AverageNodalPressure(settings.tetrahedron == TetrahedronFormulation::AverageNodalPressure)
 {
-  for (Index c = 0; c < static_cast<Index>(model.cells.size()); ++c)
+  // Kernel order: hexahedra by colour, then tetrahedra by colour.
+  m_HexColourOffsets.push_back(0);
+  for (const auto & colour : ColourCells(model, CellType::Hexahedron))
   {
-    if (model.cells[c].type == CellType::Hexahedron)
-    {
-      m_ModelCell.push_back(c);
-    }
+    m_ModelCell.insert(m_ModelCell.end(), colour.begin(), colour.end());
+    m_HexColourOffsets.push_back(static_cast<Index>(m_ModelCell.size()));
   }
-  for (Index c = 0; c < static_cast<Index>(model.cells.size()); ++c)
+  const Index hexCount = static_cast<Index>(m_ModelCell.size());
+  m_TetColourOffsets.push_back(0);
+  for (const auto & colour : ColourCells(model, CellType::Tetrahedron))
   {
-    if (model.cells[c].type == CellType::Tetrahedron)
-    {
-      m_ModelCell.push_back(c);
-    }
+    m_ModelCell.insert(m_ModelCell.end(), colour.begin(), colour.end());
+    m_TetColourOffsets.push_back(static_cast<Index>(m_ModelCell.size()) - hexCount);
   }
   const std::size_t cellCount = m_ModelCell.size();
   m_Volume.resize(cellCount);
@@ -215,23 +296,17 @@ ForceModel::ForceModel(const Model & model, const SolverSettings & settings, int
   m_Density.resize(cellCount);
   m_WaveBound.resize(cellCount);
 
-  const auto & hourglassBase = [] {
-    // Hourglass base vectors xi2 xi3, xi3 xi1, xi1 xi2, xi1 xi2 xi3 at the nodes.
-    Eigen::Matrix<double, 8, 4> h;
-    const auto &                xi = HexahedronNaturalCoordinates();
-    for (int a = 0; a < 8; ++a)
+  Eigen::Matrix<double, 8, 4> hourglassBase;
+  for (int a = 0; a < 8; ++a)
+  {
+    for (int alpha = 0; alpha < 4; ++alpha)
     {
-      h(a, 0) = xi(a, 1) * xi(a, 2);
-      h(a, 1) = xi(a, 2) * xi(a, 0);
-      h(a, 2) = xi(a, 0) * xi(a, 1);
-      h(a, 3) = xi(a, 0) * xi(a, 1) * xi(a, 2);
+      hourglassBase(a, alpha) = kHourglassBase[a][alpha];
     }
-    return h;
-  }();
+  }
+  const std::set<TriangleKey> tetFaces =
+    hexCount > 0 && hexCount < static_cast<Index>(cellCount) ? TetrahedronFaces(model) : std::set<TriangleKey>{};
 
-  const std::set<TriangleKey> tetFaces = m_ModelCell.empty() || model.cells[m_ModelCell.front()].type != CellType::Hexahedron
-                                           ? std::set<TriangleKey>{}
-                                           : TetrahedronFaces(model);
   for (std::size_t k = 0; k < cellCount; ++k)
   {
     const Cell &     cell = model.cells[m_ModelCell[k]];
@@ -257,11 +332,11 @@ ForceModel::ForceModel(const Model & model, const SolverSettings & settings, int
       {
         UseTetrahedronFacesOfHexahedron(nodes, x, tetFaces, integrals);
       }
-      const HexahedronGradients       B = integrals.b / integrals.volume;
+      const HexahedronGradients         B = integrals.b / integrals.volume;
+      const Eigen::Matrix<double, 3, 4> XH = x.transpose() * hourglassBase;
       // Flanagan-Belytschko hourglass shape vectors: orthogonal to every linear field.
-      const Eigen::Matrix<double, 8, 4> gamma = hourglassBase - B * (x.transpose() * hourglassBase);
+      const Eigen::Matrix<double, 8, 4> gamma = hourglassBase - B * XH;
       const double                      BB = B.squaredNorm();
-      const double stiffness = settings.hourglassCoefficient * pWaveModulus * integrals.volume * BB / 8.0;
       const double gammaNorm = (gamma.transpose() * gamma).selfadjointView<Eigen::Lower>().eigenvalues().maxCoeff();
 
       m_HexNodes.push_back(nodes);
@@ -271,12 +346,15 @@ ForceModel::ForceModel(const Model & model, const SolverSettings & settings, int
         {
           m_HexB.push_back(B(a, j));
         }
+      }
+      for (int j = 0; j < 3; ++j)
+      {
         for (int alpha = 0; alpha < 4; ++alpha)
         {
-          m_HexGamma.push_back(gamma(a, alpha));
+          m_HexXH.push_back(XH(j, alpha));
         }
       }
-      m_HexHourglassStiffness.push_back(stiffness);
+      m_HexHourglassStiffness.push_back(settings.hourglassCoefficient * pWaveModulus * integrals.volume * BB / 8.0);
       m_Volume[k] = integrals.volume;
       m_WaveBound[k] = 8.0 * BB * (1.0 + settings.hourglassCoefficient * gammaNorm / 8.0);
     }
@@ -304,31 +382,6 @@ ForceModel::ForceModel(const Model & model, const SolverSettings & settings, int
     // Largest eigenvalue of the cell's stiffness over its lumped mass is at most
     // (lambda + 2 mu) / rho * q (Rayleigh bound); stored here without the density.
     m_WaveBound[k] *= pWaveModulus;
-  }
-
-  // Node -> slot incidence (counting sort keeps slots ascending per node).
-  const Index hexCount = HexahedronCount();
-  const Index slotCount = 8 * hexCount + 4 * TetrahedronCount();
-  m_SlotForces.assign(3 * static_cast<std::size_t>(slotCount), 0.0);
-  m_NodeSlotOffsets.assign(m_NodeCount + 1, 0);
-  auto slotNode = [&](Index slot) -> Index {
-    return slot < 8 * hexCount ? m_HexNodes[slot / 8][slot % 8] : m_TetNodes[(slot - 8 * hexCount) / 4][(slot - 8 * hexCount) % 4];
-  };
-  for (Index s = 0; s < slotCount; ++s)
-  {
-    ++m_NodeSlotOffsets[slotNode(s) + 1];
-  }
-  for (Index n = 0; n < m_NodeCount; ++n)
-  {
-    m_NodeSlotOffsets[n + 1] += m_NodeSlotOffsets[n];
-  }
-  m_NodeSlots.resize(slotCount);
-  {
-    std::vector<Index> fill(m_NodeSlotOffsets.begin(), m_NodeSlotOffsets.end() - 1);
-    for (Index s = 0; s < slotCount; ++s)
-    {
-      m_NodeSlots[fill[slotNode(s)]++] = s;
-    }
   }
 
   if (UsesAverageNodalPressure())
@@ -373,52 +426,76 @@ ForceModel::ForceModel(const Model & model, const SolverSettings & settings, int
 Index
 ForceModel::ComputeInternalForces(const double * u, double * f)
 {
-  const Index hexCount = HexahedronCount();
-  const Index tetCount = TetrahedronCount();
-  const bool  anp = UsesAverageNodalPressure();
-  Index       firstInverted = std::numeric_limits<Index>::max();
-  double *    slots = m_SlotForces.data();
+  const Index       hexCount = HexahedronCount();
+  const Index       tetCount = TetrahedronCount();
+  const bool        anp = UsesAverageNodalPressure();
+  const std::size_t dofCount = 3 * static_cast<std::size_t>(m_NodeCount);
+  Index             firstInverted = std::numeric_limits<Index>::max();
 
 #pragma omp parallel num_threads(m_Threads) reduction(min : firstInverted)
   {
-#pragma omp for schedule(static) nowait
-    for (Index e = 0; e < hexCount; ++e)
+#pragma omp for schedule(static)
+    for (std::size_t d = 0; d < dofCount; ++d)
     {
-      const auto &          nodes = m_HexNodes[e];
-      const double *        B = &m_HexB[24 * static_cast<std::size_t>(e)];
-      const Eigen::Matrix3d F = DeformationGradient<8>(u, nodes, B);
-      const Eigen::Matrix3d cof = Cofactor(F);
-      const double          J = F.col(0).dot(cof.col(0));
-      if (!(J > 0.0))
+      f[d] = 0.0;
+    }
+    for (std::size_t colour = 0; colour + 1 < m_HexColourOffsets.size(); ++colour)
+    {
+#pragma omp for schedule(static)
+      for (Index e = m_HexColourOffsets[colour]; e < m_HexColourOffsets[colour + 1]; ++e)
       {
-        firstInverted = std::min(firstInverted, e);
-        continue;
-      }
-      double * cellSlots = slots + 24 * static_cast<std::size_t>(e);
-      NodalForces<8>(FirstPiola(F, cof, J, J, m_Mu[e], m_Kappa[e]), m_Volume[e], B, cellSlots);
-
-      // Hourglass forces k Gamma (Gamma^T u): hourglass modes only, zero for linear fields.
-      const double * gamma = &m_HexGamma[32 * static_cast<std::size_t>(e)];
-      double         modes[4][3] = {};
-      for (int a = 0; a < 8; ++a)
-      {
-        const double * ua = u + 3 * static_cast<std::size_t>(nodes[a]);
-        for (int alpha = 0; alpha < 4; ++alpha)
+        const auto &   nodes = m_HexNodes[e];
+        const double * B = &m_HexB[24 * static_cast<std::size_t>(e)];
+        double         ue[8][3];
+        for (int a = 0; a < 8; ++a)
         {
-          const double g = gamma[4 * a + alpha];
-          modes[alpha][0] += g * ua[0];
-          modes[alpha][1] += g * ua[1];
-          modes[alpha][2] += g * ua[2];
+          const double * ua = u + 3 * static_cast<std::size_t>(nodes[a]);
+          ue[a][0] = ua[0];
+          ue[a][1] = ua[1];
+          ue[a][2] = ua[2];
         }
-      }
-      const double k = m_HexHourglassStiffness[e];
-      for (int a = 0; a < 8; ++a)
-      {
+        Eigen::Matrix3d F = Eigen::Matrix3d::Identity();
+        for (int a = 0; a < 8; ++a)
+        {
+          for (int i = 0; i < 3; ++i)
+          {
+            for (int j = 0; j < 3; ++j)
+            {
+              F(i, j) += ue[a][i] * B[3 * a + j];
+            }
+          }
+        }
+        const Eigen::Matrix3d cof = Cofactor(F);
+        const double          J = F.col(0).dot(cof.col(0));
+        if (!(J > 0.0))
+        {
+          firstInverted = std::min(firstInverted, e);
+          continue;
+        }
+        // Hourglass forces k Gamma m folded in: k h m directly, and -k B (X^T h) m
+        // through the same B as the stress term.
+        const double * XH = &m_HexXH[12 * static_cast<std::size_t>(e)];
+        double         modes[4][3];
+        HourglassModes(ue, F, XH, modes);
+        const double    k = m_HexHourglassStiffness[e];
+        Eigen::Matrix3d A = m_Volume[e] * FirstPiola(F, cof, J, J, m_Mu[e], m_Kappa[e]);
         for (int i = 0; i < 3; ++i)
         {
-          const double hourglass = gamma[4 * a] * modes[0][i] + gamma[4 * a + 1] * modes[1][i] +
-                                   gamma[4 * a + 2] * modes[2][i] + gamma[4 * a + 3] * modes[3][i];
-          cellSlots[3 * a + i] += k * hourglass;
+          for (int j = 0; j < 3; ++j)
+          {
+            A(i, j) -= k * (modes[0][i] * XH[4 * j] + modes[1][i] * XH[4 * j + 1] + modes[2][i] * XH[4 * j + 2] +
+                            modes[3][i] * XH[4 * j + 3]);
+          }
+        }
+        for (int a = 0; a < 8; ++a)
+        {
+          double * fa = f + 3 * static_cast<std::size_t>(nodes[a]);
+          for (int i = 0; i < 3; ++i)
+          {
+            fa[i] += A(i, 0) * B[3 * a] + A(i, 1) * B[3 * a + 1] + A(i, 2) * B[3 * a + 2] +
+                     k * (kHourglassBase[a][0] * modes[0][i] + kHourglassBase[a][1] * modes[1][i] +
+                          kHourglassBase[a][2] * modes[2][i] + kHourglassBase[a][3] * modes[3][i]);
+          }
         }
       }
     }
@@ -443,45 +520,39 @@ ForceModel::ComputeInternalForces(const double * u, double * f)
       }
     }
 
-#pragma omp for schedule(static)
-    for (Index t = 0; t < tetCount; ++t)
+    for (std::size_t colour = 0; colour + 1 < m_TetColourOffsets.size(); ++colour)
     {
-      const auto &          nodes = m_TetNodes[t];
-      const double *        B = &m_TetB[12 * static_cast<std::size_t>(t)];
-      const Eigen::Matrix3d F = DeformationGradient<4>(u, nodes, B);
-      const Eigen::Matrix3d cof = Cofactor(F);
-      const double          J = F.col(0).dot(cof.col(0));
-      if (!(J > 0.0))
-      {
-        firstInverted = std::min(firstInverted, hexCount + t);
-        continue;
-      }
-      // Average nodal pressure: the dilatation is the mean of the nodal averages,
-      // so pressure stays continuous across cells (and across material interfaces,
-      // since J, not pressure, is averaged).
-      const double volumeRatio =
-        anp ? 0.25 * (m_NodalJacobian[nodes[0]] + m_NodalJacobian[nodes[1]] + m_NodalJacobian[nodes[2]] +
-                      m_NodalJacobian[nodes[3]])
-            : J;
-      const Index k = hexCount + t;
-      NodalForces<4>(FirstPiola(F, cof, J, volumeRatio, m_Mu[k], m_Kappa[k]), m_Volume[k], B,
-                     slots + 3 * (8 * static_cast<std::size_t>(hexCount) + 4 * static_cast<std::size_t>(t)));
-    }
-
 #pragma omp for schedule(static)
-    for (Index n = 0; n < m_NodeCount; ++n)
-    {
-      double fx = 0.0, fy = 0.0, fz = 0.0;
-      for (Index k = m_NodeSlotOffsets[n]; k < m_NodeSlotOffsets[n + 1]; ++k)
+      for (Index t = m_TetColourOffsets[colour]; t < m_TetColourOffsets[colour + 1]; ++t)
       {
-        const double * s = slots + 3 * static_cast<std::size_t>(m_NodeSlots[k]);
-        fx += s[0];
-        fy += s[1];
-        fz += s[2];
+        const auto &          nodes = m_TetNodes[t];
+        const double *        B = &m_TetB[12 * static_cast<std::size_t>(t)];
+        const Eigen::Matrix3d F = DeformationGradient<4>(u, nodes, B);
+        const Eigen::Matrix3d cof = Cofactor(F);
+        const double          J = F.col(0).dot(cof.col(0));
+        if (!(J > 0.0))
+        {
+          firstInverted = std::min(firstInverted, hexCount + t);
+          continue;
+        }
+        // Average nodal pressure: the dilatation is the mean of the nodal averages,
+        // so pressure stays continuous across cells (and across material interfaces,
+        // since J, not pressure, is averaged).
+        const double volumeRatio =
+          anp ? 0.25 * (m_NodalJacobian[nodes[0]] + m_NodalJacobian[nodes[1]] + m_NodalJacobian[nodes[2]] +
+                        m_NodalJacobian[nodes[3]])
+              : J;
+        const Index           k = hexCount + t;
+        const Eigen::Matrix3d A = m_Volume[k] * FirstPiola(F, cof, J, volumeRatio, m_Mu[k], m_Kappa[k]);
+        for (int a = 0; a < 4; ++a)
+        {
+          double * fa = f + 3 * static_cast<std::size_t>(nodes[a]);
+          for (int i = 0; i < 3; ++i)
+          {
+            fa[i] += A(i, 0) * B[3 * a] + A(i, 1) * B[3 * a + 1] + A(i, 2) * B[3 * a + 2];
+          }
+        }
       }
-      f[3 * n] = fx;
-      f[3 * n + 1] = fy;
-      f[3 * n + 2] = fz;
     }
   }
   return firstInverted == std::numeric_limits<Index>::max() ? Index{ -1 } : m_ModelCell[firstInverted];
@@ -565,15 +636,19 @@ ForceModel::ComputeEnergies(const double * u) const
     const Eigen::Matrix3d F = DeformationGradient<8>(u, m_HexNodes[e], B);
     const double          J = F.determinant();
     energies.strain += m_Volume[e] * StrainEnergyDensity(F, J, J, m_Mu[e], m_Kappa[e]);
-    const double * gamma = &m_HexGamma[32 * static_cast<std::size_t>(e)];
-    for (int alpha = 0; alpha < 4; ++alpha)
+    double ue[8][3];
+    for (int a = 0; a < 8; ++a)
     {
-      Eigen::Vector3d mode = Eigen::Vector3d::Zero();
-      for (int a = 0; a < 8; ++a)
+      for (int i = 0; i < 3; ++i)
       {
-        mode += gamma[4 * a + alpha] * Eigen::Vector3d(u + 3 * static_cast<std::size_t>(m_HexNodes[e][a]));
+        ue[a][i] = u[3 * static_cast<std::size_t>(m_HexNodes[e][a]) + i];
       }
-      energies.hourglass += 0.5 * m_HexHourglassStiffness[e] * mode.squaredNorm();
+    }
+    double modes[4][3];
+    HourglassModes(ue, F, &m_HexXH[12 * static_cast<std::size_t>(e)], modes);
+    for (const auto & mode : modes)
+    {
+      energies.hourglass += 0.5 * m_HexHourglassStiffness[e] * (mode[0] * mode[0] + mode[1] * mode[1] + mode[2] * mode[2]);
     }
   }
   // Nodal dilatations recomputed here so this stays const and independent of the last force call.

@@ -2,9 +2,9 @@
 //
 // Everything that depends only on the reference configuration is computed once:
 // shape-function gradients, volumes, hourglass shape vectors and stiffnesses,
-// nodal volumes for the average-nodal-pressure tetrahedron, and the node-to-slot
-// incidence used to assemble forces without atomics (deterministic for any
-// thread count).
+// nodal volumes for the average-nodal-pressure tetrahedron, and a colouring of
+// the cells that lets forces be assembled in parallel without atomics and in a
+// fixed order (deterministic for any thread count).
 #ifndef bmrForceModel_h
 #define bmrForceModel_h
 
@@ -58,17 +58,15 @@ public:
   Index ModelCell(Index kernelCell) const { return m_ModelCell[kernelCell]; }
 
 private:
-  void Gather(double * f) const;
-
   int   m_Threads;
   Index m_NodeCount;
   bool  m_AverageNodalPressure;
 
-  // Hexahedra: nodes, B = (1/V) integral dN/dX (8x3, row-major), hourglass
-  // shape vectors Gamma (8x4, row-major), stiffness per cell.
+  // Hexahedra: nodes, B = (1/V) integral dN/dX (8x3, row-major), X^T h (3x4,
+  // row-major) from which the hourglass vectors follow, stiffness per cell.
   std::vector<std::array<Index, 8>> m_HexNodes;
   std::vector<double>               m_HexB;
-  std::vector<double>               m_HexGamma;
+  std::vector<double>               m_HexXH;
   std::vector<double>               m_HexHourglassStiffness; // N/mm
 
   // Tetrahedra: nodes, dN/dX (4x3, row-major).
@@ -90,11 +88,9 @@ private:
   std::vector<double> m_WaveBound;
   std::vector<Index>  m_ModelCell;
 
-  // Element force slots (3 doubles each; hexahedra 8 per cell, then tetrahedra 4)
-  // and, per node, the slots to sum in fixed order.
-  std::vector<double> m_SlotForces;
-  std::vector<Index>  m_NodeSlotOffsets;
-  std::vector<Index>  m_NodeSlots;
+  // Kernel cells are stored colour by colour; cells of one colour share no node.
+  std::vector<Index> m_HexColourOffsets;
+  std::vector<Index> m_TetColourOffsets;
 };
 
 } // namespace bmr

@@ -48,6 +48,57 @@ DeterministicSum(Index count, int threads, const Term & term)
   return total;
 }
 
+// Size of one step's change of the displacements, in one pass over the dofs:
+// largest and root-sum-square increment, and the first dof whose increment is
+// not finite or larger than `limit`.
+struct IncrementStatistics
+{
+  double maxAbs = 0.0;
+  double norm = 0.0;
+  Index  firstBad = -1;
+};
+
+IncrementStatistics
+MeasureIncrement(const std::vector<double> & next, const std::vector<double> & current, double limit, int threads)
+{
+  const Index count = static_cast<Index>(next.size());
+  double      maxima[kReductionBlocks], sums[kReductionBlocks];
+  Index       bad[kReductionBlocks];
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (Index b = 0; b < kReductionBlocks; ++b)
+  {
+    const Index begin = static_cast<Index>(static_cast<std::int64_t>(count) * b / kReductionBlocks);
+    const Index end = static_cast<Index>(static_cast<std::int64_t>(count) * (b + 1) / kReductionBlocks);
+    double      largest = 0.0, sum = 0.0;
+    Index       firstBad = -1;
+    for (Index d = begin; d < end; ++d)
+    {
+      const double du = std::abs(next[d] - current[d]);
+      if (!(du <= limit) && firstBad < 0)
+      {
+        firstBad = d;
+      }
+      largest = std::max(largest, du);
+      sum += du * du;
+    }
+    maxima[b] = largest;
+    sums[b] = sum;
+    bad[b] = firstBad;
+  }
+  IncrementStatistics statistics;
+  for (Index b = 0; b < kReductionBlocks; ++b)
+  {
+    statistics.maxAbs = std::max(statistics.maxAbs, maxima[b]);
+    statistics.norm += sums[b];
+    if (statistics.firstBad < 0)
+    {
+      statistics.firstBad = bad[b];
+    }
+  }
+  statistics.norm = std::sqrt(statistics.norm);
+  return statistics;
+}
+
 struct ConstrainedDof
 {
   Index  dof;
@@ -87,7 +138,8 @@ struct Solver::Impl
   void        ApplyConstraints(double * u, const std::vector<double> & curveFactors) const;
   void        EnforceContact(double * u, std::vector<char> & inContact);
   void        CheckForces(Index inverted, int step, bool explicitDynamics, double timeStep) const;
-  void        CheckIncrement(const double * du, int step, bool explicitDynamics, double timeStep) const;
+  void        CheckIncrement(const std::vector<double> & next, const std::vector<double> & current, Index bad, int step,
+                             bool explicitDynamics, double timeStep) const;
   SolveResult Finish(const std::vector<double> & u, const std::vector<char> & inContact, double gravityFactor);
   SolveResult SolveDynamicRelaxation(const ProgressCallback & progress);
   SolveResult SolveExplicitDynamics(const ProgressCallback & progress);
@@ -301,26 +353,17 @@ Solver::Impl::CheckForces(Index inverted, int step, bool explicitDynamics, doubl
 }
 
 void
-Solver::Impl::CheckIncrement(const double * du, int step, bool explicitDynamics, double timeStep) const
+Solver::Impl::CheckIncrement(const std::vector<double> & next, const std::vector<double> & current, Index bad, int step,
+                             bool explicitDynamics, double timeStep) const
 {
-  const Index dofCount = static_cast<Index>(3 * model.nodes.size());
-  Index       bad = -1;
-  for (Index d = 0; d < dofCount; ++d)
-  {
-    // One step moving a node further than the body's size means the motion is unbounded.
-    if (!(std::abs(du[d]) <= lengthScale))
-    {
-      bad = d;
-      break;
-    }
-  }
   if (bad < 0)
   {
     return;
   }
+  const double       du = next[bad] - current[bad];
   std::ostringstream message;
   message << "the solution became unstable at " << StepLabel(step) << ": node " << bad / 3
-          << (std::isfinite(du[bad]) ? " moved further in one step than the body's size" : " has a NaN or infinite displacement")
+          << (std::isfinite(du) ? " moved further in one step than the body's size" : " has a NaN or infinite displacement")
           << " (kinetic energy growing without bound). Likely cause: ";
   if (explicitDynamics && timeStep > criticalTimeStep)
   {
@@ -386,7 +429,7 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   const Index               dofCount = static_cast<Index>(3 * model.nodes.size());
 
   std::vector<double> u(dofCount, 0.0), uPrevious(dofCount, 0.0), uNext(dofCount, 0.0);
-  std::vector<double> f(dofCount, 0.0), fPrevious(dofCount, 0.0), increment(dofCount, 0.0);
+  std::vector<double> f(dofCount, 0.0), fPrevious(dofCount, 0.0);
   std::vector<double> inverseMass(dofCount);
   for (Index d = 0; d < dofCount; ++d)
   {
@@ -457,24 +500,13 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
     ApplyConstraints(uNext.data(), curveFactors);
     EnforceContact(uNext.data(), inContact);
 
-#pragma omp parallel for num_threads(threads) schedule(static)
-    for (Index d = 0; d < dofCount; ++d)
-    {
-      increment[d] = uNext[d] - u[d];
-    }
-    CheckIncrement(increment.data(), step, false, h);
+    const IncrementStatistics increment = MeasureIncrement(uNext, u, lengthScale, threads);
+    CheckIncrement(uNext, u, increment.firstBad, step, false, h);
     std::swap(uPrevious, u);
     std::swap(u, uNext);
     std::swap(f, fPrevious);
-
-    double maxIncrement = 0.0;
-    for (Index d = 0; d < dofCount; ++d)
-    {
-      maxIncrement = std::max(maxIncrement, std::abs(increment[d]));
-    }
-    const double incrementNorm =
-      std::sqrt(DeterministicSum(dofCount, threads, [&](Index d) { return increment[d] * increment[d]; }));
-    incrementNorms.push_back(incrementNorm);
+    const double maxIncrement = increment.maxAbs;
+    incrementNorms.push_back(increment.norm);
     if (static_cast<int>(incrementNorms.size()) > window + 1)
     {
       incrementNorms.pop_front();
@@ -538,7 +570,7 @@ Solver::Impl::SolveExplicitDynamics(const ProgressCallback & progress)
   const Index  dofCount = static_cast<Index>(3 * model.nodes.size());
 
   std::vector<double> u(dofCount, 0.0), uPrevious(dofCount, 0.0), uNext(dofCount, 0.0);
-  std::vector<double> f(dofCount, 0.0), increment(dofCount, 0.0), inverseMass(dofCount);
+  std::vector<double> f(dofCount, 0.0), inverseMass(dofCount);
   for (Index d = 0; d < dofCount; ++d)
   {
     inverseMass[d] = 1.0 / physicalMass[d / 3];
@@ -568,12 +600,7 @@ Solver::Impl::SolveExplicitDynamics(const ProgressCallback & progress)
     }
     ApplyConstraints(uNext.data(), curveFactors);
     EnforceContact(uNext.data(), inContact);
-#pragma omp parallel for num_threads(threads) schedule(static)
-    for (Index d = 0; d < dofCount; ++d)
-    {
-      increment[d] = uNext[d] - u[d];
-    }
-    CheckIncrement(increment.data(), step, true, h);
+    CheckIncrement(uNext, u, MeasureIncrement(uNext, u, lengthScale, threads).firstBad, step, true, h);
     std::swap(uPrevious, u);
     std::swap(u, uNext);
     if (progress && (step + 1) % reportEvery == 0)

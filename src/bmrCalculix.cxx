@@ -1,0 +1,834 @@
+// CalculiX harness: deck writer, runner and result reader (see bmrCalculix.h).
+#include "bmrCalculix.h"
+
+#include "bmrUnits.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <limits>
+#include <map>
+#include <sstream>
+#include <unordered_map>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#ifndef BMR_CCX_EXECUTABLE
+#  define BMR_CCX_EXECUTABLE "ccx"
+#endif
+
+namespace bmr
+{
+namespace
+{
+
+namespace fs = std::filesystem;
+
+// Local edges, in CalculiX mid-edge node order.
+constexpr int kTetEdges[6][2] = { { 0, 1 }, { 1, 2 }, { 2, 0 }, { 0, 3 }, { 1, 3 }, { 2, 3 } };
+constexpr int kHexEdges[12][2] = { { 0, 1 }, { 1, 2 }, { 2, 3 }, { 3, 0 }, { 4, 5 }, { 5, 6 },
+                                   { 6, 7 }, { 7, 4 }, { 0, 4 }, { 1, 5 }, { 2, 6 }, { 3, 7 } };
+
+int
+ElementNodeCount(const std::string & type)
+{
+  // "C3D10", "C3D20R", "C3D8I", ...: the digits after "C3D".
+  if (type.size() < 4 || type.compare(0, 3, "C3D") != 0)
+  {
+    return 0;
+  }
+  return std::atoi(type.c_str() + 3);
+}
+
+std::string
+ShellQuote(const std::string & text)
+{
+  std::string quoted = "'";
+  for (const char c : text)
+  {
+    if (c == '\'')
+    {
+      quoted += "'\\''";
+    }
+    else
+    {
+      quoted += c;
+    }
+  }
+  return quoted + "'";
+}
+
+bool
+IsExecutableFile(const fs::path & path)
+{
+  std::error_code error;
+  return fs::is_regular_file(path, error) && ::access(path.c_str(), X_OK) == 0;
+}
+
+std::string
+ReadFile(const fs::path & path)
+{
+  std::ifstream stream(path, std::ios::binary);
+  std::ostringstream text;
+  text << stream.rdbuf();
+  return text.str();
+}
+
+std::string
+Tail(const std::string & text, int lines)
+{
+  std::size_t position = text.size();
+  int         count = 0;
+  while (position > 0 && count <= lines)
+  {
+    position = text.rfind('\n', position - 1);
+    if (position == std::string::npos)
+    {
+      return text;
+    }
+    ++count;
+  }
+  return text.substr(position + 1);
+}
+
+/** Fortran-style number: "1.234E-01", also "0.123456-100" (E dropped for
+ *  three-digit exponents). */
+bool
+ParseNumber(const std::string & token, double & value)
+{
+  const char * begin = token.c_str();
+  char *       end = nullptr;
+  value = std::strtod(begin, &end);
+  if (end != begin && *end == '\0')
+  {
+    return true;
+  }
+  const std::size_t sign = token.find_last_of("+-");
+  if (sign == std::string::npos || sign == 0 || token[sign - 1] == 'E' || token[sign - 1] == 'e')
+  {
+    return false;
+  }
+  const std::string fixed = token.substr(0, sign) + "E" + token.substr(sign);
+  begin = fixed.c_str();
+  value = std::strtod(begin, &end);
+  return end != begin && *end == '\0';
+}
+
+struct DatBlock
+{
+  double                               time = -1.0;
+  std::vector<std::pair<long, Vector3>> rows;
+};
+
+/** The last block of *NODE PRINT output whose header contains `header`. */
+DatBlock
+LastDatBlock(const std::string & text, const std::string & header)
+{
+  DatBlock           last;
+  std::istringstream stream(text);
+  std::string        line;
+  bool               inBlock = false;
+  DatBlock           current;
+  while (std::getline(stream, line))
+  {
+    if (line.find(header) != std::string::npos)
+    {
+      if (inBlock)
+      {
+        last = current;
+      }
+      current = DatBlock{};
+      inBlock = true;
+      const std::size_t at = line.rfind("time");
+      if (at != std::string::npos)
+      {
+        std::istringstream timeStream(line.substr(at + 4));
+        std::string        token;
+        timeStream >> token;
+        ParseNumber(token, current.time);
+      }
+      continue;
+    }
+    if (!inBlock)
+    {
+      continue;
+    }
+    std::istringstream fields(line);
+    std::string        tokens[5];
+    int                count = 0;
+    while (count < 5 && fields >> tokens[count])
+    {
+      ++count;
+    }
+    if (count == 0)
+    {
+      if (!current.rows.empty())
+      {
+        last = current;
+        inBlock = false;
+      }
+      continue;
+    }
+    double values[4];
+    bool   numeric = count == 4;
+    for (int i = 0; numeric && i < 4; ++i)
+    {
+      numeric = ParseNumber(tokens[i], values[i]);
+    }
+    if (!numeric)
+    {
+      if (!current.rows.empty())
+      {
+        last = current;
+      }
+      inBlock = false;
+      continue;
+    }
+    current.rows.emplace_back(static_cast<long>(values[0]), Vector3(values[1], values[2], values[3]));
+  }
+  if (inBlock && !current.rows.empty())
+  {
+    last = current;
+  }
+  return last;
+}
+
+struct GridKey
+{
+  long long x, y, z;
+  bool operator==(const GridKey & other) const { return x == other.x && y == other.y && z == other.z; }
+};
+
+struct GridKeyHash
+{
+  std::size_t operator()(const GridKey & key) const
+  {
+    std::size_t h = static_cast<std::size_t>(key.x) * 73856093u;
+    h ^= static_cast<std::size_t>(key.y) * 19349663u;
+    h ^= static_cast<std::size_t>(key.z) * 83492791u;
+    return h;
+  }
+};
+
+/** Shortest round-trip text that fits CalculiX's 20-character fields. */
+std::string
+FormatDouble(double value)
+{
+  std::string text;
+  for (int precision = 17; precision >= 6; --precision)
+  {
+    std::ostringstream stream;
+    stream << std::setprecision(precision) << value;
+    text = stream.str();
+    if (text.size() <= 20)
+    {
+      break;
+    }
+  }
+  return text;
+}
+
+} // namespace
+
+bool
+CalculixMesh::InSet(Index meshNode, const std::vector<char> & modelMask) const
+{
+  if (meshNode < modelNodes)
+  {
+    return modelMask[meshNode] != 0;
+  }
+  const auto & parents = edgeParents[meshNode - modelNodes];
+  return modelMask[parents[0]] != 0 && modelMask[parents[1]] != 0;
+}
+
+CalculixMesh
+MakeCalculixMesh(const Model & model, const CalculixSettings & settings)
+{
+  const std::string tetType =
+    !settings.tetrahedronType.empty() ? settings.tetrahedronType : (settings.quadratic ? "C3D10" : "C3D4");
+  const std::string hexType =
+    !settings.hexahedronType.empty() ? settings.hexahedronType : (settings.quadratic ? "C3D20R" : "C3D8");
+  const int tetNodes = ElementNodeCount(tetType);
+  const int hexNodes = ElementNodeCount(hexType);
+  if (tetNodes != 4 && tetNodes != 10)
+  {
+    throw Error("CalculiX deck: tetrahedron element type '" + tetType +
+                "' is not a 4- or 10-node C3D element; use C3D4 or C3D10.");
+  }
+  if (hexNodes != 8 && hexNodes != 20)
+  {
+    throw Error("CalculiX deck: hexahedron element type '" + hexType +
+                "' is not an 8- or 20-node C3D element; use C3D8, C3D8I, C3D20 or C3D20R.");
+  }
+
+  CalculixMesh mesh;
+  mesh.nodes = model.nodes;
+  mesh.modelNodes = static_cast<Index>(model.nodes.size());
+  mesh.elementTypes.reserve(model.cells.size());
+  mesh.elements.reserve(model.cells.size());
+
+  std::unordered_map<std::uint64_t, Index> midEdge;
+  const auto midEdgeNode = [&](Index a, Index b) {
+    const Index         lo = std::min(a, b);
+    const Index         hi = std::max(a, b);
+    const std::uint64_t key = (static_cast<std::uint64_t>(lo) << 32) | static_cast<std::uint32_t>(hi);
+    const auto          found = midEdge.find(key);
+    if (found != midEdge.end())
+    {
+      return found->second;
+    }
+    const Index created = static_cast<Index>(mesh.nodes.size());
+    mesh.nodes.push_back(0.5 * (model.nodes[lo] + model.nodes[hi]));
+    mesh.edgeParents.push_back({ lo, hi });
+    midEdge.emplace(key, created);
+    return created;
+  };
+
+  for (const Cell & cell : model.cells)
+  {
+    const bool          tet = cell.type == CellType::Tetrahedron;
+    const int           corners = NodesPerCell(cell.type);
+    const int           total = tet ? tetNodes : hexNodes;
+    std::vector<Index> element(cell.nodes.begin(), cell.nodes.begin() + corners);
+    if (total > corners)
+    {
+      if (tet)
+      {
+        for (const auto & edge : kTetEdges)
+        {
+          element.push_back(midEdgeNode(cell.nodes[edge[0]], cell.nodes[edge[1]]));
+        }
+      }
+      else
+      {
+        for (const auto & edge : kHexEdges)
+        {
+          element.push_back(midEdgeNode(cell.nodes[edge[0]], cell.nodes[edge[1]]));
+        }
+      }
+    }
+    mesh.elementTypes.push_back(tet ? tetType : hexType);
+    mesh.elements.push_back(std::move(element));
+  }
+  return mesh;
+}
+
+void
+WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh & mesh, const CalculixSettings & settings)
+{
+  if (!model.contactSurfaces.empty())
+  {
+    throw Error("CalculiX deck: the model has contact surface '" + model.contactSurfaces.front().name +
+                "'; the CalculiX harness writes Dirichlet problems only. Remove the contact surfaces for a reference run.");
+  }
+  if (mesh.elements.size() != model.cells.size() || mesh.modelNodes != static_cast<Index>(model.nodes.size()))
+  {
+    throw Error("CalculiX deck: the CalculiX mesh was made for another model; call MakeCalculixMesh on this model.");
+  }
+
+  // Constraint per model node and component: constrained flag and value (mm).
+  // Prescribed displacements override fixed constraints on the same component.
+  const std::size_t   modelNodes = model.nodes.size();
+  std::vector<char>   constrained(modelNodes * 3, 0);
+  std::vector<double> value(modelNodes * 3, 0.0);
+  for (const FixedConstraint & fixed : model.fixedConstraints)
+  {
+    for (const Index node : model.NodeSet(fixed.nodeSet))
+    {
+      for (int d = 0; d < 3; ++d)
+      {
+        if (fixed.components[d])
+        {
+          constrained[3 * node + d] = 1;
+          value[3 * node + d] = 0.0;
+        }
+      }
+    }
+  }
+  for (const PrescribedDisplacement & prescribed : model.prescribedDisplacements)
+  {
+    if (prescribed.nodes.size() != prescribed.displacements.size())
+    {
+      throw Error("CalculiX deck: a prescribed displacement has " + std::to_string(prescribed.nodes.size()) +
+                  " nodes but " + std::to_string(prescribed.displacements.size()) +
+                  " displacements; give one displacement per node.");
+    }
+    for (std::size_t i = 0; i < prescribed.nodes.size(); ++i)
+    {
+      const Index node = prescribed.nodes[i];
+      if (node < 0 || static_cast<std::size_t>(node) >= modelNodes)
+      {
+        throw Error("CalculiX deck: prescribed displacement node " + std::to_string(node) + " does not exist.");
+      }
+      for (int d = 0; d < 3; ++d)
+      {
+        if (prescribed.components[d])
+        {
+          constrained[3 * node + d] = 1;
+          value[3 * node + d] = prescribed.displacements[i][d];
+        }
+      }
+    }
+  }
+
+  stream << "** Written by BiomechanicalRegistration (bmrCalculix).\n"
+         << "** Units: mm, N, s, tonne; stresses MPa.\n";
+  stream << "*NODE, NSET=NALL\n";
+  for (std::size_t i = 0; i < mesh.nodes.size(); ++i)
+  {
+    const Vector3 & p = mesh.nodes[i];
+    stream << i + 1 << ", " << FormatDouble(p.x()) << ", " << FormatDouble(p.y()) << ", " << FormatDouble(p.z()) << "\n";
+  }
+
+  // Elements grouped by (material, type); one solid section per group.
+  std::map<std::pair<Index, std::string>, std::vector<std::size_t>> groups;
+  for (std::size_t e = 0; e < model.cells.size(); ++e)
+  {
+    groups[{ model.cells[e].material, mesh.elementTypes[e] }].push_back(e);
+  }
+  std::vector<std::pair<std::string, Index>> sections;
+  for (const auto & group : groups)
+  {
+    const std::string name = "M" + std::to_string(group.first.first) + "_" + group.first.second;
+    sections.emplace_back(name, group.first.first);
+    stream << "*ELEMENT, TYPE=" << group.first.second << ", ELSET=" << name << "\n";
+    for (const std::size_t e : group.second)
+    {
+      const auto & element = mesh.elements[e];
+      stream << e + 1;
+      for (std::size_t a = 0; a < element.size(); ++a)
+      {
+        // At most 16 entries per line in CalculiX input; continue with a trailing comma.
+        stream << (a == 15 ? ",\n" : ", ") << element[a] + 1;
+      }
+      stream << "\n";
+    }
+  }
+
+  const bool gravity = model.bodyAcceleration.norm() > 0.0;
+  for (std::size_t m = 0; m < model.materials.size(); ++m)
+  {
+    const Material & material = model.materials[m];
+    const double     mu = material.ShearModulus() * units::PascalToInternal;
+    const double     kappa = material.BulkModulus() * units::PascalToInternal;
+    if (!(mu > 0.0) || !(kappa > 0.0) || !std::isfinite(kappa))
+    {
+      throw Error("CalculiX deck: material '" + material.name + "' has E = " + FormatDouble(material.youngsModulus) +
+                  " Pa, nu = " + FormatDouble(material.poissonRatio) +
+                  "; the neo-Hookean constants need E > 0 and -1 < nu < 0.5.");
+    }
+    stream << "*MATERIAL, NAME=MAT" << m << "\n"
+           << "** " << material.name << ": E = " << FormatDouble(material.youngsModulus)
+           << " Pa, nu = " << FormatDouble(material.poissonRatio) << "; C10 = mu/2, D1 = 2/kappa (MPa)\n"
+           << "*HYPERELASTIC, NEO HOOKE\n"
+           << FormatDouble(0.5 * mu) << ", " << FormatDouble(2.0 / kappa) << "\n";
+    if (gravity)
+    {
+      stream << "*DENSITY\n" << FormatDouble(material.density * units::DensityToInternal) << "\n";
+    }
+  }
+  for (const auto & section : sections)
+  {
+    if (section.second < 0 || static_cast<std::size_t>(section.second) >= model.materials.size())
+    {
+      throw Error("CalculiX deck: a cell refers to material " + std::to_string(section.second) + ", but the model has " +
+                  std::to_string(model.materials.size()) + " materials.");
+    }
+    stream << "*SOLID SECTION, ELSET=" << section.first << ", MATERIAL=MAT" << section.second << "\n";
+  }
+
+  stream << "*STEP, NLGEOM, INC=" << settings.maximumIncrements << "\n"
+         << "*STATIC" << (settings.solver.empty() ? std::string{} : ", SOLVER=" + settings.solver) << "\n"
+         << FormatDouble(settings.initialIncrement) << ", 1.0, " << FormatDouble(settings.minimumIncrement) << ", 1.0\n"
+         << "*CONTROLS, PARAMETERS=FIELD\n"
+         << FormatDouble(settings.residualTolerance) << ", " << FormatDouble(settings.correctionTolerance)
+         << ", 0, 0, 0.02, 1e-5, 1e-3, 1e-8\n";
+
+  stream << "*BOUNDARY\n";
+  for (std::size_t node = 0; node < mesh.nodes.size(); ++node)
+  {
+    for (int d = 0; d < 3; ++d)
+    {
+      bool   isConstrained = false;
+      double v = 0.0;
+      if (static_cast<Index>(node) < mesh.modelNodes)
+      {
+        isConstrained = constrained[3 * node + d] != 0;
+        v = value[3 * node + d];
+      }
+      else
+      {
+        const auto & parents = mesh.edgeParents[node - mesh.modelNodes];
+        isConstrained = constrained[3 * parents[0] + d] != 0 && constrained[3 * parents[1] + d] != 0;
+        v = 0.5 * (value[3 * parents[0] + d] + value[3 * parents[1] + d]);
+      }
+      if (isConstrained)
+      {
+        stream << node + 1 << ", " << d + 1 << ", " << d + 1 << ", " << FormatDouble(v) << "\n";
+      }
+    }
+  }
+
+  if (gravity)
+  {
+    const double  magnitude = model.bodyAcceleration.norm(); // mm/s^2, consistent with t, N
+    const Vector3 direction = model.bodyAcceleration / magnitude;
+    stream << "*DLOAD\n";
+    for (const auto & section : sections)
+    {
+      stream << section.first << ", GRAV, " << FormatDouble(magnitude) << ", " << FormatDouble(direction.x()) << ", "
+             << FormatDouble(direction.y()) << ", " << FormatDouble(direction.z()) << "\n";
+    }
+  }
+
+  // FREQUENCY beyond the increment limit: only the end of the step is printed.
+  const int frequency = settings.maximumIncrements + 1;
+  stream << "*NODE PRINT, NSET=NALL, FREQUENCY=" << frequency << "\n"
+         << "U\n"
+         << "*NODE PRINT, NSET=NALL, FREQUENCY=" << frequency << "\n"
+         << "RF\n"
+         << "*END STEP\n";
+}
+
+std::string
+FindCalculix(const std::string & executable)
+{
+  std::string name = executable;
+  if (name.empty())
+  {
+    const char * fromEnvironment = std::getenv("BMR_CCX");
+    name = (fromEnvironment && *fromEnvironment) ? fromEnvironment : BMR_CCX_EXECUTABLE;
+  }
+  if (name.find('/') != std::string::npos)
+  {
+    return IsExecutableFile(name) ? name : std::string{};
+  }
+  const char * path = std::getenv("PATH");
+  std::string  directories = path ? path : "/usr/local/bin:/usr/bin:/bin";
+  std::size_t  start = 0;
+  while (start <= directories.size())
+  {
+    std::size_t end = directories.find(':', start);
+    if (end == std::string::npos)
+    {
+      end = directories.size();
+    }
+    const std::string directory = directories.substr(start, end - start);
+    const fs::path    candidate = fs::path(directory.empty() ? "." : directory) / name;
+    if (IsExecutableFile(candidate))
+    {
+      return candidate.string();
+    }
+    start = end + 1;
+  }
+  return {};
+}
+
+Vector3
+CalculixResult::TotalReactionForce(const std::vector<Index> & modelNodes) const
+{
+  std::vector<char> mask(mesh.modelNodes, 0);
+  for (const Index node : modelNodes)
+  {
+    if (node >= 0 && node < mesh.modelNodes)
+    {
+      mask[node] = 1;
+    }
+  }
+  Vector3 total = Vector3::Zero();
+  for (Index node = 0; node < static_cast<Index>(meshReactionForces.size()); ++node)
+  {
+    if (mesh.InSet(node, mask))
+    {
+      total += meshReactionForces[node];
+    }
+  }
+  return total;
+}
+
+CalculixResult
+RunCalculix(const Model & model, const CalculixSettings & settings)
+{
+  const std::string executable = FindCalculix(settings.executable);
+  if (executable.empty())
+  {
+    throw Error("CalculiX: the executable '" +
+                (settings.executable.empty() ? std::string(BMR_CCX_EXECUTABLE) : settings.executable) +
+                "' was not found (PATH, $BMR_CCX); install Debian's calculix-ccx (scripts/install-dependencies.sh).");
+  }
+  model.Validate();
+
+  CalculixResult result;
+  result.mesh = MakeCalculixMesh(model, settings);
+
+  // Job folder.
+  fs::path   folder;
+  const bool temporary = settings.workDirectory.empty();
+  if (temporary)
+  {
+    std::string pattern = (fs::temp_directory_path() / "bmr-ccx-XXXXXX").string();
+    if (!::mkdtemp(pattern.data()))
+    {
+      throw Error("CalculiX: could not create a temporary job folder under " + fs::temp_directory_path().string() +
+                  ": " + std::strerror(errno));
+    }
+    folder = pattern;
+  }
+  else
+  {
+    folder = settings.workDirectory;
+    std::error_code error;
+    fs::create_directories(folder, error);
+    if (error)
+    {
+      throw Error("CalculiX: could not create the job folder '" + folder.string() + "': " + error.message());
+    }
+  }
+  const std::string job = settings.jobName.empty() ? "bmr" : settings.jobName;
+  {
+    std::ofstream deck(folder / (job + ".inp"));
+    if (!deck)
+    {
+      throw Error("CalculiX: could not write " + (folder / (job + ".inp")).string());
+    }
+    WriteCalculixDeck(deck, model, result.mesh, settings);
+    if (!deck)
+    {
+      throw Error("CalculiX: writing " + (folder / (job + ".inp")).string() + " failed (disk full?)");
+    }
+  }
+  // Remove results of an earlier run in a user-given folder.
+  for (const char * extension : { ".dat", ".sta", ".frd", ".cvg" })
+  {
+    std::error_code ignored;
+    fs::remove(folder / (job + extension), ignored);
+  }
+
+  std::ostringstream command;
+  command << "cd " << ShellQuote(folder.string()) << " && ";
+  if (settings.threads > 0)
+  {
+    command << "OMP_NUM_THREADS=" << settings.threads << " CCX_NPROC_EQUATION_SOLVER=" << settings.threads
+            << " CCX_NPROC_RESULTS=" << settings.threads << " CCX_NPROC_STIFFNESS=" << settings.threads << " ";
+  }
+  command << ShellQuote(executable) << " -i " << ShellQuote(job) << " > " << ShellQuote(job + ".log") << " 2>&1";
+
+  const auto start = std::chrono::steady_clock::now();
+  const int  status = std::system(command.str().c_str());
+  result.wallSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+
+  const std::string log = ReadFile(folder / (job + ".log"));
+  const std::string dat = ReadFile(folder / (job + ".dat"));
+  const std::string sta = ReadFile(folder / (job + ".sta"));
+  const auto        fail = [&](const std::string & why) {
+    std::ostringstream message;
+    message << "CalculiX: " << why << " (job " << (folder / job).string()
+            << ".inp, files kept there). Last lines of its output:\n"
+            << Tail(log, 25);
+    throw Error(message.str());
+  };
+
+  const bool exitedNormally = status != -1 && WIFEXITED(status) && WEXITSTATUS(status) == 0;
+  if (!exitedNormally || log.find("*ERROR") != std::string::npos)
+  {
+    fail("ccx failed (exit status " + std::to_string(status == -1 ? -1 : WEXITSTATUS(status)) + ")");
+  }
+
+  const DatBlock u = LastDatBlock(dat, "displacements (vx,vy,vz) for set");
+  const DatBlock rf = LastDatBlock(dat, "forces (fx,fy,fz) for set");
+  if (u.rows.empty() || rf.rows.empty())
+  {
+    fail("no displacement or reaction force output in " + job + ".dat");
+  }
+  if (std::abs(u.time - 1.0) > 1e-6 || std::abs(rf.time - 1.0) > 1e-6)
+  {
+    fail("the static step did not converge to its end (last output at step time " + FormatDouble(u.time) +
+         " of 1); try a smaller initial increment or more increments");
+  }
+  const std::size_t meshNodes = result.mesh.nodes.size();
+  result.meshDisplacements.assign(meshNodes, Vector3::Constant(std::numeric_limits<double>::quiet_NaN()));
+  result.meshReactionForces.assign(meshNodes, Vector3::Zero());
+  std::vector<char> seen(meshNodes, 0);
+  for (const auto & row : u.rows)
+  {
+    if (row.first >= 1 && static_cast<std::size_t>(row.first) <= meshNodes)
+    {
+      result.meshDisplacements[row.first - 1] = row.second;
+      seen[row.first - 1] = 1;
+    }
+  }
+  for (const auto & row : rf.rows)
+  {
+    if (row.first >= 1 && static_cast<std::size_t>(row.first) <= meshNodes)
+    {
+      result.meshReactionForces[row.first - 1] = row.second;
+    }
+  }
+  for (std::size_t i = 0; i < meshNodes; ++i)
+  {
+    if (!seen[i] || !result.meshDisplacements[i].allFinite())
+    {
+      fail("node " + std::to_string(i + 1) + " has no finite displacement in " + job + ".dat");
+    }
+  }
+  result.displacements.assign(result.meshDisplacements.begin(),
+                              result.meshDisplacements.begin() + result.mesh.modelNodes);
+
+  // .sta: STEP INC ATT ITRS TOT-TIME STEP-TIME INC-TIME, one line per converged increment.
+  std::istringstream staStream(sta);
+  std::string        line;
+  while (std::getline(staStream, line))
+  {
+    std::istringstream fields(line);
+    long               step = 0, increment = 0, attempt = 0, iterations = 0;
+    if (fields >> step >> increment >> attempt >> iterations)
+    {
+      ++result.increments;
+      result.iterations += static_cast<int>(iterations);
+    }
+  }
+
+  if (temporary && !settings.keepFiles)
+  {
+    std::error_code ignored;
+    fs::remove_all(folder, ignored);
+  }
+  else
+  {
+    result.workDirectory = folder.string();
+  }
+  return result;
+}
+
+std::vector<Index>
+MatchNodes(const std::vector<Vector3> & points, const std::vector<Vector3> & nodes, double tolerance)
+{
+  const double cell = std::max(2.0 * tolerance, 1e-12);
+  const auto   keyOf = [cell](const Vector3 & p) {
+    return GridKey{ static_cast<long long>(std::floor(p.x() / cell)),
+                    static_cast<long long>(std::floor(p.y() / cell)),
+                    static_cast<long long>(std::floor(p.z() / cell)) };
+  };
+  std::unordered_map<GridKey, std::vector<Index>, GridKeyHash> grid;
+  grid.reserve(nodes.size());
+  for (Index i = 0; i < static_cast<Index>(nodes.size()); ++i)
+  {
+    grid[keyOf(nodes[i])].push_back(i);
+  }
+  std::vector<Index> match(points.size(), -1);
+  for (std::size_t p = 0; p < points.size(); ++p)
+  {
+    const GridKey centre = keyOf(points[p]);
+    double        best = tolerance;
+    for (long long dx = -1; dx <= 1; ++dx)
+    {
+      for (long long dy = -1; dy <= 1; ++dy)
+      {
+        for (long long dz = -1; dz <= 1; ++dz)
+        {
+          const auto found = grid.find(GridKey{ centre.x + dx, centre.y + dy, centre.z + dz });
+          if (found == grid.end())
+          {
+            continue;
+          }
+          for (const Index candidate : found->second)
+          {
+            const double distance = (nodes[candidate] - points[p]).norm();
+            if (distance <= best)
+            {
+              best = distance;
+              match[p] = candidate;
+            }
+          }
+        }
+      }
+    }
+  }
+  return match;
+}
+
+DisplacementComparison
+CompareDisplacements(const std::vector<Vector3> & nodes,
+                     const std::vector<Vector3> & displacements,
+                     const std::vector<Vector3> & referenceNodes,
+                     const std::vector<Vector3> & referenceDisplacements,
+                     double                       tolerance)
+{
+  if (nodes.size() != displacements.size() || referenceNodes.size() != referenceDisplacements.size())
+  {
+    throw Error("CompareDisplacements: node and displacement counts differ.");
+  }
+  const std::vector<Index> match = MatchNodes(nodes, referenceNodes, tolerance);
+  DisplacementComparison   comparison;
+  double                   sumSquares = 0.0;
+  for (std::size_t i = 0; i < nodes.size(); ++i)
+  {
+    if (match[i] < 0)
+    {
+      std::ostringstream message;
+      message << "CompareDisplacements: node " << i << " at (" << nodes[i].transpose()
+              << ") mm is not a node of the reference mesh; use a reference mesh that refines this one.";
+      throw Error(message.str());
+    }
+    const double error = (displacements[i] - referenceDisplacements[match[i]]).norm();
+    sumSquares += error * error;
+    if (error > comparison.maxError || comparison.maxNode < 0)
+    {
+      comparison.maxError = error;
+      comparison.maxNode = static_cast<Index>(i);
+    }
+  }
+  comparison.nodes = static_cast<int>(nodes.size());
+  comparison.rmsError = nodes.empty() ? 0.0 : std::sqrt(sumSquares / static_cast<double>(nodes.size()));
+  return comparison;
+}
+
+Model
+MakeIndentationModel(const IndentationProblem & problem, const std::array<int, 3> & divisions, GridCells cells)
+{
+  Model        model = MakeBlockMesh(problem.size, divisions, cells, problem.material);
+  const double eps = 1e-9 * problem.size.maxCoeff();
+  const double cx = 0.5 * problem.size.x();
+  const double cy = 0.5 * problem.size.y();
+
+  std::vector<Index> bottom;
+  std::vector<Index> patch;
+  for (Index i = 0; i < static_cast<Index>(model.nodes.size()); ++i)
+  {
+    const Vector3 & p = model.nodes[i];
+    if (std::abs(p.z()) <= eps)
+    {
+      bottom.push_back(i);
+    }
+    if (std::abs(p.z() - problem.size.z()) <= eps && std::abs(p.x() - cx) <= problem.patchHalfWidth + eps &&
+        std::abs(p.y() - cy) <= problem.patchHalfWidth + eps)
+    {
+      patch.push_back(i);
+    }
+  }
+  if (patch.empty())
+  {
+    throw Error("MakeIndentationModel: no top-face node lies in the indentation patch; refine the divisions or widen "
+                "the patch.");
+  }
+  model.nodeSets["bottom"] = bottom;
+  model.nodeSets["patch"] = patch;
+
+  FixedConstraint fixed;
+  fixed.nodeSet = "bottom";
+  model.fixedConstraints.push_back(fixed);
+
+  PrescribedDisplacement indent;
+  indent.nodes = patch;
+  indent.displacements.assign(patch.size(), Vector3(0.0, 0.0, -problem.depth));
+  model.prescribedDisplacements.push_back(indent);
+  return model;
+}
+
+} // namespace bmr
