@@ -78,6 +78,7 @@ struct SolveResult
   double      criticalTimeStep = 0.0; // s, physical density, before the safety factor
   double      estimatedError = 0.0;   // mm, dynamic relaxation
   double      convergenceRate = 0.0;  // dynamic relaxation: estimated spectral radius per step
+  int         restarts = 0;           // dynamic relaxation: restarts with heavier masses after divergence
   double      wallSeconds = 0.0;
   double      maxDisplacement = 0.0;  // mm
   double      strainEnergy = 0.0;     // J (N*m)

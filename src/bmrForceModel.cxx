@@ -234,57 +234,121 @@ HourglassModes(const double (&u)[8][3], const Eigen::Matrix3d & F, const double 
   }
 }
 
-// Greedy colouring: cells of one colour share no node, so their forces are
-// scattered in parallel without races, and every node receives its cell
-// contributions in colour order whatever the number of threads.
-std::vector<std::vector<Index>>
-ColourCells(const Model & model, CellType type)
+// Cells of one type in a locality-preserving (Morton) order, cut into blocks of
+// consecutive cells, and the blocks coloured greedily so that blocks of one
+// colour share no node. Blocks of a colour are processed in parallel, each
+// sequentially, scattering forces without atomics; every node receives its
+// contributions in the same order whatever the number of threads.
+struct CellSchedule
 {
-  std::vector<int> valence(model.nodes.size(), 0);
-  for (const Cell & cell : model.cells)
-  {
-    for (int a = 0; a < NodesPerCell(cell.type); ++a)
-    {
-      ++valence[cell.nodes[a]];
-    }
-  }
-  const int maxValence = valence.empty() ? 0 : *std::max_element(valence.begin(), valence.end());
-  const int words = (8 * maxValence + 64) / 64 + 1; // greedy never needs more colours than this
-  std::vector<std::uint64_t>      used(model.nodes.size() * words, 0);
-  std::vector<std::vector<Index>> colours;
+  std::vector<Index> cells;         // model cell indices, colour by colour, block by block
+  std::vector<Index> blockOffsets;  // block b: cells [blockOffsets[b], blockOffsets[b + 1])
+  std::vector<Index> colourOffsets; // colour c: blocks [colourOffsets[c], colourOffsets[c + 1])
+};
+
+CellSchedule
+ScheduleCells(const Model & model, CellType type, Index blockSize)
+{
+  const int           count = NodesPerCell(type);
+  std::vector<Index>  cells;
+  Eigen::AlignedBox3d box;
   for (Index c = 0; c < static_cast<Index>(model.cells.size()); ++c)
   {
-    const Cell & cell = model.cells[c];
-    if (cell.type != type)
+    if (model.cells[c].type == type)
     {
-      continue;
+      cells.push_back(c);
     }
-    const int count = NodesPerCell(type);
-    int       colour = 0;
-    for (int w = 0; w < words; ++w)
-    {
-      std::uint64_t taken = 0;
-      for (int a = 0; a < count; ++a)
-      {
-        taken |= used[cell.nodes[a] * static_cast<std::size_t>(words) + w];
-      }
-      if (~taken != 0)
-      {
-        colour = 64 * w + __builtin_ctzll(~taken);
-        break;
-      }
-    }
+  }
+  for (const Vector3 & x : model.nodes)
+  {
+    box.extend(x);
+  }
+  const Vector3 extent = box.sizes().cwiseMax(1e-300);
+  auto          morton = [&](Index c) {
+    Vector3 centre = Vector3::Zero();
     for (int a = 0; a < count; ++a)
     {
-      used[cell.nodes[a] * static_cast<std::size_t>(words) + colour / 64] |= std::uint64_t{ 1 } << (colour % 64);
+      centre += model.nodes[model.cells[c].nodes[a]];
     }
-    if (colour >= static_cast<int>(colours.size()))
+    const Vector3 unit = ((centre / count - box.min()).cwiseQuotient(extent)).cwiseMax(0.0).cwiseMin(1.0);
+    std::uint64_t code = 0;
+    for (int bit = 9; bit >= 0; --bit)
     {
-      colours.resize(colour + 1);
+      for (int axis = 0; axis < 3; ++axis)
+      {
+        const auto q = static_cast<std::uint64_t>(unit[axis] * 1023.0);
+        code = (code << 1) | ((q >> bit) & 1u);
+      }
     }
-    colours[colour].push_back(c);
+    return code;
+  };
+  std::vector<std::pair<std::uint64_t, Index>> keyed;
+  for (const Index c : cells)
+  {
+    keyed.emplace_back(morton(c), c);
   }
-  return colours;
+  std::stable_sort(keyed.begin(), keyed.end(), [](const auto & l, const auto & r) { return l.first < r.first; });
+
+  // Greedy block colouring with a per-node bit mask of the colours touching it.
+  const Index                       blockCount = (static_cast<Index>(keyed.size()) + blockSize - 1) / blockSize;
+  std::vector<std::vector<Index>>   blocksOfColour;
+  std::vector<std::vector<std::uint64_t>> used(model.nodes.size());
+  for (Index b = 0; b < blockCount; ++b)
+  {
+    const Index begin = b * blockSize;
+    const Index end = std::min<Index>(begin + blockSize, static_cast<Index>(keyed.size()));
+    std::vector<std::uint64_t> taken;
+    for (Index i = begin; i < end; ++i)
+    {
+      for (int a = 0; a < count; ++a)
+      {
+        const auto & mask = used[model.cells[keyed[i].second].nodes[a]];
+        taken.resize(std::max(taken.size(), mask.size()), 0);
+        for (std::size_t w = 0; w < mask.size(); ++w)
+        {
+          taken[w] |= mask[w];
+        }
+      }
+    }
+    std::size_t colour = 0;
+    while (colour / 64 < taken.size() && (taken[colour / 64] >> (colour % 64) & 1u))
+    {
+      ++colour;
+    }
+    for (Index i = begin; i < end; ++i)
+    {
+      for (int a = 0; a < count; ++a)
+      {
+        auto & mask = used[model.cells[keyed[i].second].nodes[a]];
+        mask.resize(std::max(mask.size(), colour / 64 + 1), 0);
+        mask[colour / 64] |= std::uint64_t{ 1 } << (colour % 64);
+      }
+    }
+    if (colour >= blocksOfColour.size())
+    {
+      blocksOfColour.resize(colour + 1);
+    }
+    blocksOfColour[colour].push_back(b);
+  }
+
+  CellSchedule schedule;
+  schedule.blockOffsets.push_back(0);
+  schedule.colourOffsets.push_back(0);
+  for (const auto & blocks : blocksOfColour)
+  {
+    for (const Index b : blocks)
+    {
+      const Index begin = b * blockSize;
+      const Index end = std::min<Index>(begin + blockSize, static_cast<Index>(keyed.size()));
+      for (Index i = begin; i < end; ++i)
+      {
+        schedule.cells.push_back(keyed[i].second);
+      }
+      schedule.blockOffsets.push_back(static_cast<Index>(schedule.cells.size()));
+    }
+    schedule.colourOffsets.push_back(static_cast<Index>(schedule.blockOffsets.size()) - 1);
+  }
+  return schedule;
 }
 
 } // namespace
@@ -294,20 +358,17 @@ ForceModel::ForceModel(const Model & model, const SolverSettings & settings, int
   , m_NodeCount(static_cast<Index>(model.nodes.size()))
   , m_AverageNodalPressure(settings.tetrahedron == TetrahedronFormulation::AverageNodalPressure)
 {
-  // Kernel order: hexahedra by colour, then tetrahedra by colour.
-  m_HexColourOffsets.push_back(0);
-  for (const auto & colour : ColourCells(model, CellType::Hexahedron))
-  {
-    m_ModelCell.insert(m_ModelCell.end(), colour.begin(), colour.end());
-    m_HexColourOffsets.push_back(static_cast<Index>(m_ModelCell.size()));
-  }
-  const Index hexCount = static_cast<Index>(m_ModelCell.size());
-  m_TetColourOffsets.push_back(0);
-  for (const auto & colour : ColourCells(model, CellType::Tetrahedron))
-  {
-    m_ModelCell.insert(m_ModelCell.end(), colour.begin(), colour.end());
-    m_TetColourOffsets.push_back(static_cast<Index>(m_ModelCell.size()) - hexCount);
-  }
+  // Kernel order: hexahedra, then tetrahedra, each colour by colour and block by block.
+  constexpr Index    kBlockSize = 256;
+  const CellSchedule hexSchedule = ScheduleCells(model, CellType::Hexahedron, kBlockSize);
+  const CellSchedule tetSchedule = ScheduleCells(model, CellType::Tetrahedron, kBlockSize);
+  m_ModelCell = hexSchedule.cells;
+  m_ModelCell.insert(m_ModelCell.end(), tetSchedule.cells.begin(), tetSchedule.cells.end());
+  m_HexBlockOffsets = hexSchedule.blockOffsets;
+  m_HexColourOffsets = hexSchedule.colourOffsets;
+  m_TetBlockOffsets = tetSchedule.blockOffsets;
+  m_TetColourOffsets = tetSchedule.colourOffsets;
+  const Index hexCount = static_cast<Index>(hexSchedule.cells.size());
   const std::size_t cellCount = m_ModelCell.size();
   m_Volume.resize(cellCount);
   m_Mu.resize(cellCount);
@@ -460,8 +521,10 @@ ForceModel::ComputeInternalForces(const double * u, double * f)
     }
     for (std::size_t colour = 0; colour + 1 < m_HexColourOffsets.size(); ++colour)
     {
-#pragma omp for schedule(static)
-      for (Index e = m_HexColourOffsets[colour]; e < m_HexColourOffsets[colour + 1]; ++e)
+#pragma omp for schedule(dynamic, 1)
+      for (Index block = m_HexColourOffsets[colour]; block < m_HexColourOffsets[colour + 1]; ++block)
+      {
+      for (Index e = m_HexBlockOffsets[block]; e < m_HexBlockOffsets[block + 1]; ++e)
       {
         const auto &   nodes = m_HexNodes[e];
         const double * B = &m_HexB[24 * static_cast<std::size_t>(e)];
@@ -517,6 +580,7 @@ ForceModel::ComputeInternalForces(const double * u, double * f)
           }
         }
       }
+      }
     }
 
     if (anp)
@@ -541,8 +605,10 @@ ForceModel::ComputeInternalForces(const double * u, double * f)
 
     for (std::size_t colour = 0; colour + 1 < m_TetColourOffsets.size(); ++colour)
     {
-#pragma omp for schedule(static)
-      for (Index t = m_TetColourOffsets[colour]; t < m_TetColourOffsets[colour + 1]; ++t)
+#pragma omp for schedule(dynamic, 1)
+      for (Index block = m_TetColourOffsets[colour]; block < m_TetColourOffsets[colour + 1]; ++block)
+      {
+      for (Index t = m_TetBlockOffsets[block]; t < m_TetBlockOffsets[block + 1]; ++t)
       {
         const auto &          nodes = m_TetNodes[t];
         const double *        B = &m_TetB[12 * static_cast<std::size_t>(t)];
@@ -571,6 +637,7 @@ ForceModel::ComputeInternalForces(const double * u, double * f)
             fa[i] += A(i, 0) * B[3 * a] + A(i, 1) * B[3 * a + 1] + A(i, 2) * B[3 * a + 2];
           }
         }
+      }
       }
     }
   }

@@ -88,8 +88,11 @@ private:
   std::vector<double> m_WaveBound;
   std::vector<Index>  m_ModelCell;
 
-  // Kernel cells are stored colour by colour; cells of one colour share no node.
+  // Kernel cells are stored colour by colour, block by block; blocks of one
+  // colour share no node (see ScheduleCells).
+  std::vector<Index> m_HexBlockOffsets;
   std::vector<Index> m_HexColourOffsets;
+  std::vector<Index> m_TetBlockOffsets;
   std::vector<Index> m_TetColourOffsets;
 };
 
