@@ -1,1 +1,894 @@
-int main() { return 1; } // replaced by the benchmark driver
+// Benchmark driver (not a test): throughput of the TLED force kernels, time to
+// dynamic-relaxation convergence for a brain-sized model, peak memory, and
+// error against run time for a CalculiX-referenced indentation problem.
+// Writes a Markdown report (docs/benchmarks.md) and a CSV for the plot script.
+//
+//   bmrBenchmark [--output docs/benchmarks.md] [--csv docs/benchmark-error-vs-time.csv]
+//                [--threads 1,2] [--quick] [--skip-brain] [--skip-indentation]
+//                [--reference-divisions 16] [--indentation-divisions 4,8,16,32]
+//
+// Each brain-sized case runs in a child process (the same executable with
+// --child), so that its peak memory (getrusage ru_maxrss) is its own.
+#include "bmrCalculix.h"
+#include "bmrMeshGenerators.h"
+#include "bmrModel.h"
+#include "bmrSolver.h"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <sys/resource.h>
+#include <unistd.h>
+
+#ifdef _OPENMP
+#  include <omp.h>
+#endif
+
+#ifndef BMR_BUILD_TYPE
+#  define BMR_BUILD_TYPE "unknown"
+#endif
+#ifndef BMR_CXX_FLAGS
+#  define BMR_CXX_FLAGS ""
+#endif
+
+namespace
+{
+
+using bmr::Index;
+using bmr::Vector3;
+using Json = nlohmann::json;
+using Clock = std::chrono::steady_clock;
+
+// ---------------------------------------------------------------------------
+// Targets of the issue and the published reference.
+// ---------------------------------------------------------------------------
+constexpr double kTargetTetElementStepsPerSecond = 20e6; // ANP tetrahedra, 2 threads
+constexpr double kTargetBrainHexSeconds = 2.0;
+constexpr double kTargetBrainTetSeconds = 6.0;
+constexpr double kMillerDesktopSeconds = 19.2; // ~100,000 DOF, desktop CPU (Joldes, Wittek, Miller)
+constexpr double kMillerGpuSeconds = 4.0;
+
+// Brain-sized model (as examples/scenes/brain-sized-*.json, spacing chosen for ~33,000 nodes).
+const Vector3       kBrainSemiAxes(70.0, 85.0, 60.0);
+constexpr double    kBrainTargetNodes = 33000.0;
+constexpr double    kBrainBaseZ = -45.0;       // surface nodes with z <= this are held
+constexpr double    kCraniotomyRadius = 25.0;  // surface nodes within this of (0,0,60) ...
+constexpr double    kCraniotomyDepth = 10.0;   // ... are pushed 10 mm in (-z)
+constexpr double    kBrainTolerance = 0.01;    // mm
+const bmr::Material kBrain{ "brain", 3000.0, 0.49, 1000.0 };
+
+double
+Seconds(Clock::time_point start)
+{
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+double
+PeakMemoryMiB()
+{
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return usage.ru_maxrss / 1024.0; // Linux: kB
+}
+
+double
+Median(std::vector<double> values)
+{
+  if (values.empty())
+  {
+    return 0.0;
+  }
+  std::sort(values.begin(), values.end());
+  const std::size_t n = values.size();
+  return n % 2 ? values[n / 2] : 0.5 * (values[n / 2 - 1] + values[n / 2]);
+}
+
+std::string
+Fixed(double value, int digits)
+{
+  std::ostringstream text;
+  text << std::fixed << std::setprecision(digits) << value;
+  return text.str();
+}
+
+std::string
+Sci(double value, int digits = 2)
+{
+  std::ostringstream text;
+  text << std::scientific << std::setprecision(digits) << value;
+  return text.str();
+}
+
+std::string
+ReadTextFile(const std::string & path)
+{
+  std::ifstream stream(path);
+  std::ostringstream text;
+  text << stream.rdbuf();
+  return text.str();
+}
+
+std::string
+CpuModel()
+{
+  std::istringstream cpuinfo(ReadTextFile("/proc/cpuinfo"));
+  std::string        line;
+  while (std::getline(cpuinfo, line))
+  {
+    if (line.rfind("model name", 0) == 0)
+    {
+      const auto colon = line.find(':');
+      return colon == std::string::npos ? line : line.substr(colon + 2);
+    }
+  }
+  return "unknown";
+}
+
+std::string
+LoadAverage()
+{
+  std::istringstream loadavg(ReadTextFile("/proc/loadavg"));
+  std::string        one, five, fifteen;
+  loadavg >> one >> five >> fifteen;
+  return one + " " + five + " " + fifteen;
+}
+
+std::string
+CellsName(bmr::GridCells cells)
+{
+  return cells == bmr::GridCells::Hexahedra ? "hexahedra" : "ANP tetrahedra";
+}
+
+std::string
+CellsKey(bmr::GridCells cells)
+{
+  return cells == bmr::GridCells::Hexahedra ? "hex" : "tet";
+}
+
+bmr::GridCells
+CellsFromKey(const std::string & key)
+{
+  if (key == "hex")
+  {
+    return bmr::GridCells::Hexahedra;
+  }
+  if (key == "tet")
+  {
+    return bmr::GridCells::Tetrahedra;
+  }
+  throw bmr::Error("bmrBenchmark: cells must be 'hex' or 'tet', not '" + key + "'");
+}
+
+std::vector<int>
+ParseIntList(const std::string & text)
+{
+  std::vector<int>  values;
+  std::stringstream stream(text);
+  std::string       item;
+  while (std::getline(stream, item, ','))
+  {
+    if (!item.empty())
+    {
+      values.push_back(std::stoi(item));
+    }
+  }
+  return values;
+}
+
+// ---------------------------------------------------------------------------
+// Brain-sized model.
+// ---------------------------------------------------------------------------
+bmr::Model
+MakeBrainModel(double spacing, bmr::GridCells cells, double depth = kCraniotomyDepth)
+{
+  bmr::Model model = bmr::MakeEllipsoidMesh(kBrainSemiAxes, spacing, cells, kBrain);
+  const Vector3      top(0.0, 0.0, kBrainSemiAxes.z());
+  std::vector<Index> base, craniotomy;
+  for (const Index node : model.NodeSet("surface"))
+  {
+    const Vector3 & p = model.nodes[node];
+    if (p.z() <= kBrainBaseZ)
+    {
+      base.push_back(node);
+    }
+    else if ((p - top).norm() <= kCraniotomyRadius)
+    {
+      craniotomy.push_back(node);
+    }
+  }
+  model.nodeSets["base"] = base;
+  model.nodeSets["craniotomy"] = craniotomy;
+  model.fixedConstraints.push_back(bmr::FixedConstraint{ "base", { true, true, true } });
+  bmr::PrescribedDisplacement push;
+  push.nodes = craniotomy;
+  push.displacements.assign(craniotomy.size(), Vector3(0.0, 0.0, -depth));
+  model.prescribedDisplacements.push_back(push);
+  return model;
+}
+
+/** Grid spacing (mm) whose ellipsoid mesh has the node count closest to the target. */
+double
+BrainSpacing(double targetNodes, int & nodes)
+{
+  const double volume = 4.0 / 3.0 * M_PI * kBrainSemiAxes.prod();
+  double       best = std::cbrt(volume / targetNodes);
+  int          bestNodes = 0;
+  double       spacing = best;
+  for (int iteration = 0; iteration < 8; ++iteration)
+  {
+    const int count =
+      static_cast<int>(bmr::MakeEllipsoidMesh(kBrainSemiAxes, spacing, bmr::GridCells::Hexahedra, kBrain).nodes.size());
+    if (bestNodes == 0 || std::abs(count - targetNodes) < std::abs(bestNodes - targetNodes))
+    {
+      best = spacing;
+      bestNodes = count;
+    }
+    if (std::abs(count - targetNodes) < 0.01 * targetNodes)
+    {
+      break;
+    }
+    spacing *= std::cbrt(count / targetNodes);
+    spacing = std::round(spacing * 1000.0) / 1000.0;
+  }
+  nodes = bestNodes;
+  return best;
+}
+
+/** Child process: one brain-sized case (cells, threads): dynamic relaxation to
+ *  0.01 mm, then the throughput of explicit time steps. Prints one JSON line. */
+Json
+RunBrainCase(double spacing, bmr::GridCells cells, int threads, int throughputSteps, int repeats)
+{
+  Json out;
+  out["cells"] = CellsKey(cells);
+  out["threads"] = threads;
+  out["spacing_mm"] = spacing;
+
+  auto             start = Clock::now();
+  const bmr::Model model = MakeBrainModel(spacing, cells);
+  out["mesh_seconds"] = Seconds(start);
+  out["nodes"] = model.nodes.size();
+  out["dofs"] = 3 * model.nodes.size();
+  out["elements"] = model.cells.size();
+  out["craniotomy_nodes"] = model.NodeSet("craniotomy").size();
+  out["base_nodes"] = model.NodeSet("base").size();
+
+  double critical = 0.0;
+  {
+    bmr::SolverSettings settings;
+    settings.integrator = bmr::Integrator::DynamicRelaxation;
+    settings.tolerance = kBrainTolerance;
+    settings.threads = threads;
+    start = Clock::now();
+    bmr::Solver solver(model, settings);
+    out["setup_seconds"] = Seconds(start);
+    critical = solver.CriticalTimeStep();
+    const bmr::SolveResult result = solver.Solve();
+    out["dr_seconds"] = result.wallSeconds;
+    out["dr_steps"] = result.steps;
+    out["dr_estimated_error_mm"] = result.estimatedError;
+    out["dr_converged"] = result.converged;
+    out["dr_message"] = result.message;
+    out["max_displacement_mm"] = result.maxDisplacement;
+    out["active_components"] = result.activeComponents;
+    // Fingerprint for the thread-count determinism check.
+    double sum = 0.0;
+    for (std::size_t n = 0; n < result.displacements.size(); ++n)
+    {
+      sum += (n % 7 + 1) * result.displacements[n].sum();
+    }
+    std::ostringstream fingerprint;
+    fingerprint << std::setprecision(17) << sum;
+    out["dr_fingerprint"] = fingerprint.str();
+  }
+
+  // Throughput: explicit dynamics for a fixed number of steps at 0.8 x the
+  // critical step (a 1 mm smooth push over the run), median of the repeats.
+  {
+    const bmr::Model    pushed = MakeBrainModel(spacing, cells, 1.0);
+    bmr::SolverSettings settings;
+    settings.integrator = bmr::Integrator::ExplicitDynamics;
+    settings.timeStepSafetyFactor = 0.8;
+    settings.endTime = throughputSteps * 0.8 * critical;
+    settings.threads = threads;
+    bmr::Model loaded = pushed;
+    loaded.prescribedDisplacements.front().curve.rampTime = settings.endTime;
+    bmr::Solver         solver(loaded, settings);
+    std::vector<double> nsPerElementStep;
+    int                 steps = 0;
+    for (int r = 0; r < repeats; ++r)
+    {
+      const bmr::SolveResult result = solver.Solve();
+      steps = result.steps;
+      nsPerElementStep.push_back(1e9 * result.wallSeconds / (static_cast<double>(steps) * loaded.cells.size()));
+    }
+    const double median = Median(nsPerElementStep);
+    out["throughput_steps"] = steps;
+    out["throughput_repeats"] = repeats;
+    out["ns_per_element_step"] = median;
+    out["ns_per_element_step_min"] = *std::min_element(nsPerElementStep.begin(), nsPerElementStep.end());
+    out["ns_per_element_step_max"] = *std::max_element(nsPerElementStep.begin(), nsPerElementStep.end());
+    out["element_steps_per_second"] = 1e9 / median;
+  }
+  out["peak_memory_mib"] = PeakMemoryMiB();
+  return out;
+}
+
+Json
+RunChild(const std::string & self, const std::string & arguments)
+{
+  const std::string command = "'" + self + "' --child " + arguments;
+  FILE *            pipe = ::popen(command.c_str(), "r");
+  if (!pipe)
+  {
+    throw bmr::Error("bmrBenchmark: could not start " + command);
+  }
+  std::string output;
+  char        buffer[4096];
+  while (std::fgets(buffer, sizeof buffer, pipe))
+  {
+    output += buffer;
+  }
+  const int   status = ::pclose(pipe);
+  const auto  at = output.rfind("BMR_RESULT ");
+  if (status != 0 || at == std::string::npos)
+  {
+    throw bmr::Error("bmrBenchmark: child '" + arguments + "' failed (status " + std::to_string(status) +
+                     "). Output:\n" + output);
+  }
+  return Json::parse(output.substr(at + 11));
+}
+
+// ---------------------------------------------------------------------------
+// Indentation: error against run time, CalculiX reference.
+// ---------------------------------------------------------------------------
+struct Reference
+{
+  bmr::IndentationProblem problem;
+  int                     divisions = 16; // quarter model, per axis
+  std::vector<Vector3>    nodes;
+  std::vector<Vector3>    displacements;
+  double                  forceZ = 0.0; // full block, N
+  double                  seconds = 0.0;
+  int                     meshNodes = 0;
+  int                     elements = 0;
+  int                     increments = 0;
+  int                     iterations = 0;
+};
+
+Reference
+RunReference(const bmr::IndentationProblem & problem, int divisions, int threads)
+{
+  Reference reference;
+  reference.problem = problem;
+  reference.divisions = divisions;
+  const bmr::Model quarter =
+    bmr::MakeIndentationQuarterModel(problem, { divisions, divisions, divisions }, bmr::GridCells::Tetrahedra);
+  bmr::CalculixSettings settings;
+  settings.quadratic = true;
+  settings.initialIncrement = 0.25;
+  settings.threads = threads;
+  const bmr::CalculixResult result = bmr::RunCalculix(quarter, settings);
+  reference.nodes = result.mesh.nodes;
+  reference.displacements = result.meshDisplacements;
+  reference.forceZ = 4.0 * result.TotalReactionForce(quarter.NodeSet("patch")).z();
+  reference.seconds = result.wallSeconds;
+  reference.meshNodes = static_cast<int>(result.mesh.nodes.size());
+  reference.elements = static_cast<int>(quarter.cells.size());
+  reference.increments = result.increments;
+  reference.iterations = result.iterations;
+  return reference;
+}
+
+struct IndentationRun
+{
+  bmr::GridCells cells = bmr::GridCells::Hexahedra;
+  int            divisions = 4; // x and y; z has half
+  double         spacing = 0.0;
+  int            nodes = 0;
+  int            elements = 0;
+  int            threads = 1;
+  double         setupSeconds = 0.0;
+  double         solveSeconds = 0.0;
+  int            steps = 0;
+  bool           converged = false;
+  double         estimatedError = 0.0;
+  double         rmsError = 0.0; // relative to the indentation depth
+  double         maxError = 0.0;
+  double         forceError = 0.0; // relative to the reference force
+  double         forceZ = 0.0;
+};
+
+IndentationRun
+RunIndentation(const Reference & reference, bmr::GridCells cells, int divisions, int threads, double tolerance)
+{
+  IndentationRun run;
+  run.cells = cells;
+  run.divisions = divisions;
+  run.threads = threads;
+  run.spacing = reference.problem.size.x() / divisions;
+  const bmr::Model model =
+    bmr::MakeIndentationModel(reference.problem, { divisions, divisions, divisions / 2 }, cells);
+  run.nodes = static_cast<int>(model.nodes.size());
+  run.elements = static_cast<int>(model.cells.size());
+
+  bmr::SolverSettings settings;
+  settings.integrator = bmr::Integrator::DynamicRelaxation;
+  settings.tolerance = tolerance;
+  settings.threads = threads;
+  auto        start = Clock::now();
+  bmr::Solver solver(model, settings);
+  run.setupSeconds = Seconds(start);
+  const bmr::SolveResult result = solver.Solve();
+  run.solveSeconds = result.wallSeconds;
+  run.steps = result.steps;
+  run.converged = result.converged;
+  run.estimatedError = result.estimatedError;
+
+  const std::vector<Vector3> expected =
+    bmr::UnfoldQuarterDisplacements(reference.problem, reference.nodes, reference.displacements, model.nodes);
+  const bmr::DisplacementComparison comparison =
+    bmr::CompareDisplacements(model.nodes, result.displacements, model.nodes, expected);
+  run.rmsError = comparison.rmsError / reference.problem.depth;
+  run.maxError = comparison.maxError / reference.problem.depth;
+  for (const Index node : model.NodeSet("patch"))
+  {
+    run.forceZ += result.reactionForces[node].z();
+  }
+  run.forceError = std::abs(run.forceZ - reference.forceZ) / std::abs(reference.forceZ);
+  return run;
+}
+
+// ---------------------------------------------------------------------------
+// Driver.
+// ---------------------------------------------------------------------------
+struct Options
+{
+  std::string      output = "docs/benchmarks.md";
+  std::string      csv = "docs/benchmark-error-vs-time.csv";
+  std::vector<int> threads{ 1, 2 };
+  bool             quick = false;
+  bool             skipBrain = false;
+  bool             skipIndentation = false;
+  int              referenceDivisions = 16;
+  std::vector<int> indentationDivisions{ 4, 8, 16, 32 };
+  double           indentationTolerance = 1e-4;
+  double           indentationPoisson = 0.45;
+  int              calculixThreads = 1;
+};
+
+void
+WriteAtomically(const std::string & path, const std::string & text)
+{
+  const std::filesystem::path target(path);
+  if (target.has_parent_path())
+  {
+    std::filesystem::create_directories(target.parent_path());
+  }
+  const std::string temporary = path + ".tmp";
+  {
+    std::ofstream stream(temporary);
+    stream << text;
+    if (!stream)
+    {
+      throw bmr::Error("bmrBenchmark: could not write " + temporary);
+    }
+  }
+  std::filesystem::rename(temporary, target);
+}
+
+int
+Driver(const Options & options, const std::string & self)
+{
+  const auto         started = Clock::now();
+  const std::string  loadBefore = LoadAverage();
+  std::ostringstream md;
+  const auto         log = [](const std::string & line) { std::cerr << "[bmrBenchmark] " << line << std::endl; };
+
+  const unsigned hardwareThreads = std::thread::hardware_concurrency();
+  std::time_t    now = std::time(nullptr);
+  char           date[64];
+  std::strftime(date, sizeof date, "%Y-%m-%d %H:%M UTC", std::gmtime(&now));
+
+  md << "# Benchmarks\n\n"
+     << "Written by `bmrBenchmark` (apps/bmrBenchmark.cxx); run `scripts/run-benchmarks.sh` to reproduce. "
+     << "Timings are wall-clock seconds on the machine below; per-unit costs are per element and time step.\n\n"
+     << "## Machine and build\n\n"
+     << "| | |\n|---|---|\n"
+     << "| CPU | " << CpuModel() << " |\n"
+     << "| Hardware threads | " << hardwareThreads << " |\n"
+     << "| Compiler | " <<
+#if defined(__clang__)
+    "clang "
+#elif defined(__GNUC__)
+    "GCC "
+#endif
+     << __VERSION__ << " |\n"
+     << "| Build type, flags | " << BMR_BUILD_TYPE << ", `" << BMR_CXX_FLAGS << "` |\n"
+#ifdef _OPENMP
+     << "| OpenMP | " << _OPENMP << " |\n"
+#endif
+     << "| Precision | double (64-bit) throughout |\n"
+     << "| Thread counts measured | ";
+  for (std::size_t i = 0; i < options.threads.size(); ++i)
+  {
+    md << (i ? ", " : "") << options.threads[i];
+  }
+  md << " |\n"
+     << "| Date | " << date << " |\n"
+     << "| Load average at start (1, 5, 15 min) | " << loadBefore << " |\n\n";
+
+  // -------------------------------------------------------------------------
+  // Brain-sized cases: throughput and dynamic relaxation.
+  // -------------------------------------------------------------------------
+  std::vector<Json> brain;
+  if (!options.skipBrain)
+  {
+    int          nodes = 0;
+    const double spacing = options.quick ? 6.0 : BrainSpacing(kBrainTargetNodes, nodes);
+    const int    steps = options.quick ? 50 : 300;
+    const int    repeats = options.quick ? 2 : 5;
+    for (const bmr::GridCells cells : { bmr::GridCells::Hexahedra, bmr::GridCells::Tetrahedra })
+    {
+      for (const int threads : options.threads)
+      {
+        log("brain-sized " + CellsName(cells) + ", " + std::to_string(threads) + " thread(s)...");
+        std::ostringstream arguments;
+        arguments << "brain " << CellsKey(cells) << " " << threads << " " << std::setprecision(17) << spacing << " "
+                  << steps << " " << repeats;
+        Json result = RunChild(self, arguments.str());
+        log("  DR " + Fixed(result["dr_seconds"].get<double>(), 2) + " s, " +
+            std::to_string(result["dr_steps"].get<int>()) + " steps; " +
+            Fixed(result["ns_per_element_step"].get<double>(), 1) + " ns/element-step");
+        brain.push_back(result);
+      }
+    }
+
+    const Json & first = brain.front();
+    md << "## Brain-sized model\n\n"
+       << "Ellipsoid with semi-axes (70, 85, 60) mm on a regular grid of spacing " << Fixed(spacing, 3)
+       << " mm (chosen for about 33,000 nodes; the demo scenes in examples/scenes use 3.6 mm), E = 3000 Pa, "
+       << "nu = 0.49, density 1000 kg/m^3. Surface nodes with z <= " << kBrainBaseZ
+       << " mm are held; surface nodes within " << kCraniotomyRadius
+       << " mm of the top (0, 0, 60) are pushed 10 mm in (-z): " << first["craniotomy_nodes"].get<int>()
+       << " craniotomy nodes, " << first["base_nodes"].get<int>() << " base nodes.\n\n";
+
+    // (i) throughput
+    md << "### Force-kernel throughput\n\n"
+       << "Explicit dynamics (central difference) for a fixed number of steps at 0.8 x the critical time step, "
+       << "on the brain-sized mesh (a 1 mm smooth push of the craniotomy over the run); the whole time step is "
+       << "counted (internal forces, hourglass control or nodal pressure averaging, integration, constraints), "
+       << "divided by elements x steps. Median of " << brain.front()["throughput_repeats"].get<int>() << " runs of "
+       << brain.front()["throughput_steps"].get<int>() << " steps.\n\n"
+       << "| Elements | Count | Threads | ns / element-step (median) | min..max | element-steps / s | Target |\n"
+       << "|---|---|---|---|---|---|---|\n";
+    for (const Json & r : brain)
+    {
+      const bool        tet = r["cells"] == "tet";
+      const int         threads = r["threads"].get<int>();
+      const double      rate = r["element_steps_per_second"].get<double>();
+      std::string       target = "";
+      if (tet && threads == 2)
+      {
+        target = std::string(">= 20 M/s: ") + (rate >= kTargetTetElementStepsPerSecond ? "**met**" : "**MISSED**");
+      }
+      md << "| " << (tet ? "ANP tetrahedra" : "hexahedra (hourglass control)") << " | "
+         << r["elements"].get<int>() << " | " << threads << " | " << Fixed(r["ns_per_element_step"].get<double>(), 1)
+         << " | " << Fixed(r["ns_per_element_step_min"].get<double>(), 1) << ".."
+         << Fixed(r["ns_per_element_step_max"].get<double>(), 1) << " | " << Fixed(rate / 1e6, 2) << " M | " << target
+         << " |\n";
+    }
+    // Speed-up per element type.
+    md << "\n";
+    for (const std::string key : { "hex", "tet" })
+    {
+      double one = 0.0, two = 0.0;
+      for (const Json & r : brain)
+      {
+        if (r["cells"] == key && r["threads"] == 1)
+        {
+          one = r["ns_per_element_step"].get<double>();
+        }
+        if (r["cells"] == key && r["threads"] == 2)
+        {
+          two = r["ns_per_element_step"].get<double>();
+        }
+      }
+      if (one > 0.0 && two > 0.0)
+      {
+        md << "Speed-up 1 -> 2 threads, " << (key == "hex" ? "hexahedra" : "ANP tetrahedra") << ": " << Fixed(one / two, 2)
+           << "x.\n";
+      }
+    }
+
+    // (ii) dynamic relaxation
+    md << "\n### Time to dynamic-relaxation convergence (tolerance " << kBrainTolerance << " mm)\n\n"
+       << "Adaptive dynamic relaxation from rest to an estimated max nodal error below 0.01 mm. \"Solve\" is the "
+       << "time-stepping loop (Solver::Solve); \"setup\" is the solver's precomputation (shape functions, masses, "
+       << "hourglass vectors); the mesh generation is not counted.\n\n"
+       << "| Elements | Nodes | DOF | Threads | Setup s | Solve s | DR steps | Estimated error mm | Converged | Peak memory MiB | Target (solve) |\n"
+       << "|---|---|---|---|---|---|---|---|---|---|---|\n";
+    for (const Json & r : brain)
+    {
+      const bool   tet = r["cells"] == "tet";
+      const double solve = r["dr_seconds"].get<double>();
+      const double target = tet ? kTargetBrainTetSeconds : kTargetBrainHexSeconds;
+      md << "| " << (tet ? "ANP tetrahedra" : "hexahedra") << " | " << r["nodes"].get<int>() << " | "
+         << r["dofs"].get<int>() << " | " << r["threads"].get<int>() << " | "
+         << Fixed(r["setup_seconds"].get<double>(), 2) << " | " << Fixed(solve, 2) << " | "
+         << r["dr_steps"].get<int>() << " | " << Sci(r["dr_estimated_error_mm"].get<double>()) << " | "
+         << (r["dr_converged"].get<bool>() ? "yes" : "**NO**") << " | " << Fixed(r["peak_memory_mib"].get<double>(), 0)
+         << " | < " << target << " s: " << (solve < target && r["dr_converged"].get<bool>() ? "**met**" : "**MISSED**")
+         << " |\n";
+    }
+    md << "\nPublished reference: Miller et al. (TLED with dynamic relaxation) report " << kMillerDesktopSeconds
+       << " s for about 100,000 DOF on a desktop CPU and under " << kMillerGpuSeconds << " s on a GPU.\n\n";
+
+    // Determinism across thread counts.
+    for (const std::string key : { "hex", "tet" })
+    {
+      std::vector<std::string> prints;
+      for (const Json & r : brain)
+      {
+        if (r["cells"] == key)
+        {
+          prints.push_back(r["dr_fingerprint"].get<std::string>());
+        }
+      }
+      if (prints.size() > 1)
+      {
+        const bool same = std::all_of(prints.begin(), prints.end(), [&](const std::string & p) { return p == prints[0]; });
+        md << "Dynamic-relaxation displacements, " << (key == "hex" ? "hexahedra" : "ANP tetrahedra") << ", "
+           << (same ? "bit-identical" : "**DIFFERENT**") << " across the thread counts (checksum).\n";
+      }
+    }
+    md << "\nPeak memory is the child process's ru_maxrss (getrusage) for the whole case: mesh, solver, the "
+       << "relaxation and the throughput runs.\n\n";
+  }
+
+  // -------------------------------------------------------------------------
+  // Error against run time, CalculiX reference.
+  // -------------------------------------------------------------------------
+  if (!options.skipIndentation)
+  {
+    bmr::IndentationProblem problem; // 20 x 20 x 10 mm, 10 x 10 mm patch, 2 mm, E 3000 Pa
+    problem.material.poissonRatio = options.indentationPoisson;
+    const std::string       ccx = bmr::FindCalculix();
+    md << "## Error against run time (block indentation, CalculiX reference)\n\n";
+    if (ccx.empty())
+    {
+      md << "Not measured: CalculiX (`ccx`) was not found. Install Debian's calculix-ccx.\n\n";
+    }
+    else
+    {
+      const int referenceThreads = options.calculixThreads;
+      const int referenceDivisions = options.quick ? 8 : options.referenceDivisions;
+      log("CalculiX reference, quarter model, " + std::to_string(referenceDivisions) + "^3 grid cells...");
+      const Reference reference = RunReference(problem, referenceDivisions, referenceThreads);
+      log("  " + Fixed(reference.seconds, 1) + " s");
+
+      // The reference's own discretisation error, estimated against half its resolution.
+      double selfCheck = -1.0;
+      double selfForce = -1.0;
+      double coarseSeconds = 0.0;
+      if (referenceDivisions % 2 == 0 && referenceDivisions >= 8)
+      {
+        log("CalculiX reference at half resolution (self-check)...");
+        const Reference coarse = RunReference(problem, referenceDivisions / 2, referenceThreads);
+        coarseSeconds = coarse.seconds;
+        // Compare at the coarse quadratic mesh's nodes (all are fine-mesh nodes).
+        const std::vector<Vector3> fine =
+          bmr::UnfoldQuarterDisplacements(problem, reference.nodes, reference.displacements, coarse.nodes);
+        const bmr::DisplacementComparison c =
+          bmr::CompareDisplacements(coarse.nodes, coarse.displacements, coarse.nodes, fine);
+        selfCheck = c.rmsError / problem.depth;
+        selfForce = std::abs(coarse.forceZ - reference.forceZ) / std::abs(reference.forceZ);
+      }
+
+      const std::vector<int> divisionsList = options.quick ? std::vector<int>{ 4, 8 } : options.indentationDivisions;
+      const int              threads = *std::max_element(options.threads.begin(), options.threads.end());
+      std::vector<IndentationRun> runs;
+      for (const bmr::GridCells cells : { bmr::GridCells::Hexahedra, bmr::GridCells::Tetrahedra })
+      {
+        for (const int n : divisionsList)
+        {
+          // TLED nodes (spacing 20/n mm) must be nodes of the quadratic reference (spacing 5/R mm),
+          // and the patch edges (5 mm from the block's sides) grid lines.
+          if ((4 * referenceDivisions) % n != 0 || n % 4 != 0)
+          {
+            log("skipping " + std::to_string(n) + " divisions: not a refinement of the reference");
+            continue;
+          }
+          log("indentation " + CellsName(cells) + " " + std::to_string(n) + "x" + std::to_string(n) + "x" +
+              std::to_string(n / 2) + "...");
+          runs.push_back(RunIndentation(reference, cells, n, threads, options.indentationTolerance));
+          const IndentationRun & r = runs.back();
+          log("  " + Fixed(r.setupSeconds + r.solveSeconds, 2) + " s, rms error " + Fixed(100 * r.rmsError, 3) +
+              " %, force error " + Fixed(100 * r.forceError, 2) + " %");
+        }
+      }
+
+      const double h = 0.5 * problem.size.x() / referenceDivisions;
+      md << "Block 20 x 20 x 10 mm, bottom face held, top-face nodes in the centred 10 x 10 mm square pushed (0, 0, "
+         << -problem.depth << ") mm (all components prescribed), neo-Hookean E = 3000 Pa, nu = " << problem.material.poissonRatio << ". "
+         << "TLED: dynamic relaxation to an estimated error of " << Sci(options.indentationTolerance, 0) << " mm, "
+         << threads << " threads, on n x n x n/2 grids (hexahedra, or 6 ANP tetrahedra per grid cell).\n\n"
+         << "Reference: CalculiX " << ccx << " (static, NLGEOM, Newton to a residual of 1e-5 of the mean force), "
+         << "C3D10 quadratic tetrahedra (6 per grid cell) on the quarter model x, y >= 10 mm with symmetry "
+         << "conditions (the problem is symmetric about both mid-planes), " << referenceDivisions << "^3 grid cells: corner "
+         << "spacing h = " << Fixed(h, 4) << " mm (quadratic node spacing " << Fixed(h / 2, 4) << " mm), "
+         << reference.elements << " elements, " << reference.meshNodes << " nodes, " << 3 * reference.meshNodes
+         << " DOF; " << Fixed(reference.seconds, 1) << " s (" << reference.increments << " increments, "
+         << reference.iterations << " Newton iterations, " << referenceThreads << " threads). "
+         << "Reference reaction force on the patch: " << Fixed(reference.forceZ, 5) << " N.";
+      if (selfCheck >= 0.0)
+      {
+        md << " Self-check: the same reference at half the resolution (h = " << Fixed(2 * h, 4) << " mm, "
+           << Fixed(coarseSeconds, 1) << " s) differs from it by " << Fixed(100 * selfCheck, 3)
+           << " % RMS (of the 2 mm depth) and " << Fixed(100 * selfForce, 2)
+           << " % in force, a bound on the reference's own error at that resolution.";
+      }
+      md << "\n\nErrors are at every TLED node (all are nodes of the reference mesh after reflection): RMS and max "
+         << "of |u - u_ref| as a percentage of the 2 mm indentation, and the relative error of the total vertical "
+         << "reaction force on the patch. Time = setup + solve.\n\n"
+         << "| Elements | Grid | h mm | Nodes | Elements | DR steps | Setup s | Solve s | RMS error % | Max error % | Force error % | Converged |\n"
+         << "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+      std::ostringstream csv;
+      csv << "cells,divisions,h_mm,nodes,elements,threads,setup_s,solve_s,total_s,steps,converged,rms_error_pct,max_"
+             "error_pct,force_error_pct,reference_h_mm\n";
+      for (const IndentationRun & r : runs)
+      {
+        md << "| " << CellsName(r.cells) << " | " << r.divisions << "x" << r.divisions << "x" << r.divisions / 2
+           << " | " << Fixed(r.spacing, 3) << " | " << r.nodes << " | " << r.elements << " | " << r.steps << " | "
+           << Fixed(r.setupSeconds, 3) << " | " << Fixed(r.solveSeconds, 3) << " | " << Fixed(100 * r.rmsError, 3)
+           << " | " << Fixed(100 * r.maxError, 2) << " | " << Fixed(100 * r.forceError, 2) << " | "
+           << (r.converged ? "yes" : "**NO**") << " |\n";
+        csv << CellsKey(r.cells) << "," << r.divisions << "," << r.spacing << "," << r.nodes << "," << r.elements << ","
+            << r.threads << "," << r.setupSeconds << "," << r.solveSeconds << "," << r.setupSeconds + r.solveSeconds
+            << "," << r.steps << "," << (r.converged ? 1 : 0) << "," << 100 * r.rmsError << "," << 100 * r.maxError
+            << "," << 100 * r.forceError << "," << h << "\n";
+      }
+      md << "\n![Error against run time](benchmark-error-vs-time.png)\n\n"
+         << "The plot (scripts/plot-benchmarks.py) is drawn from " << std::filesystem::path(options.csv).filename().string()
+         << ".\n\n";
+      WriteAtomically(options.csv, csv.str());
+    }
+  }
+
+  md << "---\nTotal benchmark time " << Fixed(Seconds(started), 0) << " s; load average at the end: " << LoadAverage()
+     << ". Other processes may have shared the machine; a load average above the number of hardware threads "
+     << "means the timings are pessimistic.\n";
+
+  std::cout << md.str();
+  WriteAtomically(options.output, md.str());
+  log("wrote " + options.output);
+  return 0;
+}
+
+int
+Child(int argc, char ** argv)
+{
+  const std::string kind = argc > 2 ? argv[2] : "";
+  if (kind == "brain" && argc == 8)
+  {
+    const bmr::GridCells cells = CellsFromKey(argv[3]);
+    const int            threads = std::stoi(argv[4]);
+    const double         spacing = std::stod(argv[5]);
+    const int            steps = std::stoi(argv[6]);
+    const int            repeats = std::stoi(argv[7]);
+    const Json           result = RunBrainCase(spacing, cells, threads, steps, repeats);
+    std::cout << "BMR_RESULT " << result.dump() << std::endl;
+    return 0;
+  }
+  std::cerr << "bmrBenchmark --child brain hex|tet THREADS SPACING STEPS REPEATS\n";
+  return 2;
+}
+
+} // namespace
+
+int
+main(int argc, char ** argv)
+{
+  try
+  {
+    if (argc > 1 && std::string(argv[1]) == "--child")
+    {
+      return Child(argc, argv);
+    }
+    Options options;
+    for (int i = 1; i < argc; ++i)
+    {
+      const std::string argument = argv[i];
+      const auto        value = [&]() -> std::string {
+        if (i + 1 >= argc)
+        {
+          throw bmr::Error("bmrBenchmark: " + argument + " needs a value");
+        }
+        return argv[++i];
+      };
+      if (argument == "--output")
+      {
+        options.output = value();
+      }
+      else if (argument == "--csv")
+      {
+        options.csv = value();
+      }
+      else if (argument == "--threads")
+      {
+        options.threads = ParseIntList(value());
+      }
+      else if (argument == "--quick")
+      {
+        options.quick = true;
+      }
+      else if (argument == "--skip-brain")
+      {
+        options.skipBrain = true;
+      }
+      else if (argument == "--skip-indentation")
+      {
+        options.skipIndentation = true;
+      }
+      else if (argument == "--reference-divisions")
+      {
+        options.referenceDivisions = std::stoi(value());
+      }
+      else if (argument == "--indentation-divisions")
+      {
+        options.indentationDivisions = ParseIntList(value());
+      }
+      else if (argument == "--indentation-poisson")
+      {
+        options.indentationPoisson = std::stod(value());
+      }
+      else if (argument == "--calculix-threads")
+      {
+        options.calculixThreads = std::stoi(value());
+      }
+      else if (argument == "--indentation-tolerance")
+      {
+        options.indentationTolerance = std::stod(value());
+      }
+      else if (argument == "--help" || argument == "-h")
+      {
+        std::cout << "bmrBenchmark [--output docs/benchmarks.md] [--csv docs/benchmark-error-vs-time.csv]\n"
+                     "             [--threads 1,2] [--quick] [--skip-brain] [--skip-indentation]\n"
+                     "             [--reference-divisions 16] [--indentation-divisions 4,8,16,32]\n"
+                     "             [--indentation-tolerance 1e-4] [--indentation-poisson 0.45]\n"
+                     "             [--calculix-threads 1]\n";
+        return 0;
+      }
+      else
+      {
+        throw bmr::Error("bmrBenchmark: unknown argument '" + argument + "' (see --help)");
+      }
+    }
+    if (options.threads.empty())
+    {
+      throw bmr::Error("bmrBenchmark: --threads needs at least one count");
+    }
+    const std::string self = std::filesystem::canonical("/proc/self/exe").string();
+    return Driver(options, self);
+  }
+  catch (const std::exception & error)
+  {
+    std::cerr << "bmrBenchmark: " << error.what() << std::endl;
+    return 1;
+  }
+}

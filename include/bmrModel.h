@@ -8,6 +8,7 @@
 #define bmrModel_h
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 
 #include <array>
 #include <cstdint>

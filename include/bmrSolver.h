@@ -32,9 +32,11 @@ struct SolverSettings
   Integrator             integrator = Integrator::DynamicRelaxation;
   TetrahedronFormulation tetrahedron = TetrahedronFormulation::AverageNodalPressure;
 
-  /** Flanagan-Belytschko hourglass coefficient k of the one-point hexahedron:
-   *  hourglass stiffness k (lambda + 2 mu) V (B:B) / 8 per element. */
-  double hourglassCoefficient = 0.075;
+  /** Hourglass coefficient k of the one-point hexahedron (perturbation control
+   *  after Flanagan-Belytschko): hourglass stiffness k 2 mu V (B:B) / 8 per cell.
+   *  Scaled with the shear modulus, not lambda + 2 mu, so that nearly
+   *  incompressible tissue does not lock (see docs/solver.md). */
+  double hourglassCoefficient = 0.2;
 
   /** Fraction of the critical time step actually used. */
   double timeStepSafetyFactor = 0.8;

@@ -789,13 +789,21 @@ CompareDisplacements(const std::vector<Vector3> & nodes,
   return comparison;
 }
 
-Model
-MakeIndentationModel(const IndentationProblem & problem, const std::array<int, 3> & divisions, GridCells cells)
+namespace
 {
-  Model        model = MakeBlockMesh(problem.size, divisions, cells, problem.material);
-  const double eps = 1e-9 * problem.size.maxCoeff();
-  const double cx = 0.5 * problem.size.x();
-  const double cy = 0.5 * problem.size.y();
+
+Model
+MakeIndentation(const IndentationProblem & problem,
+                const std::array<int, 3> & divisions,
+                GridCells                  cells,
+                bool                       quarter)
+{
+  const double  cx = 0.5 * problem.size.x();
+  const double  cy = 0.5 * problem.size.y();
+  const Vector3 origin = quarter ? Vector3(cx, cy, 0.0) : Vector3::Zero();
+  const Vector3 size = quarter ? Vector3(0.5 * problem.size.x(), 0.5 * problem.size.y(), problem.size.z()) : problem.size;
+  Model         model = MakeBlockMesh(size, divisions, cells, problem.material, origin);
+  const double  eps = 1e-9 * problem.size.maxCoeff();
 
   std::vector<Index> bottom;
   std::vector<Index> patch;
@@ -823,12 +831,66 @@ MakeIndentationModel(const IndentationProblem & problem, const std::array<int, 3
   FixedConstraint fixed;
   fixed.nodeSet = "bottom";
   model.fixedConstraints.push_back(fixed);
+  if (quarter)
+  {
+    model.fixedConstraints.push_back(FixedConstraint{ "xmin", { true, false, false } });
+    model.fixedConstraints.push_back(FixedConstraint{ "ymin", { false, true, false } });
+  }
 
   PrescribedDisplacement indent;
   indent.nodes = patch;
   indent.displacements.assign(patch.size(), Vector3(0.0, 0.0, -problem.depth));
   model.prescribedDisplacements.push_back(indent);
   return model;
+}
+
+} // namespace
+
+Model
+MakeIndentationModel(const IndentationProblem & problem, const std::array<int, 3> & divisions, GridCells cells)
+{
+  return MakeIndentation(problem, divisions, cells, false);
+}
+
+Model
+MakeIndentationQuarterModel(const IndentationProblem & problem, const std::array<int, 3> & divisions, GridCells cells)
+{
+  return MakeIndentation(problem, divisions, cells, true);
+}
+
+std::vector<Vector3>
+UnfoldQuarterDisplacements(const IndentationProblem &   problem,
+                           const std::vector<Vector3> & quarterNodes,
+                           const std::vector<Vector3> & quarterDisplacements,
+                           const std::vector<Vector3> & points,
+                           double                       tolerance)
+{
+  const double         cx = 0.5 * problem.size.x();
+  const double         cy = 0.5 * problem.size.y();
+  std::vector<Vector3> reflected(points.size());
+  std::vector<Vector3> signs(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i)
+  {
+    const Vector3 & p = points[i];
+    const bool      flipX = p.x() < cx;
+    const bool      flipY = p.y() < cy;
+    reflected[i] = Vector3(flipX ? 2.0 * cx - p.x() : p.x(), flipY ? 2.0 * cy - p.y() : p.y(), p.z());
+    signs[i] = Vector3(flipX ? -1.0 : 1.0, flipY ? -1.0 : 1.0, 1.0);
+  }
+  const std::vector<Index> match = MatchNodes(reflected, quarterNodes, tolerance);
+  std::vector<Vector3>     result(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i)
+  {
+    if (match[i] < 0)
+    {
+      std::ostringstream message;
+      message << "UnfoldQuarterDisplacements: point (" << points[i].transpose()
+              << ") mm reflects to no node of the quarter mesh; use a quarter mesh that refines the full one.";
+      throw Error(message.str());
+    }
+    result[i] = quarterDisplacements[match[i]].cwiseProduct(signs[i]);
+  }
+  return result;
 }
 
 } // namespace bmr

@@ -16,6 +16,8 @@ namespace bmr
 
 namespace
 {
+constexpr int kProjectionPasses = 4;
+
 using Kernel = CGAL::Simple_cartesian<double>;
 using Point = Kernel::Point_3;
 using Triangle = Kernel::Triangle_3;
@@ -150,7 +152,8 @@ RigidContact::RigidContact(const ContactSurface & surface, std::vector<Index> sl
       const Vector3 e1 = (p[(k + 1) % 3] - p[k]).normalized();
       const Vector3 e2 = (p[(k + 2) % 3] - p[k]).normalized();
       tree.vertexNormals[c[k]] += std::acos(std::clamp(e1.dot(e2), -1.0, 1.0)) * normal;
-      tree.edgeNormals[std::minmax(c[k], c[(k + 1) % 3])] += normal;
+      // try_emplace with an explicit zero: Eigen's default constructor leaves values uninitialised.
+      tree.edgeNormals.try_emplace(std::minmax(c[k], c[(k + 1) % 3]), Vector3::Zero()).first->second += normal;
     }
   }
   tree.tree.insert(tree.triangles.begin(), tree.triangles.end());
@@ -176,15 +179,16 @@ RigidContact::IsClosed() const
 }
 
 void
-RigidContact::Enforce(double * u, const std::vector<char> & skip, std::vector<char> & inContact, int threads)
+RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std::vector<char> & inContact, int threads)
 {
   const Tree & tree = *m_Tree;
   const auto   count = static_cast<Index>(m_SlaveNodes.size());
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 256)
   for (Index i = 0; i < count; ++i)
   {
-    const Index node = m_SlaveNodes[i];
-    if (skip[node])
+    const Index  node = m_SlaveNodes[i];
+    const char * held = &dofConstrained[3 * static_cast<std::size_t>(node)];
+    if (held[0] && held[1] && held[2])
     {
       continue;
     }
@@ -196,15 +200,35 @@ RigidContact::Enforce(double * u, const std::vector<char> & skip, std::vector<ch
     {
       continue;
     }
-    Vector3      closest;
-    const double s = tree.sideSign * tree.SignedDistance(x, closest);
-    if (s >= 0.0)
+    Vector3 closest;
+    if (tree.sideSign * tree.SignedDistance(x, closest) >= 0.0)
     {
       m_LastQueried[i] = x;
       m_SafeDistance[i] = (x - closest).norm();
       continue;
     }
-    const Vector3 projected = closest - m_Reference[i];
+    // Project onto the surface; a node held in some components (a symmetry
+    // plane) moves in the others only: alternate projection and restoring the
+    // held components, which converges for the locally convex surface.
+    const Vector3 held0(un[0], un[1], un[2]);
+    Vector3       position = x;
+    for (int pass = 0; pass < kProjectionPasses; ++pass)
+    {
+      Vector3 displacement = closest - m_Reference[i];
+      for (int k = 0; k < 3; ++k)
+      {
+        if (held[k])
+        {
+          displacement[k] = held0[k];
+        }
+      }
+      position = m_Reference[i] + displacement;
+      if (!(held[0] || held[1] || held[2]) || tree.sideSign * tree.SignedDistance(position, closest) >= 0.0)
+      {
+        break;
+      }
+    }
+    const Vector3 projected = position - m_Reference[i];
     un[0] = projected.x();
     un[1] = projected.y();
     un[2] = projected.z();

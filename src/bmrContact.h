@@ -23,8 +23,9 @@ public:
   RigidContact & operator=(const RigidContact &) = delete;
 
   /** Moves penetrating slave nodes (u: 3 per node, mm) onto the surface and
-   *  marks them in `inContact`. Nodes whose `skip` flag is set are left alone. */
-  void Enforce(double * u, const std::vector<char> & skip, std::vector<char> & inContact, int threads);
+   *  marks them in `inContact`. Components flagged in `dofConstrained` (3 per
+   *  node) keep their value; the node moves in its free components only. */
+  void Enforce(double * u, const std::vector<char> & dofConstrained, std::vector<char> & inContact, int threads);
 
   /** Largest penetration (mm) of any slave node at displacements u. */
   double MaxPenetration(const double * u) const;

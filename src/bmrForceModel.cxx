@@ -434,9 +434,13 @@ ForceModel::ForceModel(const Model & model, const SolverSettings & settings, int
           m_HexXH.push_back(XH(j, alpha));
         }
       }
-      m_HexHourglassStiffness.push_back(settings.hourglassCoefficient * pWaveModulus * integrals.volume * BB / 8.0);
+      // Hourglass modes are (nearly) isochoric bending and twisting modes, so
+      // their stiffness scales with the shear modulus; scaling it with
+      // lambda + 2 mu (Flanagan-Belytschko) would lock nearly incompressible tissue.
+      const double hourglassStiffness = settings.hourglassCoefficient * 2.0 * mu * integrals.volume * BB / 8.0;
+      m_HexHourglassStiffness.push_back(hourglassStiffness);
       m_Volume[k] = integrals.volume;
-      m_WaveBound[k] = 8.0 * BB * (1.0 + settings.hourglassCoefficient * gammaNorm / 8.0);
+      m_WaveBound[k] = 8.0 * BB + hourglassStiffness * gammaNorm / (integrals.volume * pWaveModulus);
     }
     else
     {

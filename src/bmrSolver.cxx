@@ -2,6 +2,7 @@
 
 #include "bmrContact.h"
 #include "bmrForceModel.h"
+#include "bmrShape.h"
 #include "bmrUnits.h"
 
 #include <Eigen/Geometry>
@@ -26,6 +27,7 @@ namespace
 constexpr int    kPowerIterations = 30;
 constexpr double kEigenvalueMargin = 1.1;
 constexpr double kGrowthLimit = 10.0;
+constexpr double kSignificantIncrement = 1e-4; // of the body's size
 constexpr int    kMaxRestarts = 6;
 constexpr double kRestartMassFactor = 2.0;
 
@@ -58,8 +60,8 @@ DeterministicSum(Index count, int threads, const Term & term)
 }
 
 // Size of one step's change of the displacements, in one pass over the dofs:
-// largest and root-sum-square increment, and the first dof whose increment is
-// not finite or larger than `limit`.
+// largest and root-sum-square increment, and the first unconstrained dof whose
+// increment is not finite or larger than `limit`.
 struct IncrementStatistics
 {
   double maxAbs = 0.0;
@@ -68,7 +70,11 @@ struct IncrementStatistics
 };
 
 IncrementStatistics
-MeasureIncrement(const std::vector<double> & next, const std::vector<double> & current, double limit, int threads)
+MeasureIncrement(const std::vector<double> & next,
+                 const std::vector<double> & current,
+                 const std::vector<char> &   constrained,
+                 double                      limit,
+                 int                         threads)
 {
   const Index count = static_cast<Index>(next.size());
   double      maxima[kReductionBlocks], sums[kReductionBlocks];
@@ -83,7 +89,8 @@ MeasureIncrement(const std::vector<double> & next, const std::vector<double> & c
     for (Index d = begin; d < end; ++d)
     {
       const double du = std::abs(next[d] - current[d]);
-      if (!(du <= limit) && firstBad < 0)
+      // A prescribed jump is the user's load, not instability.
+      if (!(du <= limit) && firstBad < 0 && !constrained[d])
       {
         firstBad = d;
       }
@@ -149,7 +156,8 @@ struct Solver::Impl
   void        CheckForces(Index inverted, int step, bool explicitDynamics, double timeStep) const;
   void        CheckIncrement(const std::vector<double> & next, const std::vector<double> & current, Index bad, int step,
                              bool explicitDynamics, double timeStep) const;
-  SolveResult Finish(const std::vector<double> & u, const std::vector<char> & inContact, double gravityFactor);
+  void        CheckHexahedronCorners(const std::vector<double> & u, int step) const;
+  SolveResult Finish(const std::vector<double> & u, const std::vector<char> & inContact, double gravityFactor, int steps);
   double      LargestEigenvalueEstimate(const std::vector<double> & mass);
   SolveResult SolveDynamicRelaxation(const ProgressCallback & progress);
   SolveResult SolveExplicitDynamics(const ProgressCallback & progress);
@@ -241,8 +249,8 @@ Solver::Impl::CheckSettings() const
   };
   require(settings.timeStepSafetyFactor > 0.0 && settings.timeStepSafetyFactor <= 1.0,
           "safety_factor must lie in (0, 1]; 0.8 is a good default.");
-  require(settings.hourglassCoefficient >= 0.0 && settings.hourglassCoefficient < 1.0,
-          "hourglass_coefficient must lie in [0, 1); 0.05 to 0.1 is usual.");
+  require(settings.hourglassCoefficient >= 0.0 && settings.hourglassCoefficient <= 1.0,
+          "hourglass_coefficient must lie in [0, 1]; 0.2 is the default.");
   require(settings.timeStep >= 0.0, "time_step must be 0 (automatic) or positive.");
   require(settings.dampingCoefficient >= 0.0, "damping must not be negative.");
   if (settings.integrator == Integrator::DynamicRelaxation)
@@ -334,7 +342,7 @@ Solver::Impl::EnforceContact(double * u, std::vector<char> & inContact)
   std::fill(inContact.begin(), inContact.end(), 0);
   for (auto & contact : contacts)
   {
-    contact->Enforce(u, nodeConstrained, inContact, threads);
+    contact->Enforce(u, dofConstrained, inContact, threads);
   }
 }
 
@@ -386,10 +394,39 @@ Solver::Impl::CheckIncrement(const std::vector<double> & next, const std::vector
   throw SolveError(message.str(), step, -1);
 }
 
-SolveResult
-Solver::Impl::Finish(const std::vector<double> & u, const std::vector<char> & inContact, double gravityFactor)
+void
+Solver::Impl::CheckHexahedronCorners(const std::vector<double> & u, int step) const
 {
-  const std::size_t   nodeCount = model.nodes.size();
+  // The one-point hexahedron sees only its centre: a cell can fold at a corner
+  // (hourglassing) while J > 0 there. Such a state is never returned as a result.
+  for (Index c = 0; c < static_cast<Index>(model.cells.size()); ++c)
+  {
+    const Cell & cell = model.cells[c];
+    if (cell.type != CellType::Hexahedron)
+    {
+      continue;
+    }
+    HexahedronCoordinates x;
+    for (int a = 0; a < 8; ++a)
+    {
+      const std::size_t n = static_cast<std::size_t>(cell.nodes[a]);
+      x.row(a) = (model.nodes[n] + Vector3(u[3 * n], u[3 * n + 1], u[3 * n + 2])).transpose();
+    }
+    if (!(HexahedronMinimumCornerJacobian(x) > 0.0))
+    {
+      throw SolveError("hexahedron cell " + std::to_string(c) + " is folded at a corner (negative corner Jacobian) at " +
+                         StepLabel(step) + ". Likely cause: a load too concentrated for the mesh (refine the mesh "
+                         "near the load, or raise hourglass_coefficient).",
+                       step, c);
+    }
+  }
+}
+
+SolveResult
+Solver::Impl::Finish(const std::vector<double> & u, const std::vector<char> & inContact, double gravityFactor, int steps)
+{
+  const std::size_t nodeCount = model.nodes.size();
+  CheckHexahedronCorners(u, steps);
   std::vector<double> f(3 * nodeCount);
   forces->ComputeInternalForces(u.data(), f.data());
   SolveResult result;
@@ -526,8 +563,9 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   // the reference-state estimate of the largest eigenvalue. Dynamic relaxation
   // only seeks the steady state, so it may restart from the last good state at
   // rest with heavier masses.
-  std::vector<double> checkpoint(u);
-  int                 checkpointStep = 0;
+  std::vector<double>         checkpoint(u);
+  int                         checkpointStep = 0;
+  std::unique_ptr<SolveError> firstFailure;
 
   for (step = 0; step < settings.maxSteps; ++step)
   {
@@ -567,15 +605,19 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
       ApplyConstraints(uNext.data(), curveFactors);
       EnforceContact(uNext.data(), inContact);
 
-      const IncrementStatistics increment = MeasureIncrement(uNext, u, lengthScale, threads);
+      const IncrementStatistics increment = MeasureIncrement(uNext, u, dofConstrained, lengthScale, threads);
       CheckIncrement(uNext, u, increment.firstBad, step, false, h);
       incrementNorms.push_back(increment.norm);
       if (static_cast<int>(incrementNorms.size()) > window + 1)
       {
         incrementNorms.pop_front();
       }
+      // Divergence: increments growing tenfold within a window once the loads
+      // are applied, and no longer negligible (round-off and contact events
+      // near convergence may jump by large factors from tiny values).
       if (step + 1 > settings.loadSteps && static_cast<int>(incrementNorms.size()) == window + 1 &&
-          incrementNorms.back() > kGrowthLimit * incrementNorms.front())
+          incrementNorms.back() > kGrowthLimit * incrementNorms.front() &&
+          increment.maxAbs > kSignificantIncrement * lengthScale)
       {
         throw SolveError("dynamic relaxation diverged at " + StepLabel(step) +
                            ": the displacement increments grew " + std::to_string(kGrowthLimit) +
@@ -611,11 +653,18 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
         checkpointStep = step + 1;
       }
     }
-    catch (const SolveError &)
+    catch (const SolveError & failure)
     {
+      if (!firstFailure)
+      {
+        firstFailure = std::make_unique<SolveError>(failure);
+      }
       if (restarts == kMaxRestarts)
       {
-        throw;
+        // The first failure names the cell or node where it started.
+        throw SolveError(std::string(firstFailure->what()) + " Restarting " + std::to_string(kMaxRestarts) +
+                           " times from the last good state with heavier masses did not help.",
+                         firstFailure->Step(), firstFailure->Element());
       }
       ++restarts;
       scaleMasses(kRestartMassFactor);
@@ -634,7 +683,7 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
     }
   }
 
-  SolveResult result = Finish(u, inContact, gravityFactor);
+  SolveResult result = Finish(u, inContact, gravityFactor, step);
   result.converged = converged;
   result.steps = step;
   result.timeStep = h;
@@ -703,7 +752,7 @@ Solver::Impl::SolveExplicitDynamics(const ProgressCallback & progress)
     }
     ApplyConstraints(uNext.data(), curveFactors);
     EnforceContact(uNext.data(), inContact);
-    CheckIncrement(uNext, u, MeasureIncrement(uNext, u, lengthScale, threads).firstBad, step, true, h);
+    CheckIncrement(uNext, u, MeasureIncrement(uNext, u, dofConstrained, lengthScale, threads).firstBad, step, true, h);
     std::swap(uPrevious, u);
     std::swap(u, uNext);
     if (progress && (step + 1) % reportEvery == 0)
@@ -712,7 +761,7 @@ Solver::Impl::SolveExplicitDynamics(const ProgressCallback & progress)
     }
   }
 
-  SolveResult result = Finish(u, inContact, gravityFactor);
+  SolveResult result = Finish(u, inContact, gravityFactor, steps);
   result.converged = true;
   result.steps = steps;
   result.timeStep = h;

@@ -1,0 +1,176 @@
+// CalculiX (ccx) harness: independent implicit reference solutions for the
+// verification tests and the benchmark driver.
+//
+// A bmr::Model (mm, Pa, N) is written as a CalculiX input deck in the
+// consistent mm-N-s-tonne system (moduli in MPa = N/mm^2):
+//   compressible neo-Hookean W = mu/2 (I1bar - 3) + kappa/2 (J - 1)^2
+//   -> *HYPERELASTIC, NEO HOOKE with C10 = mu/2 and D1 = 2/kappa.
+// Tetrahedra become quadratic C3D10 elements (mid-edge nodes added at the
+// straight edge midpoints and shared between neighbours) or linear C3D4;
+// hexahedra become C3D20R (quadratic) or C3D8 (linear). Constraints on a
+// mid-edge node are interpolated from its two end nodes: a component is
+// constrained when it is constrained at both ends, with the mean value, which
+// is exactly the linear element's boundary condition along that edge.
+// The static step is geometrically nonlinear (NLGEOM); loads are ramped
+// linearly over the step (the end state of a hyperelastic solid does not depend
+// on the path). Displacements and reaction forces are read back from the .dat
+// file (*NODE PRINT).
+#ifndef bmrCalculix_h
+#define bmrCalculix_h
+
+#include "bmrMeshGenerators.h"
+#include "bmrModel.h"
+
+#include <array>
+#include <iosfwd>
+#include <string>
+#include <vector>
+
+namespace bmr
+{
+
+struct CalculixSettings
+{
+  /** true: C3D10 tetrahedra and C3D20R hexahedra (mid-edge nodes added);
+   *  false: C3D4 and C3D8. */
+  bool quadratic = true;
+  /** Overrides of the CalculiX element type names (empty: the defaults above),
+   *  e.g. "C3D8I" or "C3D20" for hexahedra. Must match the node count. */
+  std::string tetrahedronType;
+  std::string hexahedronType;
+
+  /** Initial increment as a fraction of the step (the step runs from 0 to 1). */
+  double initialIncrement = 0.1;
+  double minimumIncrement = 1e-6;
+  int    maximumIncrements = 1000;
+  /** Newton convergence: residual force relative to the mean force (CalculiX
+   *  default 0.005) and displacement correction relative to the increment
+   *  (default 0.01). Tighter values cost one more Newton iteration or so. */
+  double residualTolerance = 1e-5;
+  double correctionTolerance = 1e-4;
+
+  /** Equation solver (*STATIC, SOLVER=...): empty for CalculiX's default
+   *  (SPOOLES in Debian's build), or "ITERATIVE CHOLESKY", "ITERATIVE SCALING". */
+  std::string solver;
+
+  /** Threads for CalculiX (OMP_NUM_THREADS, CCX_NPROC_*); 0: leave the environment. */
+  int threads = 0;
+  /** ccx executable; empty: $BMR_CCX, then `ccx` on PATH. */
+  std::string executable;
+  /** Folder for the job; empty: a fresh folder under the system temp folder,
+   *  removed afterwards unless keepFiles. */
+  std::string workDirectory;
+  bool        keepFiles = false;
+  std::string jobName = "bmr";
+};
+
+/** The mesh actually given to CalculiX: the model's nodes first (same
+ *  indices), then the mid-edge nodes of quadratic elements. */
+struct CalculixMesh
+{
+  std::vector<Vector3>               nodes;      // mm
+  Index                              modelNodes = 0;
+  std::vector<std::array<Index, 2>>  edgeParents; // for node modelNodes + i: its edge's end nodes
+  std::vector<std::string>           elementTypes; // per model cell
+  std::vector<std::vector<Index>>    elements;     // per model cell, CalculiX node order, 0-based
+
+  /** Which model nodes a mesh node "belongs to": itself for a model node, its
+   *  two end nodes for a mid-edge node. */
+  bool InSet(Index meshNode, const std::vector<char> & modelMask) const;
+};
+
+/** Mid-edge nodes and CalculiX connectivity for a model (no file written). */
+CalculixMesh
+MakeCalculixMesh(const Model & model, const CalculixSettings & settings = {});
+
+/** Writes the input deck. Throws bmr::Error for what CalculiX cannot take here
+ *  (contact surfaces). */
+void
+WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh & mesh, const CalculixSettings & settings = {});
+
+struct CalculixResult
+{
+  CalculixMesh         mesh;
+  std::vector<Vector3> meshDisplacements;   // mm, every mesh node (mid-edge nodes included)
+  std::vector<Vector3> meshReactionForces;  // N, every mesh node (residual-size at free nodes)
+  std::vector<Vector3> displacements;       // mm, the model's nodes only
+  double               wallSeconds = 0.0;   // the ccx run
+  int                  increments = 0;      // converged increments of the step
+  int                  iterations = 0;      // Newton iterations in all
+  std::string          workDirectory;       // kept only with keepFiles
+
+  /** Sum of reaction forces (N) over the given model nodes and the mid-edge
+   *  nodes whose two end nodes are both in the set. */
+  Vector3 TotalReactionForce(const std::vector<Index> & modelNodes) const;
+};
+
+/** Path of the ccx executable (settings.executable, $BMR_CCX, or `ccx` on
+ *  PATH), or empty if none is found. */
+std::string
+FindCalculix(const std::string & executable = {});
+
+/** Writes the deck, runs ccx, reads the results. Throws bmr::Error when ccx is
+ *  missing, fails, or does not complete the step (with the tail of its output). */
+CalculixResult
+RunCalculix(const Model & model, const CalculixSettings & settings = {});
+
+/** For each point, the index of the node at the same position (within
+ *  `tolerance`, mm), or -1. Hash-grid lookup, O(n). */
+std::vector<Index>
+MatchNodes(const std::vector<Vector3> & points, const std::vector<Vector3> & nodes, double tolerance = 1e-6);
+
+/** Displacement difference at the points of `nodes` that are also reference
+ *  nodes (MatchNodes); throws bmr::Error if some node has no partner. */
+struct DisplacementComparison
+{
+  int    nodes = 0;
+  double rmsError = 0.0; // mm, root mean square of |u - u_ref| over the nodes
+  double maxError = 0.0; // mm
+  Index  maxNode = -1;   // index into `nodes` where the largest error occurs
+};
+
+DisplacementComparison
+CompareDisplacements(const std::vector<Vector3> & nodes,
+                     const std::vector<Vector3> & displacements,
+                     const std::vector<Vector3> & referenceNodes,
+                     const std::vector<Vector3> & referenceDisplacements,
+                     double                       tolerance = 1e-6);
+
+/** Block indentation, the CalculiX-referenced non-homogeneous verification
+ *  case: a block [0,size] with its bottom face (z = 0) fixed, and the top-face
+ *  nodes inside the centred square patch |x - cx|, |y - cy| <= patchHalfWidth
+ *  given the displacement (0, 0, -depth) in all components. Node sets "bottom",
+ *  "patch" (plus the block's sets). Choose divisions so that the patch edges
+ *  fall on grid lines, then every resolution loads the same region. */
+struct IndentationProblem
+{
+  Vector3  size{ 20.0, 20.0, 10.0 }; // mm
+  double   patchHalfWidth = 5.0;     // mm
+  double   depth = 2.0;              // mm
+  Material material{ "tissue", 3000.0, 0.45, 1000.0 };
+};
+
+Model
+MakeIndentationModel(const IndentationProblem & problem, const std::array<int, 3> & divisions, GridCells cells);
+
+/** The same continuum problem on the quarter x >= cx, y >= cy of the block
+ *  (block, patch and material are symmetric about x = cx and y = cy), with
+ *  symmetry conditions u_x = 0 on x = cx (set "xmin") and u_y = 0 on y = cy
+ *  (set "ymin"): a reference solution at a quarter of the cost. `divisions`
+ *  are the quarter's; the full-block reaction force is 4x the quarter's. */
+Model
+MakeIndentationQuarterModel(const IndentationProblem & problem, const std::array<int, 3> & divisions, GridCells cells);
+
+/** Full-block displacements at `points` from a quarter-model solution, by
+ *  reflection: u(p) = S u(S p) with S the reflection that brings p into the
+ *  quarter. Throws bmr::Error if a reflected point is not a quarter node. */
+std::vector<Vector3>
+UnfoldQuarterDisplacements(const IndentationProblem &   problem,
+                           const std::vector<Vector3> & quarterNodes,
+                           const std::vector<Vector3> & quarterDisplacements,
+                           const std::vector<Vector3> & points,
+                           double                       tolerance = 1e-6);
+
+} // namespace bmr
+
+#endif

@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# Installs the Debian (bookworm) packages the module needs to build, test and
+# run its demo. Idempotent: packages already installed are left alone, and
+# apt-get runs only when something is missing.
+set -euo pipefail
+
+packages=(
+  build-essential cmake g++ pkg-config
+  libinsighttoolkit5-dev libvtk9-dev libcgal-dev libeigen3-dev
+  libgtest-dev googletest libbenchmark-dev
+  nlohmann-json3-dev libcli11-dev libnanoflann-dev
+  calculix-ccx mricron-data
+  python3 python3-numpy python3-matplotlib python3-pytest
+)
+
+missing=()
+for package in "${packages[@]}"; do
+  if ! dpkg -s "${package}" >/dev/null 2>&1; then
+    missing+=("${package}")
+  fi
+done
+
+if [ "${#missing[@]}" -eq 0 ]; then
+  echo "install-dependencies: all ${#packages[@]} packages already installed"
+  exit 0
+fi
+
+echo "install-dependencies: installing ${missing[*]}"
+
+# Root runs apt-get directly; otherwise use sudo where it exists.
+run_as_root=()
+if [ "$(id -u)" -ne 0 ]; then
+  if command -v sudo >/dev/null 2>&1; then
+    run_as_root=(sudo)
+  else
+    echo "install-dependencies: not root and no sudo; install as root: ${missing[*]}" >&2
+    exit 1
+  fi
+fi
+
+export DEBIAN_FRONTEND=noninteractive
+"${run_as_root[@]}" apt-get update
+"${run_as_root[@]}" apt-get install -y --no-install-recommends "${missing[@]}"
+echo "install-dependencies: installed ${missing[*]}"

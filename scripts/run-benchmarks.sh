@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# Builds the module in Release and runs the benchmark driver, then draws the
+# error-against-run-time plot. Writes docs/benchmarks.md,
+# docs/benchmark-error-vs-time.csv and docs/benchmark-error-vs-time.png.
+#
+#   scripts/run-benchmarks.sh [bmrBenchmark options, e.g. --quick or --threads 1,2]
+#
+# Environment: BUILD_DIR (default build-bench), JOBS (default 2).
+# Takes about 15-30 minutes on 2 cores (most of it the CalculiX reference);
+# run it on a quiet machine: the report records the load average.
+set -euo pipefail
+
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+build="${BUILD_DIR:-${root}/build-bench}"
+jobs="${JOBS:-2}"
+
+cmake -S "${root}" -B "${build}" -DCMAKE_BUILD_TYPE=Release
+cmake --build "${build}" --target bmrBenchmark -j "${jobs}"
+
+command -v ccx >/dev/null 2>&1 || echo "run-benchmarks: ccx (calculix-ccx) not found; the CalculiX-referenced part is skipped" >&2
+
+cd "${root}"
+"${build}/apps/bmrBenchmark" \
+  --output docs/benchmarks.md \
+  --csv docs/benchmark-error-vs-time.csv \
+  "$@"
+
+if [ -f docs/benchmark-error-vs-time.csv ]; then
+  # Debian's interpreter: the python3 first on PATH may not see python3-matplotlib.
+  /usr/bin/python3 scripts/plot-benchmarks.py docs/benchmark-error-vs-time.csv docs/benchmark-error-vs-time.png
+fi
+echo "run-benchmarks: wrote docs/benchmarks.md"

@@ -1,0 +1,322 @@
+// Bad input and failing solves end with a bmr::Error / bmr::SolveError that
+// names the offending object; a non-converged solve is never reported as
+// converged.
+#include "bmrTestUtilities.h"
+
+#include <gtest/gtest.h>
+
+namespace bmr
+{
+namespace
+{
+using namespace bmr::test;
+
+bool
+Contains(const std::string & text, const std::string & part)
+{
+  return text.find(part) != std::string::npos;
+}
+
+/** Message of the bmr::Error thrown by Validate() and by the Solver constructor
+ *  (which must validate too); empty if either did not throw. */
+std::string
+ValidationMessage(const Model & model)
+{
+  std::string fromValidate, fromSolver;
+  try
+  {
+    model.Validate();
+  }
+  catch (const Error & e)
+  {
+    fromValidate = e.what();
+  }
+  try
+  {
+    Solver solver(model, SolverSettings{});
+  }
+  catch (const Error & e)
+  {
+    fromSolver = e.what();
+  }
+  EXPECT_EQ(fromValidate, fromSolver) << "the solver must report the same validation error";
+  return fromValidate;
+}
+
+Model
+TwoTetrahedra()
+{
+  Model model;
+  model.materials.push_back(MakeMaterial(3000.0, 0.45));
+  model.nodes = { { 0, 0, 0 }, { 1, 0, 0 }, { 0, 1, 0 }, { 0, 0, 1 }, { 1, 1, 1 } };
+  Cell a;
+  a.type = CellType::Tetrahedron;
+  a.nodes = { 0, 1, 2, 3 };
+  Cell b = a;
+  b.nodes = { 1, 2, 3, 4 };
+  if (TetrahedronVolume(model.nodes[1], model.nodes[2], model.nodes[3], model.nodes[4]) < 0.0)
+    std::swap(b.nodes[1], b.nodes[2]);
+  model.cells = { a, b };
+  model.nodeSets["all"] = { 0, 1, 2, 3, 4 };
+  return model;
+}
+
+TEST(Failure, ValidModelPasses)
+{
+  EXPECT_EQ(ValidationMessage(TwoTetrahedra()), "");
+  EXPECT_EQ(ValidationMessage(MakeBlockMesh(Vector3(2, 2, 2), { 2, 2, 2 }, GridCells::Mixed)), "");
+}
+
+TEST(Failure, DegenerateTetrahedronIsNamed)
+{
+  Model model = TwoTetrahedra();
+  model.nodes[4] = (model.nodes[1] + model.nodes[2] + model.nodes[3]) / 3.0; // in the plane of nodes 1, 2, 3
+  const std::string message = ValidationMessage(model);
+  EXPECT_TRUE(Contains(message, "cell 1")) << message;
+  EXPECT_TRUE(Contains(message, "degenerate")) << message;
+}
+
+TEST(Failure, DegenerateHexahedronIsNamed)
+{
+  Model model = MakeBlockMesh(Vector3(3, 1, 1), { 3, 1, 1 }, GridCells::Hexahedra);
+  // Flatten cell 2 (x in [2,3]): its x = 3 face collapses onto x = 2.
+  for (Index n : model.NodeSet("xmax"))
+    model.nodes[n].x() = 2.0;
+  const std::string message = ValidationMessage(model);
+  EXPECT_TRUE(Contains(message, "hexahedron cell 2")) << message;
+  EXPECT_TRUE(Contains(message, "degenerate")) << message;
+}
+
+TEST(Failure, InvertedCellIsNamed)
+{
+  Model model = TwoTetrahedra();
+  std::swap(model.cells[1].nodes[0], model.cells[1].nodes[1]);
+  std::string message = ValidationMessage(model);
+  EXPECT_TRUE(Contains(message, "cell 1")) << message;
+  EXPECT_TRUE(Contains(message, "inverted")) << message;
+
+  Model block = MakeBlockMesh(Vector3(2, 2, 2), { 2, 2, 2 }, GridCells::Hexahedra);
+  // Mirror cell 5: swap its bottom and top faces.
+  auto & nodes = block.cells[5].nodes;
+  for (int a = 0; a < 4; ++a)
+    std::swap(nodes[a], nodes[a + 4]);
+  message = ValidationMessage(block);
+  EXPECT_TRUE(Contains(message, "hexahedron cell 5")) << message;
+  EXPECT_TRUE(Contains(message, "inverted")) << message;
+}
+
+TEST(Failure, NodeIndexOutOfRangeIsNamed)
+{
+  Model model = TwoTetrahedra();
+  model.cells[1].nodes[3] = 17;
+  std::string message = ValidationMessage(model);
+  EXPECT_TRUE(Contains(message, "cell 1")) << message;
+  EXPECT_TRUE(Contains(message, "17")) << message;
+
+  Model load = TwoTetrahedra();
+  load.prescribedDisplacements.push_back({ { 0, 99 }, { Vector3::Zero(), Vector3::Zero() }, { true, true, true }, {} });
+  message = ValidationMessage(load);
+  EXPECT_TRUE(Contains(message, "prescribed displacement 0")) << message;
+  EXPECT_TRUE(Contains(message, "99")) << message;
+
+  Model set = TwoTetrahedra();
+  set.nodeSets["top"] = { 3, -1 };
+  message = ValidationMessage(set);
+  EXPECT_TRUE(Contains(message, "'top'")) << message;
+  EXPECT_TRUE(Contains(message, "-1")) << message;
+}
+
+TEST(Failure, MissingNodeSetIsNamed)
+{
+  Model model = TwoTetrahedra();
+  model.fixedConstraints.push_back({ "skull_contact", { true, true, true } });
+  std::string message = ValidationMessage(model);
+  EXPECT_TRUE(Contains(message, "'skull_contact'")) << message;
+
+  Model contact = TwoTetrahedra();
+  contact.contactSurfaces.push_back(MakePlane(Vector3::Zero(), Vector3::UnitZ(), 5.0));
+  contact.contactSurfaces.back().slaveNodeSet = "cortex";
+  message = ValidationMessage(contact);
+  EXPECT_TRUE(Contains(message, "'cortex'")) << message;
+}
+
+TEST(Failure, MaterialIndexOutOfRangeIsNamed)
+{
+  Model model = TwoTetrahedra();
+  model.cells[0].material = 3;
+  const std::string message = ValidationMessage(model);
+  EXPECT_TRUE(Contains(message, "cell 0")) << message;
+  EXPECT_TRUE(Contains(message, "material index 3")) << message;
+}
+
+TEST(Failure, BadMaterialIsNamed)
+{
+  Model model = TwoTetrahedra();
+  model.materials[0].poissonRatio = 0.5;
+  model.materials[0].name = "parenchyma";
+  const std::string message = ValidationMessage(model);
+  EXPECT_TRUE(Contains(message, "parenchyma")) << message;
+  EXPECT_TRUE(Contains(message, "Poisson")) << message;
+}
+
+// A displacement applied in a single step inverts the cells around the moved
+// node: the solve stops with a SolveError naming the cell and the step.
+void
+ExpectInversionNamed(GridCells cells, double push)
+{
+  Model model = MakeBlockMesh(Vector3(3, 3, 3), { 3, 3, 3 }, cells, MakeMaterial(3000.0, 0.45));
+  model.fixedConstraints.push_back({ "zmin", { true, true, true } });
+  // A top node (interior of the top face) pushed down at once.
+  const Index node = model.NodeSet("zmax")[5];
+  LoadCurve   step;
+  step.shape = LoadCurve::Shape::Step;
+  Prescribe(model, { node }, [push](const Vector3 &) { return Vector3(0.0, 0.0, -push); }, { true, true, true }, step);
+  SolverSettings settings = TightRelaxation(1e-6, 10000);
+  settings.loadSteps = 1;
+  Solver solver(model, settings);
+  try
+  {
+    solver.Solve();
+    ADD_FAILURE() << "an inverted element must stop the solve";
+  }
+  catch (const SolveError & e)
+  {
+    const std::string message = e.what();
+    ASSERT_GE(e.Element(), 0) << message;
+    ASSERT_LT(e.Element(), static_cast<Index>(model.cells.size()));
+    EXPECT_GE(e.Step(), 0) << message;
+    EXPECT_TRUE(Contains(message, "cell " + std::to_string(e.Element()))) << message;
+    EXPECT_TRUE(Contains(message, "step " + std::to_string(e.Step()))) << message;
+    EXPECT_TRUE(Contains(message, "inverted")) << message;
+    // The inverted cell is one of those around the moved node.
+    const Cell & cell = model.cells[e.Element()];
+    const auto   end = cell.nodes.begin() + NodesPerCell(cell.type);
+    EXPECT_TRUE(std::find(cell.nodes.begin(), end, node) != end) << message;
+  }
+}
+
+// Tetrahedra, 2.5 mm (through more than two cell layers of 1 mm, less than the
+// body's size): the cells under the moved node invert at the first step.
+TEST(Failure, InversionDuringSolveNamesElementAndStep)
+{
+  ExpectInversionNamed(GridCells::Tetrahedra, 2.5);
+}
+
+// 9 mm (three block heights) in one step: the prescribed node moves further
+// than the body's size in that step, but it is the user who moved it; the
+// error must still name the inverted cell, not report an instability with
+// Element() = -1.
+TEST(Failure, HugeStepDisplacementNamesInvertedElement)
+{
+  ExpectInversionNamed(GridCells::Hexahedra, 9.0);
+  ExpectInversionNamed(GridCells::Tetrahedra, 9.0);
+}
+
+// One-point hexahedra check J only at the cell centre, where it can stay
+// positive while the cell is folded at its corners. A node pushed 1.5 mm down
+// through the 1 mm cell below it must not come back as a converged result
+// with tangled cells: either a SolveError naming the cell, or a result whose
+// every corner Jacobian is positive.
+TEST(Failure, HexahedronFoldedAtCornersIsNotReturnedAsConverged)
+{
+  for (double push : { 1.5, 2.5 })
+  {
+    Model model = MakeBlockMesh(Vector3(3, 3, 3), { 3, 3, 3 }, GridCells::Hexahedra, MakeMaterial(3000.0, 0.45));
+    model.fixedConstraints.push_back({ "zmin", { true, true, true } });
+    const Index node = model.NodeSet("zmax")[5];
+    LoadCurve   step;
+    step.shape = LoadCurve::Shape::Step;
+    Prescribe(model, { node }, [push](const Vector3 &) { return Vector3(0.0, 0.0, -push); }, { true, true, true },
+              step);
+    SolverSettings settings = TightRelaxation(1e-6, 10000);
+    settings.loadSteps = 1;
+    Solver solver(model, settings);
+    try
+    {
+      const SolveResult result = solver.Solve();
+      const double      minimum = MinDeformedJacobian(model, result.displacements);
+      EXPECT_GT(minimum, 0.0) << "push " << push << " mm: returned converged=" << result.converged
+                              << " with a corner Jacobian of " << minimum << " (cell folded)";
+    }
+    catch (const SolveError & e)
+    {
+      EXPECT_GE(e.Element(), 0) << e.what();
+      EXPECT_TRUE(Contains(e.what(), "cell " + std::to_string(e.Element()))) << e.what();
+    }
+  }
+}
+
+// Explicit dynamics with a time step 20x the critical one diverges: it must
+// stop with an error that says so, not return garbage.
+TEST(Failure, ExplicitTimeStepAboveCriticalIsReported)
+{
+  Model model = MakeBlockMesh(Vector3(4, 4, 4), { 4, 4, 4 }, GridCells::Hexahedra, MakeMaterial(3000.0, 0.45));
+  model.fixedConstraints.push_back({ "zmin", { true, true, true } });
+  model.bodyAcceleration = Vector3(0.0, 0.0, -9810.0);
+  SolverSettings settings;
+  settings.integrator = Integrator::ExplicitDynamics;
+  settings.threads = 1;
+  {
+    Solver probe(model, settings);
+    settings.timeStep = 20.0 * probe.CriticalTimeStep();
+  }
+  settings.endTime = 2000 * settings.timeStep;
+  std::string message;
+  try
+  {
+    Solver      solver(model, settings);
+    SolveResult result = solver.Solve();
+    ADD_FAILURE() << "unstable time step returned converged=" << result.converged << " max displacement "
+                  << result.maxDisplacement;
+  }
+  catch (const SolveError & e)
+  {
+    message = e.what();
+  }
+  catch (const Error & e)
+  {
+    message = e.what();
+    ADD_FAILURE() << "expected a bmr::SolveError, got bmr::Error: " << message;
+  }
+  EXPECT_TRUE(Contains(message, "time step")) << message;
+}
+
+// A model without loads is already at its solution. Its internal forces are
+// round-off (about 1e-16 N for tetrahedra: ANP nodal averaging), so the
+// displacement increments are round-off too; their relative growth must not
+// be mistaken for divergence.
+TEST(Failure, UnloadedModelIsNotReportedAsDiverged)
+{
+  for (GridCells cells : { GridCells::Hexahedra, GridCells::Tetrahedra, GridCells::Mixed })
+  {
+    Model model = MakeBlockMesh(Vector3(4.0, 4.0, 2.0), { 4, 4, 2 }, cells);
+    model.fixedConstraints.push_back({ "zmax", { true, true, true } });
+    for (double tolerance : { 1e-3, 1e-9 })
+    {
+      Solver      solver(model, TightRelaxation(tolerance, 100000));
+      SolveResult result;
+      ASSERT_NO_THROW(result = solver.Solve()) << "cells " << static_cast<int>(cells) << ", tolerance " << tolerance;
+      EXPECT_TRUE(result.converged) << result.message;
+      EXPECT_LT(result.maxDisplacement, 1e-12);
+    }
+  }
+}
+
+// Too few steps: not converged, and the estimated error says why.
+TEST(Failure, TooFewRelaxationStepsIsNotConverged)
+{
+  Model model = MakeBlockMesh(Vector3(4, 4, 4), { 3, 3, 3 }, GridCells::Tetrahedra, MakeMaterial(3000.0, 0.49));
+  AddSymmetryConstraints(model);
+  Prescribe(model, model.NodeSet("xmax"), [](const Vector3 &) { return Vector3(-1.0, 0, 0); }, { true, false, false });
+  SolverSettings settings = TightRelaxation(1e-6, 250);
+  settings.loadSteps = 200;
+  Solver            solver(model, settings);
+  const SolveResult result = solver.Solve();
+  EXPECT_FALSE(result.converged);
+  EXPECT_GT(result.estimatedError, settings.tolerance);
+  EXPECT_LE(result.steps, settings.maxSteps);
+  EXPECT_FALSE(result.message.empty());
+}
+
+} // namespace
+} // namespace bmr

@@ -1,0 +1,770 @@
+// Scene parsing (every field mapped, every bad input named), the run report,
+// the example scenes, and the biomech command-line tool.
+#include "bmrMeshGenerators.h"
+#include "bmrMeshIO.h"
+#include "bmrScene.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <iterator>
+#include <string>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <vector>
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+namespace
+{
+
+#define EXPECT_CONTAINS(text, part) EXPECT_NE(std::string(text).find(part), std::string::npos) << "message: " << (text)
+
+std::string
+ErrorMessage(const std::function<void()> & action)
+{
+  try
+  {
+    action();
+  }
+  catch (const bmr::Error & error)
+  {
+    return error.what();
+  }
+  return "(no bmr::Error thrown)";
+}
+
+std::string
+ReadText(const fs::path & path)
+{
+  std::ifstream stream(path);
+  return std::string((std::istreambuf_iterator<char>(stream)), std::istreambuf_iterator<char>());
+}
+
+void
+WriteText(const fs::path & path, const std::string & text)
+{
+  std::ofstream stream(path);
+  stream << text;
+}
+
+/** 40 x 20 x 20 mm block, 4 x 2 x 2 hexahedra of 10 mm: 45 nodes, 3 of them interior. */
+json
+BlockScene()
+{
+  return json::parse(R"({
+    "mesh": {"generate": "block", "size": [40, 20, 20], "divisions": [4, 2, 2]},
+    "materials": [{"name": "brain", "youngs_modulus": 3000, "poisson_ratio": 0.49}],
+    "node_sets": {"top": {"nodes_in_box": {"min": [-1, -1, 19], "max": [41, 21, 21]}}},
+    "fixed": [{"node_set": "zmin"}],
+    "prescribed_displacements": [{"node_set": "top", "displacement": [0, 0, -1]}]
+  })");
+}
+
+/** A fresh folder per test, removed afterwards. */
+class SceneTest : public ::testing::Test
+{
+protected:
+  void SetUp() override
+  {
+    const auto * info = ::testing::UnitTest::GetInstance()->current_test_info();
+    m_Folder = fs::temp_directory_path() /
+               ("bmrSceneTest-" + std::string(info->name()) + "-" + std::to_string(::getpid()));
+    fs::remove_all(m_Folder);
+    fs::create_directories(m_Folder);
+  }
+  void TearDown() override { fs::remove_all(m_Folder); }
+
+  bmr::Scene Parse(const json & scene) const { return bmr::ParseScene(scene.dump(), (m_Folder / "scene.json").string()); }
+
+  std::string ParseError(const json & scene) const
+  {
+    return ErrorMessage([&] { Parse(scene); });
+  }
+
+  fs::path m_Folder;
+};
+
+std::size_t
+CountNodes(const bmr::Model & model, const std::function<bool(const bmr::Vector3 &)> & inside)
+{
+  return static_cast<std::size_t>(std::count_if(model.nodes.begin(), model.nodes.end(), inside));
+}
+
+} // namespace
+
+TEST_F(SceneTest, EveryFieldIsMapped)
+{
+  json scene = BlockScene();
+  scene["description"] = "all fields";
+  scene["materials"] = json::parse(R"([
+    {"name": "brain", "youngs_modulus": 3000, "poisson_ratio": 0.49, "density": 1040},
+    {"name": "tumour", "label": 2, "youngs_modulus": 6000, "poisson_ratio": 0.45}])");
+  scene["node_sets"] = json::parse(R"({
+    "top": {"nodes_in_box": {"min": [9, -1, 19], "max": [31, 21, 21]}},
+    "corner": {"nodes_in_sphere": {"center": [0, 0, 0], "radius": 10.5}},
+    "listed": {"ids": [0, 5, 3, 5]},
+    "skin": {"surface_nodes_in_box": {"min": [-1, -1, -1], "max": [41, 21, 21]}},
+    "cap": {"surface_nodes_in_sphere": {"centre": [20, 10, 20], "radius": 10.1}}})");
+  scene["fixed"] = json::parse(R"([{"node_set": "zmin", "components": [true, false, true]}, {"node_set": "corner"}])");
+  scene["prescribed_displacements"] = json::parse(R"([
+    {"node_set": "top", "displacement": [0.5, 0, -2], "components": [false, false, true],
+     "curve": {"shape": "linear", "ramp_time": 0.25}}])");
+  scene["gravity"] = { 0, 0, -9810 };
+  scene["gravity_curve"] = json::parse(R"({"shape": "step"})");
+  scene["contact"] = json::parse(R"([{"name": "skull",
+    "surface": {"generate": "ellipsoid", "semi_axes": [30, 20, 20], "subdivisions": 2, "centre": [20, 10, 10]},
+    "body_side": "outside", "flip_normals": true, "slave_node_set": "skin"}])");
+  scene["solver"] = json::parse(R"({"integrator": "explicit_dynamics", "tetrahedron": "linear", "tolerance": 0.002,
+    "max_steps": 1234, "load_steps": 77, "adapt_interval": 9, "time_step": 1e-5, "safety_factor": 0.6,
+    "end_time": 0.3, "damping": 12.5, "hourglass_coefficient": 0.1, "threads": 2, "compute_stress": true})");
+  scene["output"] = json::parse(R"({"vtu": "out/r.vtu", "report": "out/r.json"})");
+
+  const bmr::Scene parsed = Parse(scene);
+  const bmr::Model & model = parsed.model;
+  EXPECT_EQ(parsed.description, "all fields");
+  EXPECT_EQ(parsed.path, (m_Folder / "scene.json").string());
+  EXPECT_EQ(model.nodes.size(), 45u);
+  EXPECT_EQ(model.cells.size(), 16u);
+
+  ASSERT_EQ(model.materials.size(), 2u);
+  EXPECT_EQ(model.materials[0].name, "brain");
+  EXPECT_EQ(model.materials[0].youngsModulus, 3000.0);
+  EXPECT_EQ(model.materials[0].poissonRatio, 0.49);
+  EXPECT_EQ(model.materials[0].density, 1040.0);
+  EXPECT_EQ(model.materials[1].name, "tumour");
+  EXPECT_EQ(model.materials[1].youngsModulus, 6000.0);
+  EXPECT_EQ(model.materials[1].poissonRatio, 0.45);
+  EXPECT_EQ(model.materials[1].density, 1000.0); // default
+  for (const auto & cell : model.cells)
+  {
+    EXPECT_EQ(cell.material, 0); // generated meshes use the first material
+  }
+
+  // Node sets: sizes from the 10 mm grid, members checked by position.
+  ASSERT_EQ(model.NodeSet("top").size(), 9u); // x in {10, 20, 30}, y in {0, 10, 20}, z = 20
+  for (const bmr::Index node : model.NodeSet("top"))
+  {
+    EXPECT_EQ(model.nodes[node].z(), 20.0);
+    EXPECT_GE(model.nodes[node].x(), 10.0);
+    EXPECT_LE(model.nodes[node].x(), 30.0);
+  }
+  EXPECT_EQ(model.NodeSet("corner").size(), 4u); // the origin and its 3 neighbours
+  EXPECT_EQ(model.NodeSet("listed"), (std::vector<bmr::Index>{ 0, 3, 5 }));
+  EXPECT_EQ(model.NodeSet("skin").size(), 42u); // 45 nodes less 3 interior
+  // The sphere holds 6 nodes; the interior one (20, 10, 10) is not on the surface.
+  EXPECT_EQ(CountNodes(model, [](const bmr::Vector3 & x) { return (x - bmr::Vector3(20, 10, 20)).norm() <= 10.1; }), 6u);
+  EXPECT_EQ(model.NodeSet("cap").size(), 5u);
+  for (const bmr::Index node : model.NodeSet("cap"))
+  {
+    EXPECT_NE(model.nodes[node], bmr::Vector3(20, 10, 10));
+  }
+  EXPECT_EQ(model.NodeSet("zmin").size(), 15u); // the generator's sets remain
+
+  ASSERT_EQ(model.fixedConstraints.size(), 2u);
+  EXPECT_EQ(model.fixedConstraints[0].nodeSet, "zmin");
+  EXPECT_EQ(model.fixedConstraints[0].components, (std::array<bool, 3>{ true, false, true }));
+  EXPECT_EQ(model.fixedConstraints[1].nodeSet, "corner");
+  EXPECT_EQ(model.fixedConstraints[1].components, (std::array<bool, 3>{ true, true, true }));
+
+  ASSERT_EQ(model.prescribedDisplacements.size(), 1u);
+  const bmr::PrescribedDisplacement & prescribed = model.prescribedDisplacements[0];
+  EXPECT_EQ(prescribed.nodes, model.NodeSet("top"));
+  ASSERT_EQ(prescribed.displacements.size(), 9u);
+  for (const auto & displacement : prescribed.displacements)
+  {
+    EXPECT_EQ(displacement, bmr::Vector3(0.5, 0.0, -2.0));
+  }
+  EXPECT_EQ(prescribed.components, (std::array<bool, 3>{ false, false, true }));
+  EXPECT_EQ(prescribed.curve.shape, bmr::LoadCurve::Shape::Linear);
+  EXPECT_EQ(prescribed.curve.rampTime, 0.25);
+
+  EXPECT_EQ(model.bodyAcceleration, bmr::Vector3(0, 0, -9810));
+  EXPECT_EQ(model.bodyForceCurve.shape, bmr::LoadCurve::Shape::Step);
+
+  ASSERT_EQ(model.contactSurfaces.size(), 1u);
+  const bmr::ContactSurface & contact = model.contactSurfaces[0];
+  const bmr::ContactSurface   expectedSurface =
+    bmr::MakeEllipsoidSurface(bmr::Vector3(30, 20, 20), 2, bmr::Vector3(20, 10, 10));
+  EXPECT_EQ(contact.name, "skull");
+  EXPECT_EQ(contact.vertices, expectedSurface.vertices);
+  EXPECT_EQ(contact.triangles, expectedSurface.triangles);
+  EXPECT_EQ(contact.bodySide, bmr::ContactSurface::Side::Outside);
+  EXPECT_TRUE(contact.flipNormals);
+  EXPECT_EQ(contact.slaveNodeSet, "skin");
+
+  const bmr::SolverSettings & settings = parsed.settings;
+  EXPECT_EQ(settings.integrator, bmr::Integrator::ExplicitDynamics);
+  EXPECT_EQ(settings.tetrahedron, bmr::TetrahedronFormulation::Linear);
+  EXPECT_EQ(settings.tolerance, 0.002);
+  EXPECT_EQ(settings.maxSteps, 1234);
+  EXPECT_EQ(settings.loadSteps, 77);
+  EXPECT_EQ(settings.adaptInterval, 9);
+  EXPECT_EQ(settings.timeStep, 1e-5);
+  EXPECT_EQ(settings.timeStepSafetyFactor, 0.6);
+  EXPECT_EQ(settings.endTime, 0.3);
+  EXPECT_EQ(settings.dampingCoefficient, 12.5);
+  EXPECT_EQ(settings.hourglassCoefficient, 0.1);
+  EXPECT_EQ(settings.threads, 2);
+  EXPECT_TRUE(settings.computeStress);
+
+  EXPECT_EQ(parsed.resultVtuFile, "out/r.vtu");
+  EXPECT_EQ(parsed.reportFile, "out/r.json");
+}
+
+TEST_F(SceneTest, DefaultsFollowTheDocumentation)
+{
+  const bmr::Scene          parsed = Parse(BlockScene());
+  const bmr::SolverSettings defaults;
+  EXPECT_EQ(parsed.settings.integrator, bmr::Integrator::DynamicRelaxation);
+  EXPECT_EQ(parsed.settings.tetrahedron, bmr::TetrahedronFormulation::AverageNodalPressure);
+  EXPECT_EQ(parsed.settings.tolerance, defaults.tolerance);
+  EXPECT_EQ(parsed.settings.maxSteps, defaults.maxSteps);
+  EXPECT_EQ(parsed.settings.hourglassCoefficient, 0.2);
+  EXPECT_EQ(parsed.settings.timeStepSafetyFactor, 0.8);
+  EXPECT_FALSE(parsed.settings.computeStress);
+  EXPECT_EQ(parsed.model.materials[0].density, 1000.0);
+  EXPECT_EQ(parsed.model.bodyAcceleration, bmr::Vector3::Zero());
+  EXPECT_TRUE(parsed.model.contactSurfaces.empty());
+  EXPECT_EQ(parsed.model.prescribedDisplacements[0].components, (std::array<bool, 3>{ true, true, true }));
+  EXPECT_EQ(parsed.model.prescribedDisplacements[0].curve.shape, bmr::LoadCurve::Shape::Smooth);
+  EXPECT_EQ(parsed.resultVtuFile, "scene-result.vtu");
+  EXPECT_EQ(parsed.reportFile, "scene-report.json");
+}
+
+TEST_F(SceneTest, MeshFileWithLabelsPointDataAndCsv)
+{
+  // Two materials by position; WriteMesh stores material indices as labels.
+  bmr::Model mesh = bmr::MakeBlockMesh(bmr::Vector3(20, 20, 10), { 2, 2, 1 }, bmr::GridCells::Hexahedra);
+  for (auto & cell : mesh.cells)
+  {
+    cell.material = mesh.nodes[cell.nodes[0]].x() < 10.0 ? 0 : 1;
+  }
+  mesh.materials.resize(2);
+  fs::create_directories(m_Folder / "meshes");
+  bmr::WriteMesh((m_Folder / "meshes" / "block.vtu").string(), mesh);
+
+  // Two nodes of the top face by id, one with a header line and a comment.
+  const bmr::Index first = mesh.NodeSet("zmax")[0];
+  const bmr::Index second = mesh.NodeSet("zmax")[3];
+  WriteText(m_Folder / "top.csv", "id,ux,uy,uz\n# pushed down\n" + std::to_string(first) + ", 0.25, 0, -1.5\n\n" +
+                                    std::to_string(second) + ",0,-0.125,-1\n");
+
+  const json scene = json::parse(R"({
+    "mesh": "meshes/block.vtu",
+    "material_array": "material",
+    "materials": [{"name": "stiff", "label": 1, "youngs_modulus": 6000, "poisson_ratio": 0.49},
+                  {"name": "soft", "label": 0, "youngs_modulus": 1500, "poisson_ratio": 0.45}],
+    "node_sets": {"base": {"point_data": "zmin"}},
+    "fixed": [{"node_set": "base"}],
+    "prescribed_displacements": [{"csv": "top.csv"}]
+  })");
+  const bmr::Scene parsed = Parse(scene);
+  const bmr::Model & model = parsed.model;
+  EXPECT_EQ(parsed.meshSource, (m_Folder / "meshes" / "block.vtu").string());
+  ASSERT_EQ(model.cells.size(), mesh.cells.size());
+  for (std::size_t cell = 0; cell < mesh.cells.size(); ++cell)
+  {
+    // label 1 -> materials[0] ("stiff"), label 0 -> materials[1] ("soft")
+    EXPECT_EQ(model.cells[cell].material, mesh.cells[cell].material == 1 ? 0 : 1) << "cell " << cell;
+  }
+  EXPECT_EQ(model.NodeSet("base"), mesh.NodeSet("zmin"));
+  ASSERT_EQ(model.prescribedDisplacements.size(), 1u);
+  EXPECT_EQ(model.prescribedDisplacements[0].nodes, (std::vector<bmr::Index>{ first, second }));
+  EXPECT_EQ(model.prescribedDisplacements[0].displacements[0], bmr::Vector3(0.25, 0.0, -1.5));
+  EXPECT_EQ(model.prescribedDisplacements[0].displacements[1], bmr::Vector3(0.0, -0.125, -1.0));
+
+  // Without a label array in the file, every cell takes the first material.
+  WriteText(m_Folder / "plain.vtk", "# vtk DataFile Version 3.0\nplain\nASCII\nDATASET UNSTRUCTURED_GRID\n"
+                                    "POINTS 5 double\n0 0 0 10 0 0 0 10 0 0 0 10 10 10 10\n"
+                                    "CELLS 2 10\n4 0 1 2 3\n4 1 2 3 4\nCELL_TYPES 2\n10\n10\n");
+  const json plainScene = json::parse(R"({"mesh": "plain.vtk",
+    "materials": [{"youngs_modulus": 3000, "poisson_ratio": 0.49}, {"youngs_modulus": 10, "poisson_ratio": 0.1}],
+    "node_sets": {"base": {"ids": [0, 1, 2]}}, "fixed": [{"node_set": "base"}]})");
+  const bmr::Scene plain = Parse(plainScene);
+  ASSERT_EQ(plain.model.cells.size(), 2u);
+  EXPECT_EQ(plain.model.cells[0].material, 0);
+  EXPECT_EQ(plain.model.cells[1].material, 0);
+  EXPECT_EQ(plain.model.cells[1].nodes[3], 4);
+}
+
+TEST_F(SceneTest, BadInputsNameTheOffendingKey)
+{
+  struct Case
+  {
+    std::string                     what;
+    std::function<void(json &)>     change;
+    std::vector<std::string>        expected;
+  };
+  const std::vector<Case> cases = {
+    { "unknown top-level key", [](json & s) { s["solvr"] = json::object(); }, { "solvr", "unknown key" } },
+    { "unknown nested key", [](json & s) { s["solver"] = { { "tolerence", 1e-3 } }; }, { "solver.tolerence", "unknown key", "tolerance" } },
+    { "wrong type", [](json & s) { s["solver"] = { { "max_steps", "many" } }; }, { "solver.max_steps", "integer" } },
+    { "fractional integer", [](json & s) { s["solver"] = { { "max_steps", 2.5 } }; }, { "solver.max_steps", "2.5" } },
+    { "missing mesh", [](json & s) { s.erase("mesh"); }, { "missing required key 'mesh'" } },
+    { "missing materials", [](json & s) { s.erase("materials"); }, { "missing required key 'materials'" } },
+    { "empty materials", [](json & s) { s["materials"] = json::array(); }, { "materials", "at least one" } },
+    { "missing modulus", [](json & s) { s["materials"][0].erase("youngs_modulus"); }, { "materials[0]", "youngs_modulus" } },
+    { "incompressible", [](json & s) { s["materials"][0]["poisson_ratio"] = 0.5; }, { "materials[0].poisson_ratio" } },
+    { "negative modulus", [](json & s) { s["materials"][0]["youngs_modulus"] = -1; }, { "materials[0].youngs_modulus", "greater than 0" } },
+    { "duplicate label",
+      [](json & s) {
+        s["materials"][0]["label"] = 3;
+        s["materials"].push_back({ { "label", 3 }, { "youngs_modulus", 10 }, { "poisson_ratio", 0.1 } });
+      },
+      { "materials[1].label", "already used" } },
+    { "unknown generator", [](json & s) { s["mesh"]["generate"] = "sphere"; }, { "mesh.generate", "sphere", "block" } },
+    { "mesh key of another generator", [](json & s) { s["mesh"]["spacing"] = 2; }, { "mesh.spacing", "unknown key" } },
+    { "bad divisions", [](json & s) { s["mesh"]["divisions"] = { 4, 0, 2 }; }, { "mesh.divisions[1]" } },
+    { "bad cells", [](json & s) { s["mesh"]["cells"] = "prisms"; }, { "mesh.cells", "prisms" } },
+    { "mesh of wrong type", [](json & s) { s["mesh"] = 3; }, { "mesh", "file name" } },
+    { "material_array with generated mesh", [](json & s) { s["material_array"] = "labels"; }, { "material_array" } },
+    { "unknown node set",
+      [](json & s) { s["prescribed_displacements"].push_back({ { "node_set", "tpo" }, { "displacement", { 0, 0, 1 } } }); },
+      { "prescribed_displacements[1].node_set", "'tpo'", "top" } },
+    { "unknown fixed set", [](json & s) { s["fixed"][0]["node_set"] = "bottom"; }, { "fixed[0].node_set", "bottom", "zmin" } },
+    { "short components", [](json & s) { s["fixed"][0]["components"] = { true, false }; }, { "fixed[0].components", "3 values" } },
+    { "no components", [](json & s) { s["fixed"][0]["components"] = { false, false, false }; }, { "fixed[0].components", "at least one" } },
+    { "empty node set",
+      [](json & s) { s["node_sets"]["far"] = { { "nodes_in_box", { { "min", { 100, 100, 100 } }, { "max", { 200, 200, 200 } } } } }; },
+      { "node_sets.far", "selects no nodes", "spans" } },
+    { "node id out of range", [](json & s) { s["node_sets"]["bad"] = { { "ids", { 1, 9999 } } }; }, { "node_sets.bad.ids[1]", "node 9999 does not exist" } },
+    { "two selectors",
+      [](json & s) { s["node_sets"]["two"] = { { "ids", { 1 } }, { "point_data", "x" } }; },
+      { "node_sets.two", "exactly one" } },
+    { "point data on a generated mesh", [](json & s) { s["node_sets"]["mask"] = { { "point_data", "zmin" } }; }, { "node_sets.mask.point_data", "zmin" } },
+    { "box min above max",
+      [](json & s) { s["node_sets"]["box"] = { { "nodes_in_box", { { "min", { 1, 1, 1 } }, { "max", { 0, 2, 2 } } } } }; },
+      { "node_sets.box.nodes_in_box", "min" } },
+    { "sphere without radius", [](json & s) { s["node_sets"]["ball"] = { { "nodes_in_sphere", { { "center", { 0, 0, 0 } } } } }; }, { "node_sets.ball.nodes_in_sphere", "radius" } },
+    { "redefined generated set", [](json & s) { s["node_sets"]["zmin"] = { { "ids", { 0 } } }; }, { "node_sets.zmin", "already exists" } },
+    { "node_set and csv", [](json & s) { s["prescribed_displacements"][0]["csv"] = "d.csv"; }, { "prescribed_displacements[0]", "either" } },
+    { "missing displacement", [](json & s) { s["prescribed_displacements"][0].erase("displacement"); }, { "prescribed_displacements[0]", "displacement" } },
+    { "missing csv", [](json & s) { s["prescribed_displacements"][0] = { { "csv", "nowhere.csv" } }; }, { "prescribed_displacements[0].csv", "nowhere.csv" } },
+    { "bad curve", [](json & s) { s["prescribed_displacements"][0]["curve"] = { { "shape", "cubic" } }; }, { "prescribed_displacements[0].curve.shape", "cubic" } },
+    { "zero ramp", [](json & s) { s["prescribed_displacements"][0]["curve"] = { { "ramp_time", 0 } }; }, { "prescribed_displacements[0].curve.ramp_time" } },
+    { "short gravity", [](json & s) { s["gravity"] = { 0, -9810 }; }, { "gravity", "3 values" } },
+    { "gravity curve alone", [](json & s) { s["gravity_curve"] = { { "shape", "linear" } }; }, { "gravity_curve", "gravity" } },
+    { "missing contact surface file", [](json & s) { s["contact"] = { { { "surface", "skull.stl" } } }; }, { "contact[0].surface", "skull.stl" } },
+    { "bad body side",
+      [](json & s) { s["contact"] = { { { "surface", { { "generate", "ellipsoid" }, { "semi_axes", { 50, 50, 50 } } } }, { "body_side", "above" } } }; },
+      { "contact[0].body_side", "above" } },
+    { "unknown slave set",
+      [](json & s) { s["contact"] = { { { "surface", { { "generate", "ellipsoid" }, { "semi_axes", { 50, 50, 50 } } } }, { "slave_node_set", "skin" } } }; },
+      { "contact[0].slave_node_set", "skin" } },
+    { "unknown integrator", [](json & s) { s["solver"] = { { "integrator", "implicit" } }; }, { "solver.integrator", "dynamic_relaxation" } },
+    { "safety factor above 1", [](json & s) { s["solver"] = { { "safety_factor", 1.5 } }; }, { "solver.safety_factor" } },
+    { "zero tolerance", [](json & s) { s["solver"] = { { "tolerance", 0 } }; }, { "solver.tolerance" } },
+    { "negative threads", [](json & s) { s["solver"] = { { "threads", -1 } }; }, { "solver.threads" } },
+    { "result not vtu", [](json & s) { s["output"] = { { "vtu", "result.txt" } }; }, { "output.vtu", ".vtu" } },
+    { "unknown output key", [](json & s) { s["output"] = { { "vtk", "r.vtk" } }; }, { "output.vtk", "unknown key" } },
+  };
+  for (const auto & testCase : cases)
+  {
+    SCOPED_TRACE(testCase.what);
+    json scene = BlockScene();
+    testCase.change(scene);
+    const std::string message = ParseError(scene);
+    EXPECT_CONTAINS(message, (m_Folder / "scene.json").string());
+    for (const auto & part : testCase.expected)
+    {
+      EXPECT_CONTAINS(message, part);
+    }
+  }
+}
+
+TEST_F(SceneTest, BadFileInputsAreNamed)
+{
+  bmr::Model mesh = bmr::MakeBlockMesh(bmr::Vector3(10, 10, 10), { 1, 1, 1 }, bmr::GridCells::Hexahedra);
+  mesh.cells[0].material = 7;
+  bmr::WriteMesh((m_Folder / "block.vtu").string(), mesh);
+  json scene = json::parse(R"({"mesh": "block.vtu",
+    "materials": [{"label": 1, "youngs_modulus": 3000, "poisson_ratio": 0.49}]})");
+
+  // A label without a material names the cell and the label.
+  std::string message = ParseError(scene);
+  EXPECT_CONTAINS(message, "cell 0 has label 7");
+  EXPECT_CONTAINS(message, "material labels: 1");
+
+  // Labels in the mesh need labels on every material.
+  scene["materials"][0].erase("label");
+  EXPECT_CONTAINS(ParseError(scene), "materials[0]: missing key 'label'");
+
+  // An explicitly named label array must exist.
+  scene["material_array"] = "tissue";
+  message = ParseError(scene);
+  EXPECT_CONTAINS(message, "material_array");
+  EXPECT_CONTAINS(message, "'tissue'");
+  scene.erase("material_array");
+
+  // Point-data masks must exist.
+  scene["materials"][0]["label"] = 7;
+  scene["node_sets"] = { { "base", { { "point_data", "bottom" } } } };
+  message = ParseError(scene);
+  EXPECT_CONTAINS(message, "node_sets.base.point_data");
+  EXPECT_CONTAINS(message, "zmin"); // lists the arrays the file has
+
+  // CSV lines: wrong node, wrong field count, a second header.
+  scene.erase("node_sets");
+  scene["prescribed_displacements"] = { { { "csv", "d.csv" } } };
+  WriteText(m_Folder / "d.csv", "id,ux,uy,uz\n0,0,0,1\n500,0,0,1\n");
+  message = ParseError(scene);
+  EXPECT_CONTAINS(message, "prescribed_displacements[0].csv");
+  EXPECT_CONTAINS(message, "line 3");
+  EXPECT_CONTAINS(message, "node 500 does not exist");
+  WriteText(m_Folder / "d.csv", "0,0,0\n");
+  EXPECT_CONTAINS(ParseError(scene), "line 1: expected 4 comma-separated values");
+  WriteText(m_Folder / "d.csv", "id,ux,uy,uz\n0,0,0,1\nid,ux,uy,uz\n");
+  EXPECT_CONTAINS(ParseError(scene), "line 3: expected numbers");
+  WriteText(m_Folder / "d.csv", "1,0,0,1\n1,0,0,2\n");
+  EXPECT_CONTAINS(ParseError(scene), "node 1 appears twice");
+  WriteText(m_Folder / "d.csv", "id,ux,uy,uz\n");
+  EXPECT_CONTAINS(ParseError(scene), "has no displacements");
+
+  // Missing mesh file names the key and the path.
+  scene["mesh"] = "no-such.vtu";
+  message = ParseError(scene);
+  EXPECT_CONTAINS(message, "mesh: ");
+  EXPECT_CONTAINS(message, (m_Folder / "no-such.vtu").string());
+
+  // Not JSON at all.
+  EXPECT_CONTAINS(ErrorMessage([&] { bmr::ParseScene("{\"mesh\": ", "broken.json"); }), "broken.json: not valid JSON");
+  EXPECT_CONTAINS(ErrorMessage([&] { bmr::ParseScene("[1, 2]", "list.json"); }), "JSON object");
+  EXPECT_CONTAINS(ErrorMessage([&] { bmr::ReadScene((m_Folder / "missing.json").string()); }), "missing.json");
+}
+
+TEST_F(SceneTest, ReportHoldsEveryResultField)
+{
+  json scene = BlockScene();
+  scene["description"] = "report test";
+  const bmr::Scene parsed = Parse(scene);
+  bmr::SolveResult result;
+  result.converged = false;
+  result.message = "step limit reached";
+  result.steps = 321;
+  result.timeStep = 1.5e-3;
+  result.criticalTimeStep = 2.5e-4;
+  result.wallSeconds = 0.75;
+  result.estimatedError = 0.125;
+  result.convergenceRate = 0.999;
+  result.maxDisplacement = 1.0;
+  result.strainEnergy = 2e-6;
+  result.hourglassEnergy = 3e-9;
+  result.kineticEnergy = 4e-8;
+  result.contactNodes = 17;
+  result.maxPenetration = 0.0625;
+  result.activeComponents = { "hexahedra", "hourglass-control", "dynamic-relaxation" };
+
+  const json report = json::parse(bmr::MakeReportJson(parsed, result, "out/result.vtu"));
+  EXPECT_EQ(report["scene"], parsed.path);
+  EXPECT_EQ(report["description"], "report test");
+  EXPECT_EQ(report["result_vtu"], "out/result.vtu");
+  EXPECT_EQ(report["converged"], false);
+  EXPECT_EQ(report["message"], "step limit reached");
+  EXPECT_EQ(report["integrator"], "dynamic_relaxation");
+  EXPECT_EQ(report["steps"], 321);
+  EXPECT_EQ(report["time_step"], 1.5e-3);
+  EXPECT_EQ(report["critical_time_step"], 2.5e-4);
+  EXPECT_EQ(report["wall_seconds"], 0.75);
+  EXPECT_EQ(report["estimated_error_mm"], 0.125);
+  EXPECT_EQ(report["convergence_rate"], 0.999);
+  EXPECT_EQ(report["max_displacement_mm"], 1.0);
+  EXPECT_EQ(report["strain_energy_J"], 2e-6);
+  EXPECT_EQ(report["hourglass_energy_J"], 3e-9);
+  EXPECT_EQ(report["kinetic_energy_J"], 4e-8);
+  EXPECT_EQ(report["contact_nodes"], 17);
+  EXPECT_EQ(report["max_penetration_mm"], 0.0625);
+  EXPECT_EQ(report["active_components"], json({ "hexahedra", "hourglass-control", "dynamic-relaxation" }));
+  EXPECT_EQ(report["nodes"], 45);
+  EXPECT_EQ(report["cells"], 16);
+  EXPECT_EQ(report["hexahedra"], 16);
+  EXPECT_EQ(report["tetrahedra"], 0);
+  EXPECT_EQ(report["dofs"], 135);
+  EXPECT_EQ(report["materials"], 1);
+  EXPECT_GE(report["threads"].get<int>(), 1);
+
+  const std::string table = bmr::FormatReportTable(parsed, result);
+  EXPECT_CONTAINS(table, "NOT CONVERGED");
+  EXPECT_CONTAINS(table, "45 nodes, 135 DOF, 16 cells (16 hexahedra, 0 tetrahedra)");
+  EXPECT_CONTAINS(table, "step limit reached");
+  result.converged = true;
+  EXPECT_EQ(bmr::FormatReportTable(parsed, result).find("NOT CONVERGED"), std::string::npos);
+}
+
+TEST(SceneExamples, EveryExampleSceneParses)
+{
+  const fs::path folder = fs::path(BMR_SOURCE_DIR) / "examples" / "scenes";
+  int            scenes = 0;
+  for (const auto & entry : fs::directory_iterator(folder))
+  {
+    if (entry.path().extension() == ".json")
+    {
+      SCOPED_TRACE(entry.path().string());
+      EXPECT_NO_THROW(bmr::ReadScene(entry.path().string()));
+      ++scenes;
+    }
+  }
+  EXPECT_GE(scenes, 4);
+}
+
+TEST(SceneExamples, BrainSizedScenesHaveAboutOneHundredThousandDofs)
+{
+  const fs::path   folder = fs::path(BMR_SOURCE_DIR) / "examples" / "scenes";
+  const bmr::Scene hexahedra = bmr::ReadScene((folder / "brain-sized-hex.json").string());
+  const bmr::Scene tetrahedra = bmr::ReadScene((folder / "brain-sized-tet.json").string());
+  const bmr::ModelCounts hexCounts = bmr::CountModel(hexahedra.model);
+  const bmr::ModelCounts tetCounts = bmr::CountModel(tetrahedra.model);
+  EXPECT_GT(hexCounts.dofs, 90000u);
+  EXPECT_LT(hexCounts.dofs, 115000u);
+  EXPECT_EQ(hexCounts.tetrahedra, 0u);
+  EXPECT_EQ(tetCounts.hexahedra, 0u);
+  EXPECT_EQ(tetCounts.nodes, hexCounts.nodes);       // same grid
+  EXPECT_EQ(tetCounts.cells, 6 * hexCounts.cells);    // 6 tetrahedra per grid cell
+
+  const bmr::Model & model = hexahedra.model;
+  const std::vector<bmr::Index> boundary = model.BoundaryNodes();
+  for (const bmr::Index node : model.NodeSet("craniotomy"))
+  {
+    EXPECT_LE((model.nodes[node] - bmr::Vector3(0, 0, 60)).norm(), 25.0);
+    EXPECT_TRUE(std::binary_search(boundary.begin(), boundary.end(), node));
+  }
+  for (const bmr::Index node : model.NodeSet("base"))
+  {
+    EXPECT_LE(model.nodes[node].z(), -45.0);
+  }
+  EXPECT_GT(model.NodeSet("craniotomy").size(), 20u);
+  EXPECT_GT(model.NodeSet("base").size(), 20u);
+  EXPECT_EQ(hexahedra.settings.tolerance, 0.01);
+  ASSERT_EQ(model.prescribedDisplacements.size(), 1u);
+  EXPECT_EQ(model.prescribedDisplacements[0].displacements[0], bmr::Vector3(0, 0, -10));
+}
+
+// ---------------------------------------------------------------------------
+// The biomech command-line tool.
+// ---------------------------------------------------------------------------
+namespace
+{
+
+struct CommandResult
+{
+  int         exitCode = -1;
+  std::string out;
+  std::string err;
+};
+
+class SceneCliTest : public ::testing::Test
+{
+protected:
+  void SetUp() override
+  {
+    const auto * info = ::testing::UnitTest::GetInstance()->current_test_info();
+    m_Folder = fs::temp_directory_path() /
+               ("bmrSceneCliTest-" + std::string(info->name()) + "-" + std::to_string(::getpid()));
+    fs::remove_all(m_Folder);
+    fs::create_directories(m_Folder);
+  }
+  void TearDown() override { fs::remove_all(m_Folder); }
+
+  CommandResult Biomech(const std::string & arguments) const
+  {
+    const fs::path outPath = m_Folder / "stdout.txt";
+    const fs::path errPath = m_Folder / "stderr.txt";
+    const std::string command = std::string("'") + BMR_BIOMECH_EXECUTABLE + "' " + arguments + " > '" +
+                                outPath.string() + "' 2> '" + errPath.string() + "' < /dev/null";
+    const int status = std::system(command.c_str());
+    CommandResult result;
+    result.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    result.out = ReadText(outPath);
+    result.err = ReadText(errPath);
+    fs::remove(outPath);
+    fs::remove(errPath);
+    return result;
+  }
+
+  std::string Example(const std::string & name) const
+  {
+    return "'" + (fs::path(BMR_SOURCE_DIR) / "examples" / "scenes" / name).string() + "'";
+  }
+
+  std::vector<std::string> FilesIn(const fs::path & folder) const
+  {
+    std::vector<std::string> names;
+    if (fs::exists(folder))
+    {
+      for (const auto & entry : fs::recursive_directory_iterator(folder))
+      {
+        if (entry.is_regular_file())
+        {
+          names.push_back(entry.path().filename().string());
+        }
+      }
+    }
+    std::sort(names.begin(), names.end());
+    return names;
+  }
+
+  fs::path m_Folder;
+};
+
+} // namespace
+
+TEST_F(SceneCliTest, HelpListsSubcommands)
+{
+  const CommandResult help = Biomech("--help");
+  EXPECT_EQ(help.exitCode, 0);
+  EXPECT_CONTAINS(help.out, "solve");
+  EXPECT_CONTAINS(help.out, "make-mesh");
+  const CommandResult wrong = Biomech("dance");
+  EXPECT_EQ(wrong.exitCode, 1);
+  EXPECT_CONTAINS(wrong.err, "biomech: error:");
+}
+
+TEST_F(SceneCliTest, BlockIndentationConvergesToThePrescribedDisplacement)
+{
+  const fs::path output = m_Folder / "out";
+  const CommandResult run = Biomech("solve " + Example("block-indentation.json") + " --output-dir '" +
+                                    output.string() + "' --threads 2");
+  ASSERT_EQ(run.exitCode, 0) << run.out << run.err;
+  EXPECT_CONTAINS(run.out, "converged");
+  EXPECT_EQ(run.out.find("NOT CONVERGED"), std::string::npos);
+  EXPECT_TRUE(run.err.empty()) << run.err; // no progress line when stderr is not a terminal
+
+  const json report = json::parse(ReadText(output / "block-indentation-report.json"));
+  EXPECT_EQ(report["converged"], true);
+  EXPECT_NEAR(report["max_displacement_mm"].get<double>(), 2.0, 1e-6);
+  EXPECT_EQ(report["nodes"], 9 * 9 * 5);
+  EXPECT_EQ(report["hexahedra"], 8 * 8 * 4);
+  EXPECT_LE(report["estimated_error_mm"].get<double>(), 1e-3);
+  EXPECT_EQ(report["threads"], 2);
+  // Leave out what the scene does not need: no contact, no tetrahedra.
+  for (const auto & component : report["active_components"])
+  {
+    EXPECT_EQ(component.get<std::string>().find("contact"), std::string::npos) << component;
+    EXPECT_EQ(component.get<std::string>().find("tetra"), std::string::npos) << component;
+  }
+
+  // The result file: the indenter nodes moved exactly 2 mm down, the base stayed.
+  const bmr::Scene    scene = bmr::ReadScene((fs::path(BMR_SOURCE_DIR) / "examples/scenes/block-indentation.json").string());
+  const bmr::MeshData result = bmr::ReadMesh((output / "block-indentation-result.vtu").string());
+  const bmr::DataArray & displacement = result.pointData.at("displacement");
+  ASSERT_EQ(displacement.Tuples(), scene.model.nodes.size());
+  ASSERT_EQ(scene.model.NodeSet("indenter").size(), 9u);
+  for (const bmr::Index node : scene.model.NodeSet("indenter"))
+  {
+    EXPECT_NEAR(displacement.values[3 * node + 0], 0.0, 1e-9);
+    EXPECT_NEAR(displacement.values[3 * node + 1], 0.0, 1e-9);
+    EXPECT_NEAR(displacement.values[3 * node + 2], -2.0, 1e-9);
+  }
+  for (const bmr::Index node : scene.model.NodeSet("zmin"))
+  {
+    EXPECT_EQ(displacement.values[3 * node + 2], 0.0);
+  }
+  // At equilibrium the reactions of the indenter and of the base cancel.
+  const bmr::DataArray & reaction = result.pointData.at("reaction_force");
+  bmr::Vector3           total = bmr::Vector3::Zero();
+  bmr::Vector3           indenter = bmr::Vector3::Zero();
+  for (std::size_t node = 0; node < reaction.Tuples(); ++node)
+  {
+    total += bmr::Vector3(reaction.values[3 * node], reaction.values[3 * node + 1], reaction.values[3 * node + 2]);
+  }
+  for (const bmr::Index node : scene.model.NodeSet("indenter"))
+  {
+    indenter.z() += reaction.values[3 * node + 2];
+  }
+  // Reactions are the forces the constraints exert on the body: the indenter pushes down.
+  EXPECT_LT(indenter.z(), 0.0);
+  EXPECT_LT(total.norm(), 0.02 * std::abs(indenter.z()));
+}
+
+TEST_F(SceneCliTest, MeshFileSceneHonoursCsvDisplacements)
+{
+  const fs::path      output = m_Folder / "out";
+  const CommandResult run = Biomech("solve " + Example("block-from-file.json") + " -d '" + output.string() + "'");
+  ASSERT_EQ(run.exitCode, 0) << run.out << run.err;
+  const bmr::Scene scene = bmr::ReadScene((fs::path(BMR_SOURCE_DIR) / "examples/scenes/block-from-file.json").string());
+  const bmr::MeshData result = bmr::ReadMesh((output / "block-from-file-result.vtu").string());
+  const bmr::DataArray & displacement = result.pointData.at("displacement");
+  const bmr::PrescribedDisplacement & prescribed = scene.model.prescribedDisplacements.at(0);
+  ASSERT_FALSE(prescribed.nodes.empty());
+  for (std::size_t k = 0; k < prescribed.nodes.size(); ++k)
+  {
+    for (int c = 0; c < 3; ++c)
+    {
+      EXPECT_NEAR(displacement.values[3 * prescribed.nodes[k] + c], prescribed.displacements[k][c], 1e-9);
+    }
+  }
+  // Both materials are used.
+  const json report = json::parse(ReadText(output / "block-from-file-report.json"));
+  EXPECT_EQ(report["materials"], 2);
+  EXPECT_GT(report["hexahedra"].get<int>(), 0);
+  EXPECT_GT(report["tetrahedra"].get<int>(), 0);
+}
+
+TEST_F(SceneCliTest, BadMeshPathExitsOneAndWritesNothing)
+{
+  json scene = BlockScene();
+  scene["mesh"] = "missing-mesh.vtu";
+  WriteText(m_Folder / "bad.json", scene.dump());
+  const fs::path      output = m_Folder / "out";
+  const CommandResult run = Biomech("solve '" + (m_Folder / "bad.json").string() + "' --output-dir '" + output.string() + "'");
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_CONTAINS(run.err, "biomech: error:");
+  EXPECT_CONTAINS(run.err, "missing-mesh.vtu");
+  EXPECT_TRUE(FilesIn(output).empty());
+}
+
+TEST_F(SceneCliTest, StepLimitExitsTwoAndReportsNotConverged)
+{
+  json scene = BlockScene();
+  scene["solver"] = { { "max_steps", 5 }, { "tolerance", 1e-6 } };
+  WriteText(m_Folder / "short.json", scene.dump());
+  const fs::path output = m_Folder / "out";
+  // A stale result from an earlier run must not survive as if it were this one's.
+  fs::create_directories(output);
+  WriteText(output / "short-report.json", R"({"converged": true})");
+
+  const CommandResult run = Biomech("solve '" + (m_Folder / "short.json").string() + "' --output-dir '" + output.string() + "'");
+  EXPECT_EQ(run.exitCode, 2) << run.out << run.err;
+  EXPECT_CONTAINS(run.out, "NOT CONVERGED");
+  EXPECT_CONTAINS(run.err, "NOT CONVERGED");
+  const json report = json::parse(ReadText(output / "short-report.json"));
+  EXPECT_EQ(report["converged"], false);
+  EXPECT_EQ(report["steps"], 5);
+  EXPECT_TRUE(fs::exists(output / "short-result.vtu"));
+}
+
+TEST_F(SceneCliTest, MakeMeshWritesAReadableMesh)
+{
+  const fs::path      mesh = m_Folder / "block.vtu";
+  const CommandResult run =
+    Biomech("make-mesh --shape block --size 40 20 20 --divisions 4 2 2 --cells tetrahedra -o '" + mesh.string() + "'");
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const bmr::MeshData read = bmr::ReadMesh(mesh.string());
+  EXPECT_EQ(read.model.nodes.size(), 45u);
+  EXPECT_EQ(read.model.cells.size(), 6u * 16u);
+  EXPECT_EQ(read.pointData.count("zmin"), 1u);
+
+  const CommandResult wrong = Biomech("make-mesh --shape ellipsoid --size 1 2 3 -o '" + mesh.string() + "'");
+  EXPECT_EQ(wrong.exitCode, 1);
+  EXPECT_CONTAINS(wrong.err, "--semi-axes");
+}
+
+TEST_F(SceneCliTest, FailedSolveExitsOneAndWritesNothing)
+{
+  // Pushing a 20 mm thick block down by 25 mm inverts elements.
+  json scene = json::parse(ReadText(fs::path(BMR_SOURCE_DIR) / "examples/scenes/block-indentation.json"));
+  scene["prescribed_displacements"][0]["displacement"] = { 0, 0, -25 };
+  WriteText(m_Folder / "crush.json", scene.dump());
+  const fs::path output = m_Folder / "out";
+  const CommandResult run = Biomech("solve '" + (m_Folder / "crush.json").string() + "' --output-dir '" + output.string() + "'");
+  EXPECT_EQ(run.exitCode, 1) << run.out << run.err;
+  EXPECT_CONTAINS(run.err, "biomech: error: the solve failed");
+  EXPECT_CONTAINS(run.err, "element");
+  EXPECT_TRUE(FilesIn(output).empty());
+}
