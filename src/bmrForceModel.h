@@ -58,18 +58,41 @@ public:
   Index ModelCell(Index kernelCell) const { return m_ModelCell[kernelCell]; }
 
 private:
+  /** Cells per block of the parallel schedule (see ScheduleCells). */
+  static constexpr Index kCellsPerBlock = 256;
+
+  /** The `Width` values of one cell from component-major storage. */
+  template <int Width>
+  static std::array<double, Width> ComponentsOf(const std::vector<double> & values, Index cell)
+  {
+    const std::size_t         count = values.size() / Width;
+    std::array<double, Width> out;
+    for (int c = 0; c < Width; ++c)
+    {
+      out[c] = values[c * count + static_cast<std::size_t>(cell)];
+    }
+    return out;
+  }
+
+  void TetrahedronDilatations(Index begin, Index end, const double * u);
+  /** Adds the forces of hexahedra [begin, end) to f; returns the first inverted one or -1. */
+  Index AddHexahedronForces(Index begin, Index end, const double * u, double * f) const;
+  /** Adds the forces of tetrahedra [begin, end) to f; returns the first inverted one or -1. */
+  Index AddTetrahedronForces(Index begin, Index end, const double * u, double * f) const;
+
   int   m_Threads;
   Index m_NodeCount;
   bool  m_AverageNodalPressure;
 
-  // Hexahedra: nodes, B = (1/V) integral dN/dX (8x3, row-major), X^T h (3x4,
-  // row-major) from which the hourglass vectors follow, stiffness per cell.
+  // Hexahedra: nodes, B = (1/V) integral dN/dX (8x3) and X^T h (3x4), from
+  // which the hourglass vectors follow, both component-major like m_TetB;
+  // hourglass stiffness per cell.
   std::vector<std::array<Index, 8>> m_HexNodes;
   std::vector<double>               m_HexB;
   std::vector<double>               m_HexXH;
   std::vector<double>               m_HexHourglassStiffness; // N/mm
 
-  // Tetrahedra: nodes, dN/dX (4x3, row-major).
+  // Tetrahedra: nodes, dN/dX component-major: m_TetB[c * count + t], c = 3 a + j.
   std::vector<std::array<Index, 4>> m_TetNodes;
   std::vector<double>               m_TetB;
   std::vector<double>               m_TetJacobian; // per step, ANP
