@@ -101,9 +101,11 @@ TEST_P(ExtremeCells, StiffnessContrast300)
   RecordProperty("inclusionStrain", Sci(inclusionStrain));
   RecordProperty("matrixStrain", Sci(matrixStrain));
   RecordProperty("steps", result.steps);
-  // Measured (2 x 2 x 2 cell inclusion): ANP tetrahedra 0.21 vs 0.044; with a
-  // 2x finer grid (tetrahedra 0.22) the ratio only grows. A soft inclusion
-  // in a nearly incompressible matrix strains about twice the far field.
+  // Measured (2 x 2 x 2 cell inclusion): ANP tetrahedra 0.21 vs 0.044,
+  // hexahedra 0.23 vs 0.035; on a 2x finer grid tetrahedra 0.22 (with 2000 load
+  // steps; 200 invert a soft cell during relaxation, reported as a SolveError).
+  // A soft inclusion in a nearly incompressible matrix strains about twice the
+  // far field (10%).
   EXPECT_GT(inclusionStrain, 1.5 * matrixStrain);
   EXPECT_GT(matrixStrain, 0.0);
   EXPECT_LT(inclusionStrain, 0.5);

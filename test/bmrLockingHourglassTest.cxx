@@ -73,8 +73,8 @@ IndentationForce(const Indentation & run)
 // internal energy (e.g. LS-DYNA's guideline); here the patch is only 2 cells
 // wide, so the limit is 15% on this grid and 10% on the 2x finer grid (see
 // IndentationHexahedraAgreeWithTetrahedra). Measured with hourglass stiffness
-// k 2 mu, k = 0.1: 10.8% and 5.2%; with k (lambda + 2 mu), k = 0.075 (locks
-// at nu -> 0.5): 36% and 21%.
+// k 2 mu: k = 0.2 (default) 14.7% and 7.5%, k = 0.1 10.8% and 5.2%; with
+// k (lambda + 2 mu), k = 0.075 (which locks as nu -> 0.5): 36% and 21%.
 TEST(Hourglass, IndentationHourglassEnergyIsSmall)
 {
   const Indentation hex = Indent(GridCells::Hexahedra, 1);
@@ -152,9 +152,9 @@ TEST(Hourglass, IndentationHexahedraAgreeWithTetrahedra)
 // Volumetric locking in indentation (8 x 8 x 4 cells): going from nu = 0.45 to
 // 0.499 (kappa/mu from 9.7 to 500) the physical indentation force rises only
 // a little towards its incompressible limit (measured: ANP tetrahedra x1.22;
-// hexahedra with hourglass stiffness scaled by mu instead of lambda + 2 mu,
-// emulated through the coefficient, x1.13). A locking element's force grows
-// with kappa (measured: linear tetrahedra x7.3).
+// hexahedra with hourglass stiffness k 2 mu x1.09). A locking element's force
+// grows with kappa (measured: linear tetrahedra x7.3; hexahedra with hourglass
+// stiffness k (lambda + 2 mu) x6.7).
 TEST(Locking, IndentationForceStaysBoundedAsNuApproachesHalf)
 {
   struct Case
@@ -187,10 +187,10 @@ TEST(Locking, IndentationForceStaysBoundedAsNuApproachesHalf)
 // ---------------------------------------------------------------------------
 // Nearly incompressible cantilever 20 x 4 x 4 mm, x = 0 clamped, body force
 // of 0.03 g downwards. Euler-Bernoulli + Timoshenko shear: about 1.54 mm tip
-// deflection; measured with hexahedra (mu-scaled hourglass, 20x4x4 / 30x6x6
-// cells) 1.48 / 1.47 mm, with ANP tetrahedra on 10x2x2 / 20x4x4 / 30x6x6
-// cells 0.82 / 1.20 / 1.32 mm at nu = 0.49 (convergence from below: bending
-// with constant-strain tetrahedra).
+// deflection. Measured at nu = 0.49: hexahedra (hourglass k 2 mu, k = 0.2) on
+// 10x2x2 / 20x4x4 cells 1.27 / 1.39 mm (k = 0.075: 1.59 / 1.48, 30x6x6 1.47);
+// ANP tetrahedra on 10x2x2 / 20x4x4 / 30x6x6 cells 0.82 / 1.20 / 1.32 mm
+// (convergence from below: bending with constant-strain tetrahedra).
 // ---------------------------------------------------------------------------
 double
 CantileverTipDeflection(GridCells cells, TetrahedronFormulation formulation, double poissonRatio, int refinement)
@@ -222,7 +222,7 @@ AnpTipDeflection499()
 // tetrahedron on the same mesh is several times too stiff (0.134 mm). The
 // hexahedra on the same grid are the reference: ANP within 25% of them
 // (constant-strain tetrahedra are still converging in bending at 4 cells
-// through the thickness; measured 21% with mu-scaled hourglass control).
+// through the thickness; measured 16% with k = 0.2, 21% with k = 0.075).
 TEST(Locking, CantileverAnpTetrahedraDoNotLockLinearTetrahedraDo)
 {
   const double anp49 = CantileverTipDeflection(GridCells::Tetrahedra, TetrahedronFormulation::AverageNodalPressure, 0.49, 2);
