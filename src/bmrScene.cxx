@@ -1160,6 +1160,7 @@ MakeReportJson(const Scene & scene, const SolveResult & result, const std::strin
   report["wall_seconds"] = result.wallSeconds;
   report["estimated_error_mm"] = result.estimatedError;
   report["convergence_rate"] = result.convergenceRate;
+  report["restarts"] = result.restarts;
   report["max_displacement_mm"] = result.maxDisplacement;
   report["strain_energy_J"] = result.strainEnergy;
   report["hourglass_energy_J"] = result.hourglassEnergy;
@@ -1205,10 +1206,18 @@ FormatReportTable(const Scene & scene, const SolveResult & result)
                  WithThousands(counts.tetrahedra) + " tetrahedra), " + std::to_string(counts.materials) +
                  (counts.materials == 1 ? " material" : " materials"));
   row("components", JoinNames(result.activeComponents));
-  row("integrator",
-      std::string(explicitDynamics ? "explicit dynamics" : "dynamic relaxation") + ", " +
-        WithThousands(static_cast<std::size_t>(std::max(result.steps, 0))) + " steps, time step " +
-        FormatNumber(result.timeStep) + " s (critical " + FormatNumber(result.criticalTimeStep) + " s)");
+  const std::string steps = WithThousands(static_cast<std::size_t>(std::max(result.steps, 0))) + " steps";
+  if (explicitDynamics)
+  {
+    row("integrator", "explicit dynamics, " + steps + ", time step " + FormatNumber(result.timeStep) +
+                        " s (critical " + FormatNumber(result.criticalTimeStep) + " s)");
+  }
+  else
+  {
+    // Dynamic relaxation steps in pseudo time with scaled masses: no physical time step to show.
+    row("integrator", "dynamic relaxation, " + steps +
+                        (result.restarts > 0 ? ", " + std::to_string(result.restarts) + " restart(s)" : std::string()));
+  }
   if (!explicitDynamics)
   {
     row("estimated error", FormatNumber(result.estimatedError) + " mm (tolerance " +
