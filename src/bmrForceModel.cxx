@@ -537,7 +537,6 @@ Index
 ForceModel::ComputeInternalForces(const double * u, double * f)
 {
   const Index       hexCount = HexahedronCount();
-  const Index       tetCount = TetrahedronCount();
   const bool        anp = UsesAverageNodalPressure();
   const std::size_t dofCount = 3 * static_cast<std::size_t>(m_NodeCount);
   Index             firstInverted = std::numeric_limits<Index>::max();
@@ -852,12 +851,13 @@ ForceModel::AddTetrahedronForces(Index begin, Index end, const double * u, doubl
 
 #undef BMR_TETRAHEDRON_DEFORMATION_GRADIENT
 
+template <typename CellMass>
 std::vector<double>
-ForceModel::LumpedMasses() const
+ForceModel::LumpToNodes(const CellMass & cellMass) const
 {
   std::vector<double> masses(m_NodeCount, 0.0);
   auto                add = [&](Index k, const Index * nodes, int count) {
-    const double share = m_Density[k] * m_Volume[k] / count;
+    const double share = cellMass(k) / count;
     for (int a = 0; a < count; ++a)
     {
       masses[nodes[a]] += share;
@@ -875,27 +875,17 @@ ForceModel::LumpedMasses() const
 }
 
 std::vector<double>
+ForceModel::LumpedMasses() const
+{
+  return LumpToNodes([this](Index k) { return m_Density[k] * m_Volume[k]; });
+}
+
+std::vector<double>
 ForceModel::ScaledMasses(double timeStep, double safety) const
 {
   // Critical step 2 / sqrt(q M / rho) = timeStep / safety  =>  rho = q M (timeStep / safety)^2 / 4.
-  const double        factor = 0.25 * (timeStep / safety) * (timeStep / safety);
-  std::vector<double> masses(m_NodeCount, 0.0);
-  auto                add = [&](Index k, const Index * nodes, int count) {
-    const double share = factor * m_WaveBound[k] * m_Volume[k] / count;
-    for (int a = 0; a < count; ++a)
-    {
-      masses[nodes[a]] += share;
-    }
-  };
-  for (Index e = 0; e < HexahedronCount(); ++e)
-  {
-    add(e, m_HexNodes[e].data(), 8);
-  }
-  for (Index t = 0; t < TetrahedronCount(); ++t)
-  {
-    add(HexahedronCount() + t, m_TetNodes[t].data(), 4);
-  }
-  return masses;
+  const double factor = 0.25 * (timeStep / safety) * (timeStep / safety);
+  return LumpToNodes([this, factor](Index k) { return factor * m_WaveBound[k] * m_Volume[k]; });
 }
 
 double

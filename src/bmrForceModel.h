@@ -74,6 +74,10 @@ private:
     return out;
   }
 
+  /** Nodal lumped masses from a mass per kernel cell, shared equally by its nodes. */
+  template <typename CellMass>
+  std::vector<double> LumpToNodes(const CellMass & cellMass) const;
+
   void TetrahedronDilatations(Index begin, Index end, const double * u);
   /** Adds the forces of hexahedra [begin, end) to f; returns the first inverted one or -1. */
   Index AddHexahedronForces(Index begin, Index end, const double * u, double * f) const;

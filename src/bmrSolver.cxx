@@ -153,6 +153,16 @@ struct Solver::Impl
   void        BuildConstraints();
   void        ApplyConstraints(double * u, const std::vector<double> & curveFactors) const;
   void        EnforceContact(double * u, std::vector<char> & inContact);
+  void        CentralDifferenceStep(const std::vector<double> & u,
+                                    const std::vector<double> & uPrevious,
+                                    const std::vector<double> & f,
+                                    const std::vector<double> & inverseMass,
+                                    double                      alpha,
+                                    double                      beta,
+                                    double                      gravityFactor,
+                                    const std::vector<double> & curveFactors,
+                                    std::vector<double> &       uNext,
+                                    std::vector<char> &         inContact);
   void        CheckForces(Index inverted, int step, bool explicitDynamics, double timeStep) const;
   void        CheckIncrement(const std::vector<double> & next, const std::vector<double> & current, Index bad, int step,
                              bool explicitDynamics, double timeStep) const;
@@ -344,6 +354,32 @@ Solver::Impl::EnforceContact(double * u, std::vector<char> & inContact)
   {
     contact->Enforce(u, dofConstrained, inContact, threads);
   }
+}
+
+void
+Solver::Impl::CentralDifferenceStep(const std::vector<double> & u,
+                                    const std::vector<double> & uPrevious,
+                                    const std::vector<double> & f,
+                                    const std::vector<double> & inverseMass,
+                                    double                      alpha,
+                                    double                      beta,
+                                    double                      gravityFactor,
+                                    const std::vector<double> & curveFactors,
+                                    std::vector<double> &       uNext,
+                                    std::vector<char> &         inContact)
+{
+  // u+ = u + beta (u - u-) + alpha M^-1 (f_ext - f_int), then the constraints
+  // and the contact projection (both integrators).
+  const Index    dofCount = static_cast<Index>(u.size());
+  const double * g = gravityForce.empty() ? nullptr : gravityForce.data();
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (Index d = 0; d < dofCount; ++d)
+  {
+    const double residual = (g ? gravityFactor * g[d] : 0.0) - f[d];
+    uNext[d] = u[d] + beta * (u[d] - uPrevious[d]) + alpha * residual * inverseMass[d];
+  }
+  ApplyConstraints(uNext.data(), curveFactors);
+  EnforceContact(uNext.data(), inContact);
 }
 
 void
@@ -591,19 +627,11 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
       }
 
       gravityFactor = gravityForce.empty() ? 0.0 : loadFactor(model.bodyForceCurve, step);
-      const double * g = gravityForce.empty() ? nullptr : gravityForce.data();
-#pragma omp parallel for num_threads(threads) schedule(static)
-      for (Index d = 0; d < dofCount; ++d)
-      {
-        const double residual = (g ? gravityFactor * g[d] : 0.0) - f[d];
-        uNext[d] = u[d] + beta * (u[d] - uPrevious[d]) + alpha * residual * inverseMass[d];
-      }
       for (std::size_t k = 0; k < curves.size(); ++k)
       {
         curveFactors[k] = loadFactor(curves[k], step + 1);
       }
-      ApplyConstraints(uNext.data(), curveFactors);
-      EnforceContact(uNext.data(), inContact);
+      CentralDifferenceStep(u, uPrevious, f, inverseMass, alpha, beta, gravityFactor, curveFactors, uNext, inContact);
 
       const IncrementStatistics increment = MeasureIncrement(uNext, u, dofConstrained, lengthScale, threads);
       CheckIncrement(uNext, u, increment.firstBad, step, false, h);
@@ -739,19 +767,11 @@ Solver::Impl::SolveExplicitDynamics(const ProgressCallback & progress)
   {
     CheckForces(forces->ComputeInternalForces(u.data(), f.data()), step, true, h);
     gravityFactor = gravityForce.empty() ? 0.0 : loadFactor(model.bodyForceCurve, step * h);
-    const double * g = gravityForce.empty() ? nullptr : gravityForce.data();
-#pragma omp parallel for num_threads(threads) schedule(static)
-    for (Index d = 0; d < dofCount; ++d)
-    {
-      const double residual = (g ? gravityFactor * g[d] : 0.0) - f[d];
-      uNext[d] = u[d] + beta * (u[d] - uPrevious[d]) + alpha * residual * inverseMass[d];
-    }
     for (std::size_t k = 0; k < curves.size(); ++k)
     {
       curveFactors[k] = loadFactor(curves[k], (step + 1) * h);
     }
-    ApplyConstraints(uNext.data(), curveFactors);
-    EnforceContact(uNext.data(), inContact);
+    CentralDifferenceStep(u, uPrevious, f, inverseMass, alpha, beta, gravityFactor, curveFactors, uNext, inContact);
     CheckIncrement(uNext, u, MeasureIncrement(uNext, u, dofConstrained, lengthScale, threads).firstBad, step, true, h);
     std::swap(uPrevious, u);
     std::swap(u, uNext);
