@@ -515,7 +515,7 @@ ForceModel::ForceModel(const Model & model, const SolverSettings & settings, int
     m_NodeTetWeights.resize(m_NodeTetOffsets.back());
     std::vector<Index>  fill(m_NodeTetOffsets.begin(), m_NodeTetOffsets.end() - 1);
     std::vector<double> nodalVolume(m_NodeCount, 0.0);
-    for (Index t = 0; t < tetCount; ++t)
+    for (Index t = 0; t < static_cast<Index>(tetCount); ++t)
     {
       for (const Index n : m_TetNodes[t])
       {
