@@ -767,6 +767,16 @@ Solver::Impl::SolveExplicitDynamics(const ProgressCallback & progress)
   {
     CheckForces(forces->ComputeInternalForces(u.data(), f.data()), step, true, h);
     gravityFactor = gravityForce.empty() ? 0.0 : loadFactor(model.bodyForceCurve, step * h);
+    if (step == 0)
+    {
+      // Start at rest at t = 0, not at t = -h/2: u(-h) such that the first step
+      // gives u(h) = a(0) h^2 / 2 (otherwise the solution lags by half a step).
+      for (Index d = 0; d < dofCount; ++d)
+      {
+        const double acceleration = ((gravityForce.empty() ? 0.0 : gravityFactor * gravityForce[d]) - f[d]) * inverseMass[d];
+        uPrevious[d] = dofConstrained[d] ? 0.0 : (alpha - 0.5 * h * h) * acceleration / beta;
+      }
+    }
     for (std::size_t k = 0; k < curves.size(); ++k)
     {
       curveFactors[k] = loadFactor(curves[k], (step + 1) * h);
@@ -785,9 +795,17 @@ Solver::Impl::SolveExplicitDynamics(const ProgressCallback & progress)
   result.converged = true;
   result.steps = steps;
   result.timeStep = h;
+  // Velocity at the end time: v(n) = (v(n - 1/2) + h/2 a(n)) / (1 + c h / 2);
+  // prescribed components by backward difference.
+  forces->ComputeInternalForces(u.data(), f.data());
   result.kineticEnergy = 0.5 *
                          DeterministicSum(dofCount, threads, [&](Index d) {
-                           const double v = (u[d] - uPrevious[d]) / h;
+                           double v = (u[d] - uPrevious[d]) / h;
+                           if (!dofConstrained[d])
+                           {
+                             const double external = gravityForce.empty() ? 0.0 : gravityFactor * gravityForce[d];
+                             v = (v + 0.5 * h * (external - f[d]) * inverseMass[d]) / (1.0 + 0.5 * c * h);
+                           }
                            return physicalMass[d / 3] * v * v;
                          }) *
                          units::InternalEnergyToJoule;
