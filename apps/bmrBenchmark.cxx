@@ -45,6 +45,9 @@
 #ifndef BMR_CXX_FLAGS
 #  define BMR_CXX_FLAGS ""
 #endif
+#ifndef BMR_NATIVE_ARCH_SETTING
+#  define BMR_NATIVE_ARCH_SETTING "unknown"
+#endif
 
 namespace
 {
@@ -146,6 +149,89 @@ LoadAverage()
   std::string        one, five, fifteen;
   loadavg >> one >> five >> fifteen;
   return one + " " + five + " " + fifteen;
+}
+
+// ---------------------------------------------------------------------------
+// Contention: how much CPU other processes used while a case ran.
+// ---------------------------------------------------------------------------
+struct CpuSample
+{
+  double busySeconds = 0.0; // all CPUs, from /proc/stat
+  double idleSeconds = 0.0;
+};
+
+CpuSample
+ReadCpu()
+{
+  std::ifstream      stat("/proc/stat");
+  std::string        label;
+  CpuSample          sample;
+  unsigned long long value = 0;
+  stat >> label;
+  const double tick = static_cast<double>(sysconf(_SC_CLK_TCK));
+  for (int field = 0; field < 8 && stat >> value; ++field) // user nice system idle iowait irq softirq steal
+  {
+    (field == 3 || field == 4 ? sample.idleSeconds : sample.busySeconds) += value / tick;
+  }
+  return sample;
+}
+
+double
+OwnCpuSeconds()
+{
+  double total = 0.0;
+  for (const int who : { RUSAGE_SELF, RUSAGE_CHILDREN })
+  {
+    rusage usage{};
+    getrusage(who, &usage);
+    total += usage.ru_utime.tv_sec + 1e-6 * usage.ru_utime.tv_usec + usage.ru_stime.tv_sec + 1e-6 * usage.ru_stime.tv_usec;
+  }
+  return total;
+}
+
+/** Average number of cores other processes kept busy between Start() and OtherCores(). */
+class ContentionMeter
+{
+public:
+  void Start()
+  {
+    m_Cpu = ReadCpu();
+    m_Own = OwnCpuSeconds();
+    m_Start = Clock::now();
+  }
+  double OtherCores() const
+  {
+    const double wall = Seconds(m_Start);
+    const double busy = ReadCpu().busySeconds - m_Cpu.busySeconds;
+    const double own = OwnCpuSeconds() - m_Own;
+    return wall > 0.0 ? std::max(0.0, (busy - own) / wall) : 0.0;
+  }
+
+private:
+  CpuSample         m_Cpu;
+  double            m_Own = 0.0;
+  Clock::time_point m_Start;
+};
+
+/** Waits (up to maxSeconds) until other processes use less than `threshold`
+ *  cores over a 3 s window; returns the last measured use. */
+double
+WaitForQuiet(double maxSeconds, double threshold = 0.15)
+{
+  const auto start = Clock::now();
+  double     others = 0.0;
+  do
+  {
+    ContentionMeter meter;
+    meter.Start();
+    std::this_thread::sleep_for(std::chrono::seconds(3));
+    others = meter.OtherCores();
+    if (others < threshold)
+    {
+      break;
+    }
+  } while (Seconds(start) < maxSeconds);
+  return others;
 }
 
 std::string
@@ -369,11 +455,79 @@ struct Reference
   int                     elements = 0;
   int                     increments = 0;
   int                     iterations = 0;
+  bool                    cached = false; // read from the cache, not computed in this run
 };
 
-Reference
-RunReference(const bmr::IndentationProblem & problem, int divisions, int threads)
+/** Cache file name for a reference: everything the solution depends on. */
+std::string
+ReferenceKey(const bmr::IndentationProblem & problem, int divisions)
 {
+  std::ostringstream key;
+  key << std::setprecision(10) << "indentation-c3d10-quarter-" << divisions << "-E" << problem.material.youngsModulus
+      << "-nu" << problem.material.poissonRatio << "-depth" << problem.depth << "-patch" << problem.patchHalfWidth
+      << "-size" << problem.size.x() << "x" << problem.size.y() << "x" << problem.size.z() << "-v1";
+  return key.str();
+}
+
+bool
+LoadReference(const std::string & path, const std::string & key, Reference & reference)
+{
+  std::ifstream stream(path);
+  std::string   header;
+  if (!stream || !std::getline(stream, header) || header != key)
+  {
+    return false;
+  }
+  std::size_t count = 0;
+  stream >> reference.forceZ >> reference.seconds >> reference.meshNodes >> reference.elements >>
+    reference.increments >> reference.iterations >> count;
+  reference.nodes.resize(count);
+  reference.displacements.resize(count);
+  for (std::size_t i = 0; i < count; ++i)
+  {
+    Vector3 & p = reference.nodes[i];
+    Vector3 & u = reference.displacements[i];
+    stream >> p.x() >> p.y() >> p.z() >> u.x() >> u.y() >> u.z();
+  }
+  return static_cast<bool>(stream);
+}
+
+void
+SaveReference(const std::string & path, const std::string & key, const Reference & reference)
+{
+  std::ostringstream text;
+  text << key << "\n"
+       << std::setprecision(17) << reference.forceZ << " " << reference.seconds << " " << reference.meshNodes << " "
+       << reference.elements << " " << reference.increments << " " << reference.iterations << " "
+       << reference.nodes.size() << "\n";
+  for (std::size_t i = 0; i < reference.nodes.size(); ++i)
+  {
+    const Vector3 & p = reference.nodes[i];
+    const Vector3 & u = reference.displacements[i];
+    text << p.x() << " " << p.y() << " " << p.z() << " " << u.x() << " " << u.y() << " " << u.z() << "\n";
+  }
+  std::filesystem::create_directories(std::filesystem::path(path).parent_path());
+  const std::string temporary = path + ".tmp";
+  std::ofstream(temporary) << text.str();
+  std::filesystem::rename(temporary, path);
+}
+
+Reference
+RunReference(const bmr::IndentationProblem & problem, int divisions, int threads, const std::string & cache = {})
+{
+  const std::string key = ReferenceKey(problem, divisions);
+  const std::string path = cache.empty() ? std::string{} : (std::filesystem::path(cache) / (key + ".txt")).string();
+  if (!path.empty())
+  {
+    Reference cached;
+    if (LoadReference(path, key, cached))
+    {
+      cached.problem = problem;
+      cached.divisions = divisions;
+      cached.cached = true;
+      return cached;
+    }
+  }
   Reference reference;
   reference.problem = problem;
   reference.divisions = divisions;
@@ -392,6 +546,10 @@ RunReference(const bmr::IndentationProblem & problem, int divisions, int threads
   reference.elements = static_cast<int>(quarter.cells.size());
   reference.increments = result.increments;
   reference.iterations = result.iterations;
+  if (!path.empty())
+  {
+    SaveReference(path, key, reference);
+  }
   return reference;
 }
 
@@ -412,12 +570,46 @@ struct IndentationRun
   double         maxError = 0.0;
   double         forceError = 0.0; // relative to the reference force
   double         forceZ = 0.0;
+  std::string    failure;          // the solver's error, if it failed
+  double         hourglassCoefficient = -1.0; // < 0: default
 };
 
+std::string
+RunLabel(const IndentationRun & run)
+{
+  std::string label = CellsName(run.cells);
+  if (run.hourglassCoefficient >= 0.0)
+  {
+    std::ostringstream k;
+    k << label << ", hourglass k = " << run.hourglassCoefficient;
+    label = k.str();
+  }
+  return label;
+}
+
+std::string
+RunKey(const IndentationRun & run)
+{
+  std::string key = CellsKey(run.cells);
+  if (run.hourglassCoefficient >= 0.0)
+  {
+    std::ostringstream k;
+    k << key << "-k" << run.hourglassCoefficient;
+    key = k.str();
+  }
+  return key;
+}
+
 IndentationRun
-RunIndentation(const Reference & reference, bmr::GridCells cells, int divisions, int threads, double tolerance)
+RunIndentation(const Reference & reference,
+               bmr::GridCells    cells,
+               int               divisions,
+               int               threads,
+               double            tolerance,
+               double            hourglassCoefficient = -1.0) // < 0: the solver's default
 {
   IndentationRun run;
+  run.hourglassCoefficient = hourglassCoefficient;
   run.cells = cells;
   run.divisions = divisions;
   run.threads = threads;
@@ -431,6 +623,10 @@ RunIndentation(const Reference & reference, bmr::GridCells cells, int divisions,
   settings.integrator = bmr::Integrator::DynamicRelaxation;
   settings.tolerance = tolerance;
   settings.threads = threads;
+  if (hourglassCoefficient >= 0.0)
+  {
+    settings.hourglassCoefficient = hourglassCoefficient;
+  }
   auto        start = Clock::now();
   bmr::Solver solver(model, settings);
   run.setupSeconds = Seconds(start);
@@ -470,6 +666,8 @@ struct Options
   double           indentationTolerance = 1e-4;
   double           indentationPoisson = 0.45;
   int              calculixThreads = 1;
+  double           waitQuiet = 300.0; // s to wait for a quiet machine before each timed case
+  std::string      referenceCache;    // folder for CalculiX reference solutions (empty: none)
 };
 
 void
@@ -519,7 +717,8 @@ Driver(const Options & options, const std::string & self)
     "GCC "
 #endif
      << __VERSION__ << " |\n"
-     << "| Build type, flags | " << BMR_BUILD_TYPE << ", `" << BMR_CXX_FLAGS << "` |\n"
+     << "| Build type, flags | " << BMR_BUILD_TYPE << ", `" << BMR_CXX_FLAGS
+     << "`; core library -O3, BMR_NATIVE_ARCH=" << BMR_NATIVE_ARCH_SETTING << " (-march=native when ON) |\n"
 #ifdef _OPENMP
      << "| OpenMP | " << _OPENMP << " |\n"
 #endif
@@ -551,7 +750,12 @@ Driver(const Options & options, const std::string & self)
         std::ostringstream arguments;
         arguments << "brain " << CellsKey(cells) << " " << threads << " " << std::setprecision(17) << spacing << " "
                   << steps << " " << repeats;
+        const double before = WaitForQuiet(options.waitQuiet);
+        ContentionMeter meter;
+        meter.Start();
         Json result = RunChild(self, arguments.str());
+        result["other_cores_before"] = before;
+        result["other_cores"] = meter.OtherCores();
         log("  DR " + Fixed(result["dr_seconds"].get<double>(), 2) + " s, " +
             std::to_string(result["dr_steps"].get<int>()) + " steps; " +
             Fixed(result["ns_per_element_step"].get<double>(), 1) + " ns/element-step");
@@ -575,8 +779,8 @@ Driver(const Options & options, const std::string & self)
        << "counted (internal forces, hourglass control or nodal pressure averaging, integration, constraints), "
        << "divided by elements x steps. Median of " << brain.front()["throughput_repeats"].get<int>() << " runs of "
        << brain.front()["throughput_steps"].get<int>() << " steps.\n\n"
-       << "| Elements | Count | Threads | ns / element-step (median) | min..max | element-steps / s | Target |\n"
-       << "|---|---|---|---|---|---|---|\n";
+       << "| Elements | Count | Threads | ns / element-step (median) | min..max | element-steps / s | Other load (cores) | Target |\n"
+       << "|---|---|---|---|---|---|---|---|\n";
     for (const Json & r : brain)
     {
       const bool        tet = r["cells"] == "tet";
@@ -590,8 +794,8 @@ Driver(const Options & options, const std::string & self)
       md << "| " << (tet ? "ANP tetrahedra" : "hexahedra (hourglass control)") << " | "
          << r["elements"].get<int>() << " | " << threads << " | " << Fixed(r["ns_per_element_step"].get<double>(), 1)
          << " | " << Fixed(r["ns_per_element_step_min"].get<double>(), 1) << ".."
-         << Fixed(r["ns_per_element_step_max"].get<double>(), 1) << " | " << Fixed(rate / 1e6, 2) << " M | " << target
-         << " |\n";
+         << Fixed(r["ns_per_element_step_max"].get<double>(), 1) << " | " << Fixed(rate / 1e6, 2) << " M | "
+         << Fixed(r["other_cores"].get<double>(), 2) << " | " << target << " |\n";
     }
     // Speed-up per element type.
     md << "\n";
@@ -621,8 +825,8 @@ Driver(const Options & options, const std::string & self)
        << "Adaptive dynamic relaxation from rest to an estimated max nodal error below 0.01 mm. \"Solve\" is the "
        << "time-stepping loop (Solver::Solve); \"setup\" is the solver's precomputation (shape functions, masses, "
        << "hourglass vectors); the mesh generation is not counted.\n\n"
-       << "| Elements | Nodes | DOF | Threads | Setup s | Solve s | DR steps | Estimated error mm | Converged | Peak memory MiB | Target (solve) |\n"
-       << "|---|---|---|---|---|---|---|---|---|---|---|\n";
+       << "| Elements | Nodes | DOF | Threads | Setup s | Solve s | DR steps | Estimated error mm | Converged | Peak memory MiB | Other load (cores) | Target (solve) |\n"
+       << "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     for (const Json & r : brain)
     {
       const bool   tet = r["cells"] == "tet";
@@ -633,7 +837,7 @@ Driver(const Options & options, const std::string & self)
          << Fixed(r["setup_seconds"].get<double>(), 2) << " | " << Fixed(solve, 2) << " | "
          << r["dr_steps"].get<int>() << " | " << Sci(r["dr_estimated_error_mm"].get<double>()) << " | "
          << (r["dr_converged"].get<bool>() ? "yes" : "**NO**") << " | " << Fixed(r["peak_memory_mib"].get<double>(), 0)
-         << " | < " << target << " s: " << (solve < target && r["dr_converged"].get<bool>() ? "**met**" : "**MISSED**")
+         << " | " << Fixed(r["other_cores"].get<double>(), 2) << " | < " << target << " s: " << (solve < target && r["dr_converged"].get<bool>() ? "**met**" : "**MISSED**")
          << " |\n";
     }
     md << "\nPublished reference: Miller et al. (TLED with dynamic relaxation) report " << kMillerDesktopSeconds
@@ -658,7 +862,10 @@ Driver(const Options & options, const std::string & self)
       }
     }
     md << "\nPeak memory is the child process's ru_maxrss (getrusage) for the whole case: mesh, solver, the "
-       << "relaxation and the throughput runs.\n\n";
+       << "relaxation and the throughput runs. \"Other load\" is the average number of cores that other processes "
+       << "kept busy while the case ran (/proc/stat minus this process's CPU time); above about 0.2 the timings, "
+       << "the 2-thread ones most, are pessimistic. Each case waited up to " << options.waitQuiet
+       << " s for a quiet machine before it started.\n\n";
   }
 
   // -------------------------------------------------------------------------
@@ -679,8 +886,8 @@ Driver(const Options & options, const std::string & self)
       const int referenceThreads = options.calculixThreads;
       const int referenceDivisions = options.quick ? 8 : options.referenceDivisions;
       log("CalculiX reference, quarter model, " + std::to_string(referenceDivisions) + "^3 grid cells...");
-      const Reference reference = RunReference(problem, referenceDivisions, referenceThreads);
-      log("  " + Fixed(reference.seconds, 1) + " s");
+      const Reference reference = RunReference(problem, referenceDivisions, referenceThreads, options.referenceCache);
+      log("  " + Fixed(reference.seconds, 1) + " s" + (reference.cached ? " (from the cache)" : ""));
 
       // The reference's own discretisation error, estimated against half its resolution.
       double selfCheck = -1.0;
@@ -689,7 +896,7 @@ Driver(const Options & options, const std::string & self)
       if (referenceDivisions % 2 == 0 && referenceDivisions >= 8)
       {
         log("CalculiX reference at half resolution (self-check)...");
-        const Reference coarse = RunReference(problem, referenceDivisions / 2, referenceThreads);
+        const Reference coarse = RunReference(problem, referenceDivisions / 2, referenceThreads, options.referenceCache);
         coarseSeconds = coarse.seconds;
         // Compare at the coarse quadratic mesh's nodes (all are fine-mesh nodes).
         const std::vector<Vector3> fine =
@@ -703,6 +910,9 @@ Driver(const Options & options, const std::string & self)
       const std::vector<int> divisionsList = options.quick ? std::vector<int>{ 4, 8 } : options.indentationDivisions;
       const int              threads = *std::max_element(options.threads.begin(), options.threads.end());
       std::vector<IndentationRun> runs;
+      WaitForQuiet(options.waitQuiet);
+      ContentionMeter meter;
+      meter.Start();
       for (const bmr::GridCells cells : { bmr::GridCells::Hexahedra, bmr::GridCells::Tetrahedra })
       {
         for (const int n : divisionsList)
@@ -716,13 +926,45 @@ Driver(const Options & options, const std::string & self)
           }
           log("indentation " + CellsName(cells) + " " + std::to_string(n) + "x" + std::to_string(n) + "x" +
               std::to_string(n / 2) + "...");
-          runs.push_back(RunIndentation(reference, cells, n, threads, options.indentationTolerance));
-          const IndentationRun & r = runs.back();
-          log("  " + Fixed(r.setupSeconds + r.solveSeconds, 2) + " s, rms error " + Fixed(100 * r.rmsError, 3) +
-              " %, force error " + Fixed(100 * r.forceError, 2) + " %");
+          try
+          {
+            runs.push_back(RunIndentation(reference, cells, n, threads, options.indentationTolerance));
+            const IndentationRun & r = runs.back();
+            log("  " + Fixed(r.setupSeconds + r.solveSeconds, 2) + " s, rms error " + Fixed(100 * r.rmsError, 3) +
+                " %, force error " + Fixed(100 * r.forceError, 2) + " %");
+          }
+          catch (const bmr::Error & error)
+          {
+            IndentationRun failed;
+            failed.cells = cells;
+            failed.divisions = n;
+            failed.threads = threads;
+            failed.spacing = problem.size.x() / n;
+            failed.failure = error.what();
+            runs.push_back(failed);
+            log("  FAILED: " + failed.failure);
+            if (cells == bmr::GridCells::Hexahedra)
+            {
+              // The solver suggests a stiffer hourglass control; show what it gives.
+              const double k = 2.0 * bmr::SolverSettings{}.hourglassCoefficient;
+              log("  again with hourglass coefficient " + Fixed(k, 2) + "...");
+              try
+              {
+                runs.push_back(RunIndentation(reference, cells, n, threads, options.indentationTolerance, k));
+                const IndentationRun & r = runs.back();
+                log("  " + Fixed(r.setupSeconds + r.solveSeconds, 2) + " s, rms error " + Fixed(100 * r.rmsError, 3) +
+                    " %, force error " + Fixed(100 * r.forceError, 2) + " %");
+              }
+              catch (const bmr::Error & again)
+              {
+                log("  FAILED again: " + std::string(again.what()));
+              }
+            }
+          }
         }
       }
 
+      const double otherCores = meter.OtherCores();
       const double h = 0.5 * problem.size.x() / referenceDivisions;
       md << "Block 20 x 20 x 10 mm, bottom face held, top-face nodes in the centred 10 x 10 mm square pushed (0, 0, "
          << -problem.depth << ") mm (all components prescribed), neo-Hookean E = 3000 Pa, nu = " << problem.material.poissonRatio << ". "
@@ -733,7 +975,7 @@ Driver(const Options & options, const std::string & self)
          << "conditions (the problem is symmetric about both mid-planes), " << referenceDivisions << "^3 grid cells: corner "
          << "spacing h = " << Fixed(h, 4) << " mm (quadratic node spacing " << Fixed(h / 2, 4) << " mm), "
          << reference.elements << " elements, " << reference.meshNodes << " nodes, " << 3 * reference.meshNodes
-         << " DOF; " << Fixed(reference.seconds, 1) << " s (" << reference.increments << " increments, "
+         << " DOF; " << Fixed(reference.seconds, 1) << " s" << (reference.cached ? " when it was computed (read from --reference-cache)" : "") << " (" << reference.increments << " increments, "
          << reference.iterations << " Newton iterations, " << referenceThreads << " threads). "
          << "Reference reaction force on the patch: " << Fixed(reference.forceZ, 5) << " N.";
       if (selfCheck >= 0.0)
@@ -745,23 +987,41 @@ Driver(const Options & options, const std::string & self)
       }
       md << "\n\nErrors are at every TLED node (all are nodes of the reference mesh after reflection): RMS and max "
          << "of |u - u_ref| as a percentage of the 2 mm indentation, and the relative error of the total vertical "
-         << "reaction force on the patch. Time = setup + solve.\n\n"
+         << "reaction force on the patch. Time = setup + solve. Other processes kept " << Fixed(otherCores, 2)
+         << " cores busy on average during these runs.\n\n"
          << "| Elements | Grid | h mm | Nodes | Elements | DR steps | Setup s | Solve s | RMS error % | Max error % | Force error % | Converged |\n"
          << "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
       std::ostringstream csv;
       csv << "cells,divisions,h_mm,nodes,elements,threads,setup_s,solve_s,total_s,steps,converged,rms_error_pct,max_"
              "error_pct,force_error_pct,reference_h_mm\n";
+      std::vector<std::string> failures;
       for (const IndentationRun & r : runs)
       {
-        md << "| " << CellsName(r.cells) << " | " << r.divisions << "x" << r.divisions << "x" << r.divisions / 2
+        if (!r.failure.empty())
+        {
+          md << "| " << RunLabel(r) << " | " << r.divisions << "x" << r.divisions << "x" << r.divisions / 2
+             << " | " << Fixed(r.spacing, 3) << " | | | | | | **FAILED** (see below) | | | no |\n";
+          failures.push_back(RunLabel(r) + " " + std::to_string(r.divisions) + "x" + std::to_string(r.divisions) +
+                             "x" + std::to_string(r.divisions / 2) + ": " + r.failure);
+          continue;
+        }
+        md << "| " << RunLabel(r) << " | " << r.divisions << "x" << r.divisions << "x" << r.divisions / 2
            << " | " << Fixed(r.spacing, 3) << " | " << r.nodes << " | " << r.elements << " | " << r.steps << " | "
            << Fixed(r.setupSeconds, 3) << " | " << Fixed(r.solveSeconds, 3) << " | " << Fixed(100 * r.rmsError, 3)
            << " | " << Fixed(100 * r.maxError, 2) << " | " << Fixed(100 * r.forceError, 2) << " | "
            << (r.converged ? "yes" : "**NO**") << " |\n";
-        csv << CellsKey(r.cells) << "," << r.divisions << "," << r.spacing << "," << r.nodes << "," << r.elements << ","
+        if (!r.failure.empty())
+        {
+          continue;
+        }
+        csv << RunKey(r) << "," << r.divisions << "," << r.spacing << "," << r.nodes << "," << r.elements << ","
             << r.threads << "," << r.setupSeconds << "," << r.solveSeconds << "," << r.setupSeconds + r.solveSeconds
             << "," << r.steps << "," << (r.converged ? 1 : 0) << "," << 100 * r.rmsError << "," << 100 * r.maxError
             << "," << 100 * r.forceError << "," << h << "\n";
+      }
+      for (const std::string & failure : failures)
+      {
+        md << "\n**Solver failure**, " << failure << "\n";
       }
       md << "\n![Error against run time](benchmark-error-vs-time.png)\n\n"
          << "The plot (scripts/plot-benchmarks.py) is drawn from " << std::filesystem::path(options.csv).filename().string()
@@ -795,7 +1055,48 @@ Child(int argc, char ** argv)
     std::cout << "BMR_RESULT " << result.dump() << std::endl;
     return 0;
   }
-  std::cerr << "bmrBenchmark --child brain hex|tet THREADS SPACING STEPS REPEATS\n";
+  if (kind == "indentation" && (argc == 8 || argc == 9))
+  {
+    // TLED only (no reference): for reproducing a solver failure or profiling.
+    bmr::IndentationProblem problem;
+    problem.material.poissonRatio = std::stod(argv[7]);
+    const int        n = std::stoi(argv[4]);
+    const bmr::Model model = bmr::MakeIndentationModel(problem, { n, n, n / 2 }, CellsFromKey(argv[3]));
+    bmr::SolverSettings settings;
+    settings.integrator = bmr::Integrator::DynamicRelaxation;
+    settings.threads = std::stoi(argv[5]);
+    settings.tolerance = std::stod(argv[6]);
+    if (argc == 9)
+    {
+      settings.hourglassCoefficient = std::stod(argv[8]);
+    }
+    Json out;
+    out["nodes"] = model.nodes.size();
+    out["elements"] = model.cells.size();
+    try
+    {
+      bmr::Solver            solver(model, settings);
+      const bmr::SolveResult result = solver.Solve();
+      out["converged"] = result.converged;
+      out["steps"] = result.steps;
+      out["seconds"] = result.wallSeconds;
+      out["message"] = result.message;
+      double force = 0.0;
+      for (const Index node : model.NodeSet("patch"))
+      {
+        force += result.reactionForces[node].z();
+      }
+      out["force_z"] = force;
+    }
+    catch (const bmr::Error & error)
+    {
+      out["error"] = error.what();
+    }
+    std::cout << "BMR_RESULT " << out.dump() << std::endl;
+    return 0;
+  }
+  std::cerr << "bmrBenchmark --child brain hex|tet THREADS SPACING STEPS REPEATS\n"
+               "bmrBenchmark --child indentation hex|tet DIVISIONS THREADS TOLERANCE POISSON [HOURGLASS]\n";
   return 2;
 }
 
@@ -857,6 +1158,14 @@ main(int argc, char ** argv)
       {
         options.indentationPoisson = std::stod(value());
       }
+      else if (argument == "--reference-cache")
+      {
+        options.referenceCache = value();
+      }
+      else if (argument == "--wait-quiet")
+      {
+        options.waitQuiet = std::stod(value());
+      }
       else if (argument == "--calculix-threads")
       {
         options.calculixThreads = std::stoi(value());
@@ -871,7 +1180,9 @@ main(int argc, char ** argv)
                      "             [--threads 1,2] [--quick] [--skip-brain] [--skip-indentation]\n"
                      "             [--reference-divisions 16] [--indentation-divisions 4,8,16,32]\n"
                      "             [--indentation-tolerance 1e-4] [--indentation-poisson 0.45]\n"
-                     "             [--calculix-threads 1]\n";
+                     "             [--calculix-threads 1] [--wait-quiet 300] [--reference-cache DIR]\n"
+                     "bmrBenchmark --child brain hex|tet THREADS SPACING STEPS REPEATS\n"
+                     "bmrBenchmark --child indentation hex|tet DIVISIONS THREADS TOLERANCE POISSON [HOURGLASS]\n";
         return 0;
       }
       else

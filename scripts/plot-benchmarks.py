@@ -26,23 +26,33 @@ if not rows:
     sys.exit(f"plot-benchmarks: {source} has no rows; run bmrBenchmark first")
 
 labels = {"hex": "hexahedra (hourglass control)", "tet": "ANP tetrahedra"}
-styles = {"hex": ("tab:blue", "o"), "tet": ("tab:red", "s")}
-figure, axes = plt.subplots(1, 2, figsize=(11, 4.5))
+styles = {"hex": ("tab:blue", "o", "-"), "tet": ("tab:red", "s", "-")}
 reference_h = float("nan")
-for cells in ("hex", "tet"):
-    series = sorted((r for r in rows if r["cells"] == cells), key=lambda r: float(r["total_s"]))
-    if not series:
-        continue
-    colour, marker = styles[cells]
+figure, axes = plt.subplots(1, 2, figsize=(11, 4.5))
+# Series in file order: "hex", "tet", and variants such as "hex-k0.4" (another
+# hourglass coefficient) drawn as separate, dashed series.
+keys = []
+for r in rows:
+    if r["cells"] not in keys:
+        keys.append(r["cells"])
+for key in keys:
+    series = sorted((r for r in rows if r["cells"] == key), key=lambda r: float(r["total_s"]))
+    base = key.split("-")[0]
+    colour, marker, line = styles.get(base, ("tab:gray", "^", "-"))
+    label = labels.get(key)
+    if label is None:
+        variant = key[len(base) + 1:]
+        label = labels.get(base, base) + (", hourglass k = " + variant[1:] if variant.startswith("k") else ", " + variant)
+        marker, line = "D", "--"
     times = [float(r["total_s"]) for r in series]
     for axis, column, title in ((axes[0], "rms_error_pct", "RMS displacement error"),
                                 (axes[1], "force_error_pct", "reaction-force error")):
         values = [max(float(r[column]), 1e-6) for r in series]
-        axis.loglog(times, values, marker=marker, color=colour, label=labels[cells])
+        axis.loglog(times, values, marker=marker, linestyle=line, color=colour, label=label)
         for t, v, r in zip(times, values, series):
             axis.annotate(f"h={float(r['h_mm']):g}", (t, v), textcoords="offset points", xytext=(5, 4), fontsize=8)
         axis.set_title(title)
-    if series[0].get("reference_h_mm"):
+    if series and series[0].get("reference_h_mm"):
         reference_h = float(series[0]["reference_h_mm"])
 
 for axis, ylabel in ((axes[0], "RMS |u - u_ref| at nodes, % of 2 mm depth"),

@@ -6,8 +6,10 @@
 #   scripts/run-benchmarks.sh [bmrBenchmark options, e.g. --quick or --threads 1,2]
 #
 # Environment: BUILD_DIR (default build-bench), JOBS (default 2).
-# Takes about 15-30 minutes on 2 cores (most of it the CalculiX reference);
-# run it on a quiet machine: the report records the load average.
+# Takes about 15-30 minutes on 2 cores, most of it the CalculiX reference
+# (cached in BUILD_DIR/benchmark-cache for later runs). Run it on a quiet
+# machine: each timed case waits up to 300 s for one (--wait-quiet), and the
+# report records how many cores other processes kept busy.
 set -euo pipefail
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -23,6 +25,7 @@ cd "${root}"
 "${build}/apps/bmrBenchmark" \
   --output docs/benchmarks.md \
   --csv docs/benchmark-error-vs-time.csv \
+  --reference-cache "${build}/benchmark-cache" \
   "$@"
 
 if [ -f docs/benchmark-error-vs-time.csv ]; then

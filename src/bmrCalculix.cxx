@@ -591,6 +591,7 @@ RunCalculix(const Model & model, const CalculixSettings & settings)
     }
   }
   const std::string job = settings.jobName.empty() ? "bmr" : settings.jobName;
+  try
   {
     std::ofstream deck(folder / (job + ".inp"));
     if (!deck)
@@ -602,6 +603,15 @@ RunCalculix(const Model & model, const CalculixSettings & settings)
     {
       throw Error("CalculiX: writing " + (folder / (job + ".inp")).string() + " failed (disk full?)");
     }
+  }
+  catch (...)
+  {
+    if (temporary)
+    {
+      std::error_code ignored;
+      fs::remove_all(folder, ignored);
+    }
+    throw;
   }
   // Remove results of an earlier run in a user-given folder.
   for (const char * extension : { ".dat", ".sta", ".frd", ".cvg" })
@@ -628,9 +638,14 @@ RunCalculix(const Model & model, const CalculixSettings & settings)
   const std::string sta = ReadFile(folder / (job + ".sta"));
   const auto        fail = [&](const std::string & why) {
     std::ostringstream message;
-    message << "CalculiX: " << why << " (job " << (folder / job).string()
-            << ".inp, files kept there). Last lines of its output:\n"
-            << Tail(log, 25);
+    message << "CalculiX: " << why << " (job " << (folder / job).string() << ".inp";
+    if (temporary && !settings.keepFiles)
+    {
+      std::error_code ignored;
+      fs::remove_all(folder, ignored);
+      message << ", removed; set CalculixSettings::keepFiles to keep it";
+    }
+    message << "). Last lines of its output:\n" << Tail(log, 25);
     throw Error(message.str());
   };
 

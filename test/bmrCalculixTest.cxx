@@ -1,0 +1,387 @@
+// Cross-checks against CalculiX (ccx), the independent implicit solver.
+//
+// (a) The deck writer and unit conventions: CalculiX on a homogeneous uniaxial
+//     compression reproduces the analytic neo-Hookean answer to 1e-4.
+// (b) A non-homogeneous problem, block indentation: TLED (hexahedra and ANP
+//     tetrahedra, dynamic relaxation converged tightly) on three refinements
+//     approaches a quadratic-tetrahedron CalculiX reference.
+// Skipped (GTEST_SKIP) only when ccx is not installed.
+#include "bmrCalculix.h"
+#include "bmrSolver.h"
+#include "bmrTestUtilities.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <iostream>
+#include <map>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace bmr
+{
+namespace
+{
+
+#define BMR_REQUIRE_CALCULIX()                                                                                         \
+  if (FindCalculix().empty())                                                                                          \
+  {                                                                                                                    \
+    GTEST_SKIP() << "ccx (calculix-ccx) not found; scripts/install-dependencies.sh installs it";                       \
+  }
+
+/** Uniaxial stress along x: symmetry planes xmin/ymin/zmin, the xmax face
+ *  moved to stretch lambda in x only (y, z free). */
+Model
+UniaxialModel(GridCells cells, double lambda, double length, const Material & material)
+{
+  Model model = MakeBlockMesh(Vector3::Constant(length), { 2, 2, 2 }, cells, material);
+  test::AddSymmetryConstraints(model);
+  PrescribedDisplacement pull;
+  pull.nodes = model.NodeSet("xmax");
+  pull.displacements.assign(pull.nodes.size(), Vector3((lambda - 1.0) * length, 0.0, 0.0));
+  pull.components = { true, false, false };
+  model.prescribedDisplacements.push_back(pull);
+  return model;
+}
+
+struct UniaxialCheck
+{
+  double displacementError = 0.0; // max over all CalculiX nodes, relative to the largest displacement
+  double forceError = 0.0;        // relative
+};
+
+UniaxialCheck
+CheckUniaxial(GridCells cells, const CalculixSettings & settings)
+{
+  const Material          material = test::MakeMaterial(3000.0, 0.45);
+  const double            lambda = 0.8;
+  const double            length = 10.0;
+  const Model             model = UniaxialModel(cells, lambda, length, material);
+  const CalculixResult    result = RunCalculix(model, settings);
+  const test::NeoHookean  law(material);
+  const test::Matrix3     F = test::UniaxialDeformationGradient(lambda, law);
+  const test::Matrix3     displacementGradient = F - test::Matrix3::Identity();
+
+  UniaxialCheck check;
+  double        largest = 0.0;
+  for (std::size_t i = 0; i < result.mesh.nodes.size(); ++i)
+  {
+    const Vector3 expected = displacementGradient * result.mesh.nodes[i];
+    largest = std::max(largest, expected.norm());
+    check.displacementError = std::max(check.displacementError, (result.meshDisplacements[i] - expected).norm());
+  }
+  check.displacementError /= largest;
+  // Reaction on the moved face: P_11 (Pa) times the reference area (mm^2), in N.
+  const double expectedForce = law.FirstPiola(F)(0, 0) * length * length * test::PascalSquareMillimetreToNewton;
+  const double force = result.TotalReactionForce(model.NodeSet("xmax")).x();
+  check.forceError = std::abs(force - expectedForce) / std::abs(expectedForce);
+  return check;
+}
+
+TEST(Calculix, UniaxialCompressionQuadraticTetrahedraMatchesAnalytic)
+{
+  BMR_REQUIRE_CALCULIX();
+  CalculixSettings settings; // C3D10
+  const UniaxialCheck check = CheckUniaxial(GridCells::Tetrahedra, settings);
+  EXPECT_LT(check.displacementError, 1e-4);
+  EXPECT_LT(check.forceError, 1e-4);
+}
+
+TEST(Calculix, UniaxialCompressionHexahedraMatchAnalytic)
+{
+  BMR_REQUIRE_CALCULIX();
+  for (const bool quadratic : { false, true }) // C3D8, C3D20R
+  {
+    CalculixSettings settings;
+    settings.quadratic = quadratic;
+    const UniaxialCheck check = CheckUniaxial(GridCells::Hexahedra, settings);
+    EXPECT_LT(check.displacementError, 1e-4) << (quadratic ? "C3D20R" : "C3D8");
+    EXPECT_LT(check.forceError, 1e-4) << (quadratic ? "C3D20R" : "C3D8");
+  }
+}
+
+TEST(Calculix, DeckUsesConsistentUnitsAndInterpolatesMidEdgeConstraints)
+{
+  // No ccx needed: inspect the deck text.
+  IndentationProblem problem;
+  problem.material = test::MakeMaterial(3000.0, 0.45);
+  const Model        model = MakeIndentationModel(problem, { 4, 4, 2 }, GridCells::Tetrahedra);
+  const CalculixMesh mesh = MakeCalculixMesh(model);
+  ASSERT_EQ(mesh.modelNodes, static_cast<Index>(model.nodes.size()));
+  ASSERT_GT(mesh.nodes.size(), model.nodes.size());
+  for (std::size_t e = 0; e < mesh.elements.size(); ++e)
+  {
+    ASSERT_EQ(mesh.elementTypes[e], "C3D10");
+    ASSERT_EQ(mesh.elements[e].size(), 10u);
+  }
+  std::ostringstream deck;
+  WriteCalculixDeck(deck, model, mesh);
+  const std::string text = deck.str();
+
+  // C10 = mu/2 and D1 = 2/kappa in MPa: mu = 3000 / 2.9 Pa, kappa = 3000 / 0.3 Pa.
+  const double      mu = 3000.0 / 2.9 * 1e-6;
+  const double      kappa = 3000.0 / 0.3 * 1e-6;
+  const std::size_t at = text.find("*HYPERELASTIC, NEO HOOKE\n");
+  ASSERT_NE(at, std::string::npos);
+  std::istringstream constants(text.substr(at + 25));
+  double             c10 = 0.0, d1 = 0.0;
+  char               comma = 0;
+  constants >> c10 >> comma >> d1;
+  EXPECT_NEAR(c10, 0.5 * mu, 1e-12 * mu);
+  EXPECT_NEAR(d1, 2.0 / kappa, 1e-12 / kappa);
+
+  // *BOUNDARY lines: node (1-based), dof, dof, value.
+  std::map<std::pair<long, int>, double> boundary;
+  const std::size_t                      begin = text.find("*BOUNDARY\n");
+  ASSERT_NE(begin, std::string::npos);
+  std::istringstream lines(text.substr(begin + 10));
+  std::string        line;
+  while (std::getline(lines, line) && !line.empty() && line[0] != '*')
+  {
+    std::replace(line.begin(), line.end(), ',', ' ');
+    std::istringstream fields(line);
+    long               node = 0;
+    int                first = 0, last = 0;
+    double             value = 0.0;
+    fields >> node >> first >> last >> value;
+    ASSERT_EQ(first, last);
+    boundary[{ node - 1, first - 1 }] = value;
+  }
+  std::vector<char> patch(model.nodes.size(), 0), bottom(model.nodes.size(), 0);
+  for (const Index n : model.NodeSet("patch"))
+  {
+    patch[n] = 1;
+  }
+  for (const Index n : model.NodeSet("bottom"))
+  {
+    bottom[n] = 1;
+  }
+  int interpolated = 0, free = 0;
+  for (Index node = 0; node < static_cast<Index>(mesh.nodes.size()); ++node)
+  {
+    const bool inPatch = mesh.InSet(node, patch);
+    const bool inBottom = mesh.InSet(node, bottom);
+    for (int d = 0; d < 3; ++d)
+    {
+      const auto found = boundary.find({ node, d });
+      if (inPatch || inBottom)
+      {
+        ASSERT_NE(found, boundary.end()) << "node " << node << " dof " << d;
+        EXPECT_DOUBLE_EQ(found->second, inPatch && d == 2 ? -problem.depth : 0.0);
+      }
+      else
+      {
+        EXPECT_EQ(found, boundary.end()) << "node " << node << " dof " << d << " should be free";
+      }
+    }
+    if (node >= mesh.modelNodes)
+    {
+      interpolated += inPatch ? 1 : 0;
+      const auto & parents = mesh.edgeParents[node - mesh.modelNodes];
+      free += (patch[parents[0]] != patch[parents[1]] && !inBottom) ? 1 : 0;
+      EXPECT_TRUE((mesh.nodes[node] - 0.5 * (mesh.nodes[parents[0]] + mesh.nodes[parents[1]])).norm() < 1e-12);
+    }
+  }
+  EXPECT_GT(interpolated, 0); // mid-edge nodes inside the patch get the patch value
+  EXPECT_GT(free, 0);         // mid-edge nodes on edges leaving the patch stay free
+}
+
+TEST(Calculix, QuarterSolutionUnfoldsBySymmetry)
+{
+  // No ccx needed: a field with the problem's symmetry, sampled on the quarter
+  // mesh, must unfold exactly onto every node of the full block.
+  IndentationProblem problem;
+  const Vector3      centre(10.0, 10.0, 0.0);
+  const auto         field = [&](const Vector3 & p) {
+    const Vector3 d = p - centre;
+    return Vector3(0.1 * d.x() * (1.0 + 0.01 * std::abs(d.y())), -0.05 * d.y() * p.z(),
+                   0.02 * std::abs(d.x()) * std::abs(d.y()) - 0.3 * p.z());
+  };
+  const Model          quarter = MakeIndentationQuarterModel(problem, { 4, 4, 4 }, GridCells::Tetrahedra);
+  const CalculixMesh   mesh = MakeCalculixMesh(quarter);
+  std::vector<Vector3> values;
+  for (const Vector3 & p : mesh.nodes)
+  {
+    values.push_back(field(p));
+  }
+  for (const int n : { 4, 8, 16 })
+  {
+    const Model                full = MakeIndentationModel(problem, { n, n, n / 2 }, GridCells::Hexahedra);
+    const std::vector<Vector3> unfolded = UnfoldQuarterDisplacements(problem, mesh.nodes, values, full.nodes);
+    for (std::size_t i = 0; i < full.nodes.size(); ++i)
+    {
+      ASSERT_LT((unfolded[i] - field(full.nodes[i])).norm(), 1e-12) << "grid " << n << ", node " << i;
+    }
+  }
+  // A grid that does not refine into the quarter's quadratic mesh is refused.
+  const Model coarse = MakeIndentationModel(problem, { 12, 12, 6 }, GridCells::Hexahedra);
+  EXPECT_THROW(UnfoldQuarterDisplacements(problem, mesh.nodes, values, coarse.nodes), Error);
+
+  // The quarter model's constraints: bottom held, symmetry planes, patch pushed.
+  EXPECT_EQ(quarter.fixedConstraints.size(), 3u);
+  EXPECT_EQ(quarter.prescribedDisplacements.size(), 1u);
+  for (const Index node : quarter.NodeSet("patch"))
+  {
+    EXPECT_NEAR(quarter.nodes[node].z(), 10.0, 1e-12);
+    EXPECT_LE(quarter.nodes[node].x(), 15.0 + 1e-9);
+    EXPECT_LE(quarter.nodes[node].y(), 15.0 + 1e-9);
+  }
+}
+
+TEST(Calculix, MissingExecutableIsAClearError)
+{
+  const Model      model = UniaxialModel(GridCells::Hexahedra, 0.9, 10.0, test::MakeMaterial(3000.0, 0.45));
+  CalculixSettings settings;
+  settings.executable = "/nonexistent/ccx";
+  try
+  {
+    RunCalculix(model, settings);
+    FAIL() << "expected bmr::Error";
+  }
+  catch (const Error & error)
+  {
+    EXPECT_NE(std::string(error.what()).find("calculix-ccx"), std::string::npos) << error.what();
+  }
+}
+
+TEST(Calculix, UnfinishedStepIsAnErrorNotAResult)
+{
+  BMR_REQUIRE_CALCULIX();
+  const Model      model = UniaxialModel(GridCells::Hexahedra, 0.8, 10.0, test::MakeMaterial(3000.0, 0.45));
+  CalculixSettings settings;
+  settings.quadratic = false;
+  settings.initialIncrement = 0.1;
+  settings.maximumIncrements = 2; // cannot reach the end of the step
+  try
+  {
+    RunCalculix(model, settings);
+    FAIL() << "expected bmr::Error";
+  }
+  catch (const Error & error)
+  {
+    EXPECT_NE(std::string(error.what()).find("CalculiX"), std::string::npos) << error.what();
+  }
+}
+
+// ---------------------------------------------------------------------------
+// (b) Block indentation against a CalculiX C3D10 reference.
+// ---------------------------------------------------------------------------
+
+/** Reference: C3D10 on the symmetric quarter (x, y >= 10 mm), 8^3 grid cells,
+ *  corner spacing 1.25 mm (quadratic node spacing 0.625 mm). Every node of the
+ *  TLED grids below reflects onto a node of this mesh. */
+struct IndentationReference
+{
+  IndentationProblem   problem;
+  std::vector<Vector3> nodes;
+  std::vector<Vector3> displacements;
+  double               forceZ = 0.0; // full block, N
+};
+
+IndentationReference
+SolveReference(double poissonRatio)
+{
+  IndentationReference reference;
+  reference.problem.material = test::MakeMaterial(3000.0, poissonRatio);
+  const Model      quarter = MakeIndentationQuarterModel(reference.problem, { 8, 8, 8 }, GridCells::Tetrahedra);
+  CalculixSettings settings;
+  settings.initialIncrement = 0.25;
+  settings.threads = 1;
+  const CalculixResult result = RunCalculix(quarter, settings);
+  reference.nodes = result.mesh.nodes;
+  reference.displacements = result.meshDisplacements;
+  reference.forceZ = 4.0 * result.TotalReactionForce(quarter.NodeSet("patch")).z();
+  return reference;
+}
+
+struct IndentationError
+{
+  double rms = 0.0;   // RMS of |u - u_ref| over the TLED nodes / depth
+  double max = 0.0;   // max / depth
+  double force = 0.0; // |F - F_ref| / |F_ref|, vertical reaction on the patch
+};
+
+IndentationError
+TledError(const IndentationReference & reference, GridCells cells, int n)
+{
+  const Model    model = MakeIndentationModel(reference.problem, { n, n, n / 2 }, cells);
+  SolverSettings settings;
+  settings.integrator = Integrator::DynamicRelaxation;
+  settings.tetrahedron = TetrahedronFormulation::AverageNodalPressure;
+  settings.tolerance = 1e-5; // mm: far below the discretisation errors measured here
+  settings.threads = 1;      // results do not depend on it; keeps parallel CTest runs fast
+  Solver            solver(model, settings);
+  const SolveResult result = solver.Solve();
+  EXPECT_TRUE(result.converged) << result.message;
+
+  const std::vector<Vector3> expected =
+    UnfoldQuarterDisplacements(reference.problem, reference.nodes, reference.displacements, model.nodes);
+  const DisplacementComparison comparison =
+    CompareDisplacements(model.nodes, result.displacements, model.nodes, expected);
+  double forceZ = 0.0;
+  for (const Index node : model.NodeSet("patch"))
+  {
+    forceZ += result.reactionForces[node].z();
+  }
+  IndentationError error;
+  error.rms = comparison.rmsError / reference.problem.depth;
+  error.max = comparison.maxError / reference.problem.depth;
+  error.force = std::abs(forceZ - reference.forceZ) / std::abs(reference.forceZ);
+  return error;
+}
+
+void
+CheckConvergence(const IndentationReference & reference,
+                 GridCells                    cells,
+                 double                       finestRmsTolerance,
+                 double                       finestForceTolerance)
+{
+  const std::array<int, 3>      grids{ 4, 8, 16 }; // h = 5, 2.5, 1.25 mm
+  std::vector<IndentationError> errors;
+  for (const int n : grids)
+  {
+    errors.push_back(TledError(reference, cells, n));
+    ::testing::Test::RecordProperty(std::string(cells == GridCells::Hexahedra ? "hex" : "tet") + "_n" + std::to_string(n) + "_rms_pct",
+                   std::to_string(100.0 * errors.back().rms));
+    std::cout << (cells == GridCells::Hexahedra ? "hexahedra " : "ANP tetrahedra ") << n << "x" << n << "x" << n / 2
+              << ": RMS error " << 100.0 * errors.back().rms << " %, max " << 100.0 * errors.back().max
+              << " %, force " << 100.0 * errors.back().force << " %" << std::endl;
+  }
+  for (std::size_t k = 1; k < errors.size(); ++k)
+  {
+    EXPECT_LT(errors[k].rms, errors[k - 1].rms) << "RMS error must decrease with refinement (grid " << grids[k] << ")";
+    EXPECT_LT(errors[k].force, errors[k - 1].force) << "force error must decrease with refinement (grid " << grids[k]
+                                                    << ")";
+  }
+  EXPECT_LT(errors.back().rms, finestRmsTolerance);
+  EXPECT_LT(errors.back().force, finestForceTolerance);
+}
+
+TEST(CalculixIndentation, HexahedraConvergeToReference)
+{
+  BMR_REQUIRE_CALCULIX();
+  const IndentationReference reference = SolveReference(0.45);
+  CheckConvergence(reference, GridCells::Hexahedra, 0.02, 0.05);
+}
+
+TEST(CalculixIndentation, AnpTetrahedraConvergeToReference)
+{
+  BMR_REQUIRE_CALCULIX();
+  const IndentationReference reference = SolveReference(0.45);
+  CheckConvergence(reference, GridCells::Tetrahedra, 0.035, 0.12);
+}
+
+TEST(CalculixIndentation, NearlyIncompressibleBothElementTypesConvergeToReference)
+{
+  // Brain tissue's nu = 0.49: hexahedra and ANP tetrahedra must not lock.
+  BMR_REQUIRE_CALCULIX();
+  const IndentationReference reference = SolveReference(0.49);
+  CheckConvergence(reference, GridCells::Hexahedra, 0.025, 0.05);
+  CheckConvergence(reference, GridCells::Tetrahedra, 0.04, 0.12);
+}
+
+} // namespace
+} // namespace bmr
