@@ -7,10 +7,13 @@
 //   -> *HYPERELASTIC, NEO HOOKE with C10 = mu/2 and D1 = 2/kappa.
 // Tetrahedra become quadratic C3D10 elements (mid-edge nodes added at the
 // straight edge midpoints and shared between neighbours) or linear C3D4;
-// hexahedra become C3D20R (quadratic) or C3D8 (linear). Constraints on a
-// mid-edge node are interpolated from its two end nodes: a component is
-// constrained when it is constrained at both ends, with the mean value, which
-// is exactly the linear element's boundary condition along that edge.
+// hexahedra become C3D20R (quadratic) or C3D8 (linear). A node set's
+// constraint covers the boundary faces (triangles; a quadrilateral as two)
+// whose vertices are all constrained in that component; a mid-edge node on an
+// edge of such a face gets the constraint, with the mean of its two end
+// values, which is the linear element's boundary condition along that edge.
+// Other mid-edge nodes stay free, e.g. on an edge between two constrained
+// surface nodes that cuts through the interior.
 // The static step is geometrically nonlinear (NLGEOM); loads are ramped
 // linearly over the step (the end state of a hyperelastic solid does not depend
 // on the path). Displacements and reaction forces are read back from the .dat
@@ -73,13 +76,21 @@ struct CalculixMesh
   std::vector<std::array<Index, 2>>  edgeParents; // for node modelNodes + i: its edge's end nodes
   std::vector<std::string>           elementTypes; // per model cell
   std::vector<std::vector<Index>>    elements;     // per model cell, CalculiX node order, 0-based
+  /** The model's boundary triangles and the mid-edge nodes of their edges
+   *  (k -> k+1), -1 where the edge is no element edge (a quad's diagonal) or
+   *  the elements are linear. */
+  std::vector<std::array<Index, 3>>  boundaryTriangles;
+  std::vector<std::array<Index, 3>>  boundaryTriangleMidNodes;
 
-  /** Which model nodes a mesh node "belongs to": itself for a model node, its
-   *  two end nodes for a mid-edge node. */
-  bool InSet(Index meshNode, const std::vector<char> & modelMask) const;
+  /** Mask over the mesh nodes for a set of model nodes (a mask over model
+   *  nodes): the set's nodes and the mid-edge nodes on the edges of boundary
+   *  triangles whose three vertices are all in the set. */
+  std::vector<char> MeshNodeMask(const std::vector<char> & modelMask) const;
 };
 
-/** Mid-edge nodes and CalculiX connectivity for a model (no file written). */
+/** Mid-edge nodes and CalculiX connectivity for a model (no file written).
+ *  Throws bmr::Error for quadratic elements on a mixed hexahedron/tetrahedron
+ *  model (they would not conform at the interface). */
 CalculixMesh
 MakeCalculixMesh(const Model & model, const CalculixSettings & settings = {});
 

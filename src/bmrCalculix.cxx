@@ -236,15 +236,26 @@ FormatDouble(double value)
 
 } // namespace
 
-bool
-CalculixMesh::InSet(Index meshNode, const std::vector<char> & modelMask) const
+std::vector<char>
+CalculixMesh::MeshNodeMask(const std::vector<char> & modelMask) const
 {
-  if (meshNode < modelNodes)
+  std::vector<char> mask(nodes.size(), 0);
+  std::copy(modelMask.begin(), modelMask.begin() + std::min<std::size_t>(modelMask.size(), modelNodes), mask.begin());
+  for (std::size_t t = 0; t < boundaryTriangles.size(); ++t)
   {
-    return modelMask[meshNode] != 0;
+    const auto & triangle = boundaryTriangles[t];
+    if (modelMask[triangle[0]] && modelMask[triangle[1]] && modelMask[triangle[2]])
+    {
+      for (const Index mid : boundaryTriangleMidNodes[t])
+      {
+        if (mid >= 0)
+        {
+          mask[mid] = 1;
+        }
+      }
+    }
   }
-  const auto & parents = edgeParents[meshNode - modelNodes];
-  return modelMask[parents[0]] != 0 && modelMask[parents[1]] != 0;
+  return mask;
 }
 
 CalculixMesh
@@ -265,6 +276,18 @@ MakeCalculixMesh(const Model & model, const CalculixSettings & settings)
   {
     throw Error("CalculiX deck: hexahedron element type '" + hexType +
                 "' is not an 8- or 20-node C3D element; use C3D8, C3D8I, C3D20 or C3D20R.");
+  }
+
+  bool hasTetrahedra = false, hasHexahedra = false;
+  for (const Cell & cell : model.cells)
+  {
+    (cell.type == CellType::Tetrahedron ? hasTetrahedra : hasHexahedra) = true;
+  }
+  if (hasTetrahedra && hasHexahedra && (tetNodes == 10 || hexNodes == 20))
+  {
+    throw Error("CalculiX deck: the model mixes hexahedra and tetrahedra; quadratic elements would not conform "
+                "where a hexahedron's face meets two tetrahedra. Use quadratic = false (C3D8 and C3D4), or a "
+                "tetrahedral model for a quadratic reference.");
   }
 
   CalculixMesh mesh;
@@ -315,6 +338,24 @@ MakeCalculixMesh(const Model & model, const CalculixSettings & settings)
     }
     mesh.elementTypes.push_back(tet ? tetType : hexType);
     mesh.elements.push_back(std::move(element));
+  }
+
+  mesh.boundaryTriangles = model.BoundaryTriangles();
+  mesh.boundaryTriangleMidNodes.assign(mesh.boundaryTriangles.size(), { -1, -1, -1 });
+  for (std::size_t t = 0; t < mesh.boundaryTriangles.size(); ++t)
+  {
+    for (int k = 0; k < 3; ++k)
+    {
+      const Index         a = mesh.boundaryTriangles[t][k];
+      const Index         b = mesh.boundaryTriangles[t][(k + 1) % 3];
+      const std::uint64_t key =
+        (static_cast<std::uint64_t>(std::min(a, b)) << 32) | static_cast<std::uint32_t>(std::max(a, b));
+      const auto found = midEdge.find(key);
+      if (found != midEdge.end())
+      {
+        mesh.boundaryTriangleMidNodes[t][k] = found->second;
+      }
+    }
   }
   return mesh;
 }
@@ -450,28 +491,38 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
          << FormatDouble(settings.residualTolerance) << ", " << FormatDouble(settings.correctionTolerance)
          << ", 0, 0, 0.02, 1e-5, 1e-3, 1e-8\n";
 
+  // Per component: the model nodes constrained in it, and the mid-edge nodes
+  // on boundary faces whose vertices all are.
+  std::array<std::vector<char>, 3> meshConstrained;
+  for (int d = 0; d < 3; ++d)
+  {
+    std::vector<char> modelMask(modelNodes, 0);
+    for (std::size_t node = 0; node < modelNodes; ++node)
+    {
+      modelMask[node] = constrained[3 * node + d];
+    }
+    meshConstrained[d] = mesh.MeshNodeMask(modelMask);
+  }
   stream << "*BOUNDARY\n";
   for (std::size_t node = 0; node < mesh.nodes.size(); ++node)
   {
     for (int d = 0; d < 3; ++d)
     {
-      bool   isConstrained = false;
+      if (!meshConstrained[d][node])
+      {
+        continue;
+      }
       double v = 0.0;
       if (static_cast<Index>(node) < mesh.modelNodes)
       {
-        isConstrained = constrained[3 * node + d] != 0;
         v = value[3 * node + d];
       }
       else
       {
         const auto & parents = mesh.edgeParents[node - mesh.modelNodes];
-        isConstrained = constrained[3 * parents[0] + d] != 0 && constrained[3 * parents[1] + d] != 0;
         v = 0.5 * (value[3 * parents[0] + d] + value[3 * parents[1] + d]);
       }
-      if (isConstrained)
-      {
-        stream << node + 1 << ", " << d + 1 << ", " << d + 1 << ", " << FormatDouble(v) << "\n";
-      }
+      stream << node + 1 << ", " << d + 1 << ", " << d + 1 << ", " << FormatDouble(v) << "\n";
     }
   }
 
@@ -541,10 +592,11 @@ CalculixResult::TotalReactionForce(const std::vector<Index> & modelNodes) const
       mask[node] = 1;
     }
   }
-  Vector3 total = Vector3::Zero();
-  for (Index node = 0; node < static_cast<Index>(meshReactionForces.size()); ++node)
+  const std::vector<char> meshMask = mesh.MeshNodeMask(mask);
+  Vector3                 total = Vector3::Zero();
+  for (std::size_t node = 0; node < meshReactionForces.size(); ++node)
   {
-    if (mesh.InSet(node, mask))
+    if (meshMask[node])
     {
       total += meshReactionForces[node];
     }
