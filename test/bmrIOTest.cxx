@@ -3,6 +3,8 @@
 #include "bmrMeshIO.h"
 
 #include <Eigen/Geometry>
+#include "bmrTemporaryFolderTest.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -22,19 +24,10 @@ namespace fs = std::filesystem;
 namespace
 {
 
-/** A fresh folder per test, removed afterwards. */
-class IOTest : public ::testing::Test
+// Each test gets its own folder (TemporaryFolderTest).
+class IOTest : public bmr::test::TemporaryFolderTest
 {
 protected:
-  void SetUp() override
-  {
-    const auto * info = ::testing::UnitTest::GetInstance()->current_test_info();
-    m_Folder = fs::temp_directory_path() /
-               ("bmrIOTest-" + std::string(info->name()) + "-" + std::to_string(::getpid()));
-    fs::remove_all(m_Folder);
-    fs::create_directories(m_Folder);
-  }
-  void TearDown() override { fs::remove_all(m_Folder); }
 
   std::string Path(const std::string & name) const { return (m_Folder / name).string(); }
 
@@ -55,7 +48,6 @@ protected:
     stream << text;
   }
 
-  fs::path m_Folder;
 };
 
 /** One unit hexahedron and a tetrahedron on its top face, two materials, and

@@ -4,6 +4,8 @@
 #include "bmrMeshIO.h"
 #include "bmrScene.h"
 
+#include "bmrTemporaryFolderTest.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -67,19 +69,10 @@ BlockScene()
   })");
 }
 
-/** A fresh folder per test, removed afterwards. */
-class SceneTest : public ::testing::Test
+// Each test gets its own folder (TemporaryFolderTest).
+class SceneTest : public bmr::test::TemporaryFolderTest
 {
 protected:
-  void SetUp() override
-  {
-    const auto * info = ::testing::UnitTest::GetInstance()->current_test_info();
-    m_Folder = fs::temp_directory_path() /
-               ("bmrSceneTest-" + std::string(info->name()) + "-" + std::to_string(::getpid()));
-    fs::remove_all(m_Folder);
-    fs::create_directories(m_Folder);
-  }
-  void TearDown() override { fs::remove_all(m_Folder); }
 
   bmr::Scene Parse(const json & scene) const { return bmr::ParseScene(scene.dump(), (m_Folder / "scene.json").string()); }
 
@@ -88,7 +81,6 @@ protected:
     return ErrorMessage([&] { Parse(scene); });
   }
 
-  fs::path m_Folder;
 };
 
 std::size_t
@@ -558,18 +550,9 @@ struct CommandResult
   std::string err;
 };
 
-class SceneCliTest : public ::testing::Test
+class SceneCliTest : public bmr::test::TemporaryFolderTest
 {
 protected:
-  void SetUp() override
-  {
-    const auto * info = ::testing::UnitTest::GetInstance()->current_test_info();
-    m_Folder = fs::temp_directory_path() /
-               ("bmrSceneCliTest-" + std::string(info->name()) + "-" + std::to_string(::getpid()));
-    fs::remove_all(m_Folder);
-    fs::create_directories(m_Folder);
-  }
-  void TearDown() override { fs::remove_all(m_Folder); }
 
   CommandResult Biomech(const std::string & arguments) const
   {
@@ -609,7 +592,6 @@ protected:
     return names;
   }
 
-  fs::path m_Folder;
 };
 
 } // namespace
