@@ -551,7 +551,7 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   std::vector<double> mass = forces->ScaledMasses(h, 1.0); // element bound: omega_max <= 2
   const double        boundScale = 1.0 / (safety * safety);
   const double        largest = LargestEigenvalueEstimate(mass);
-  double massScale = std::clamp(kEigenvalueMargin * largest / (omegaMax * omegaMax), 1e-3 * boundScale, boundScale);
+  const double massScale = std::clamp(kEigenvalueMargin * largest / (omegaMax * omegaMax), 1e-3 * boundScale, boundScale);
 
   std::vector<double> u(dofCount, 0.0), uPrevious(dofCount, 0.0), uNext(dofCount, 0.0);
   std::vector<double> f(dofCount, 0.0), fPrevious(dofCount, 0.0), inverseMass(dofCount);
@@ -647,11 +647,11 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
           incrementNorms.back() > kGrowthLimit * incrementNorms.front() &&
           increment.maxAbs > kSignificantIncrement * lengthScale)
       {
-        throw SolveError("dynamic relaxation diverged at " + StepLabel(step) +
-                           ": the displacement increments grew " + std::to_string(kGrowthLimit) +
-                           "-fold within " + std::to_string(window) +
-                           " steps. Likely cause: stiffening beyond the time-step estimate (lower safety_factor).",
-                         step, -1);
+        std::ostringstream message;
+        message << "dynamic relaxation diverged at " << StepLabel(step) << ": the displacement increments grew "
+                << kGrowthLimit << "-fold within " << window
+                << " steps. Likely cause: stiffening beyond the time-step estimate (lower safety_factor).";
+        throw SolveError(message.str(), step, -1);
       }
       std::swap(uPrevious, u);
       std::swap(u, uNext);
@@ -696,7 +696,6 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
       }
       ++restarts;
       scaleMasses(kRestartMassFactor);
-      massScale *= kRestartMassFactor;
       setDamping(lowestEigenvalue / kRestartMassFactor);
       u = checkpoint;
       uPrevious = checkpoint;
