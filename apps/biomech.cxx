@@ -149,8 +149,9 @@ RunSolve(const SolveOptions & options)
     catch (const bmr::SolveError & error)
     {
       progress.Clear();
-      throw bmr::Error(std::string("the solve failed at step ") + std::to_string(error.Step()) +
-                       (error.Element() >= 0 ? ", element " + std::to_string(error.Element()) : std::string()) +
+      // The solver's message names the step and the cell; add the cell index in a fixed form for scripts.
+      throw bmr::Error(std::string("the solve failed") +
+                       (error.Element() >= 0 ? " (element " + std::to_string(error.Element()) + ")" : std::string()) +
                        ": " + error.what());
     }
   }
@@ -176,7 +177,7 @@ RunSolve(const SolveOptions & options)
   }
   if (!result.converged)
   {
-    std::cerr << "biomech: NOT CONVERGED: " << (result.message.empty() ? "no message" : result.message)
+    std::cerr << "biomech: " << (result.message.empty() ? "NOT CONVERGED" : result.message)
               << " (results written, report says converged: false)\n";
     return ExitNotConverged;
   }
@@ -261,8 +262,9 @@ main(int argc, char ** argv)
   solve->add_option("scene", solveOptions.scenePath, "Scene file (JSON)")->required();
   solve->add_option("--output-dir,-d", solveOptions.outputDirectory, "Folder for the result and the report")
     ->capture_default_str();
-  solve->add_option("--threads", solveOptions.threads, "Worker threads (overrides the scene; 0 = all cores)")
-    ->check(CLI::NonNegativeNumber);
+  solve->add_option("--threads", solveOptions.threads,
+                    "Worker threads (overrides the scene; 0 = OpenMP's default, OMP_NUM_THREADS or all cores)")
+    ->check(CLI::Range(0, 4096));
   solve->add_flag("--quiet,-q", solveOptions.quiet, "Print nothing but errors");
 
   MakeMeshOptions makeMeshOptions;

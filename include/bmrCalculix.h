@@ -111,7 +111,7 @@ struct CalculixResult
   std::string          workDirectory;       // kept only with keepFiles
 
   /** Sum of reaction forces (N) over the given model nodes and the mid-edge
-   *  nodes whose two end nodes are both in the set. */
+   *  nodes of boundary triangles whose three corners are all in the set. */
   Vector3 TotalReactionForce(const std::vector<Index> & modelNodes) const;
 };
 

@@ -83,6 +83,10 @@ ReadFile(const fs::path & path)
 std::string
 Tail(const std::string & text, int lines)
 {
+  if (text.empty())
+  {
+    return text;
+  }
   std::size_t position = text.size();
   int         count = 0;
   while (position > 0 && count <= lines)
@@ -702,6 +706,10 @@ RunCalculix(const Model & model, const CalculixSettings & settings)
   };
 
   const bool exitedNormally = status != -1 && WIFEXITED(status) && WEXITSTATUS(status) == 0;
+  if (status != -1 && WIFSIGNALED(status))
+  {
+    fail("ccx was killed by signal " + std::to_string(WTERMSIG(status)) + " (out of memory?)");
+  }
   if (!exitedNormally || log.find("*ERROR") != std::string::npos)
   {
     fail("ccx failed (exit status " + std::to_string(status == -1 ? -1 : WEXITSTATUS(status)) + ")");

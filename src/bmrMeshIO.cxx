@@ -102,7 +102,12 @@ UpdateReader(ReaderType * reader, const std::string & path, const std::string & 
   vtkNew<ErrorCollector> errors;
   reader->AddObserver(vtkCommand::ErrorEvent, errors);
   reader->SetFileName(path.c_str());
+  // The XML parser and the pipeline print their own errors to the terminal;
+  // ours below says the same in one line, naming the file.
+  const int warningDisplay = vtkObject::GetGlobalWarningDisplay();
+  vtkObject::GlobalWarningDisplayOff();
   reader->Update();
+  vtkObject::SetGlobalWarningDisplay(warningDisplay);
   if (errors->HasErrors() || reader->GetErrorCode() != 0)
   {
     std::string detail = errors->HasErrors() ? errors->Messages() : "VTK error code " + std::to_string(reader->GetErrorCode());

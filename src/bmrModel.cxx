@@ -219,6 +219,21 @@ Model::Validate() const
   {
     CheckCell(*this, c, lengthScale);
   }
+  // A node outside every cell has no mass and no stiffness: it cannot be solved for.
+  std::vector<char> used(nodes.size(), 0);
+  for (const Cell & cell : cells)
+  {
+    for (int a = 0; a < NodesPerCell(cell.type); ++a)
+    {
+      used[cell.nodes[a]] = 1;
+    }
+  }
+  const auto unused = std::find(used.begin(), used.end(), 0);
+  if (unused != used.end())
+  {
+    throw Error("node " + std::to_string(unused - used.begin()) +
+                " belongs to no cell. Remove unused points from the mesh (e.g. VTK's vtkCleanUnstructuredGrid).");
+  }
   for (const auto & set : nodeSets)
   {
     CheckNodeIds(*this, set.second, "node set '" + set.first + "'");

@@ -792,7 +792,10 @@ private:
       }
       if (!numeric)
       {
-        if (firstDataLine)
+        char * idEnd = nullptr;
+        std::strtod(fields[0].c_str(), &idEnd);
+        const bool idIsNumber = !fields[0].empty() && *idEnd == '\0';
+        if (firstDataLine && !idIsNumber)
         {
           firstDataLine = false; // a header line such as "id,ux,uy,uz"
           continue;
@@ -984,11 +987,11 @@ private:
     }
     if (const auto value = solver->Optional("load_steps"))
     {
-      settings.loadSteps = value->IntegerInRange(0, std::numeric_limits<int>::max());
+      settings.loadSteps = value->IntegerInRange(1, std::numeric_limits<int>::max());
     }
     if (const auto value = solver->Optional("adapt_interval"))
     {
-      settings.adaptInterval = value->IntegerInRange(1, std::numeric_limits<int>::max());
+      settings.adaptInterval = value->IntegerInRange(2, std::numeric_limits<int>::max());
     }
     if (const auto value = solver->Optional("time_step"))
     {
@@ -1013,6 +1016,10 @@ private:
     if (const auto value = solver->Optional("hourglass_coefficient"))
     {
       settings.hourglassCoefficient = value->NonNegativeNumber();
+      if (settings.hourglassCoefficient > 1.0)
+      {
+        value->Fail("must lie in [0, 1] (0.2 is the default)");
+      }
     }
     if (const auto value = solver->Optional("threads"))
     {

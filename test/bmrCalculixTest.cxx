@@ -85,6 +85,7 @@ TEST(Calculix, UniaxialCompressionQuadraticTetrahedraMatchesAnalytic)
 {
   BMR_REQUIRE_CALCULIX();
   CalculixSettings settings; // C3D10
+  settings.threads = 1;      // CTest runs two tests at once
   const UniaxialCheck check = CheckUniaxial(GridCells::Tetrahedra, settings);
   EXPECT_LT(check.displacementError, 1e-4);
   EXPECT_LT(check.forceError, 1e-4);
@@ -97,6 +98,7 @@ TEST(Calculix, UniaxialCompressionHexahedraMatchAnalytic)
   {
     CalculixSettings settings;
     settings.quadratic = quadratic;
+    settings.threads = 1; // CTest runs two tests at once
     const UniaxialCheck check = CheckUniaxial(GridCells::Hexahedra, settings);
     EXPECT_LT(check.displacementError, 1e-4) << (quadratic ? "C3D20R" : "C3D8");
     EXPECT_LT(check.forceError, 1e-4) << (quadratic ? "C3D20R" : "C3D8");
@@ -308,7 +310,8 @@ TEST(Calculix, UnfinishedStepIsAnErrorNotAResult)
   }
   catch (const Error & error)
   {
-    EXPECT_NE(std::string(error.what()).find("CalculiX"), std::string::npos) << error.what();
+    // ccx stops itself at the increment limit; the harness passes its reason on.
+    EXPECT_NE(std::string(error.what()).find("increments"), std::string::npos) << error.what();
   }
 }
 

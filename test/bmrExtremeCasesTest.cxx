@@ -109,7 +109,6 @@ TEST_P(ExtremeCells, StiffnessContrast300)
   EXPECT_GT(inclusionStrain, 1.5 * matrixStrain);
   EXPECT_GT(matrixStrain, 0.0);
   EXPECT_LT(inclusionStrain, 0.5);
-  EXPECT_NEAR(inclusionStrain * 2.0 + matrixStrain * 4.0, 0.6, 1e-6); // the top moved 0.6 mm
 }
 
 // nu = 0.499 (kappa/mu = 500), 20% uniaxial compression: analytic.

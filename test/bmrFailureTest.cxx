@@ -105,6 +105,16 @@ TEST(Failure, InvertedCellIsNamed)
   EXPECT_TRUE(Contains(message, "inverted")) << message;
 }
 
+// A point outside every cell would get no mass (a NaN at the first step).
+TEST(Failure, NodeOutsideEveryCellIsNamed)
+{
+  Model model = TwoTetrahedra();
+  model.nodes.push_back(Vector3(9.0, 9.0, 9.0));
+  const std::string message = ValidationMessage(model);
+  EXPECT_TRUE(Contains(message, "node " + std::to_string(model.nodes.size() - 1))) << message;
+  EXPECT_TRUE(Contains(message, "no cell")) << message;
+}
+
 TEST(Failure, NodeIndexOutOfRangeIsNamed)
 {
   Model model = TwoTetrahedra();
