@@ -523,7 +523,10 @@ private:
   void AssignMaterials()
   {
     Model & model = TheModel();
-    if (!m_MeshFromFile || m_MeshData.cellLabels.empty())
+    // One material without a label applies to every cell, whatever labels the
+    // mesh carries (e.g. a mesh written by `biomech make-mesh`).
+    const bool singleUnlabelled = m_MaterialLabels.size() == 1 && !m_MaterialLabels[0];
+    if (!m_MeshFromFile || m_MeshData.cellLabels.empty() || singleUnlabelled)
     {
       for (auto & cell : model.cells)
       {

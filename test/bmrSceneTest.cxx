@@ -384,9 +384,14 @@ TEST_F(SceneTest, BadFileInputsAreNamed)
   EXPECT_CONTAINS(message, "cell 0 has label 7");
   EXPECT_CONTAINS(message, "material labels: 1");
 
-  // Labels in the mesh need labels on every material.
+  // A single material without a label applies to every cell, whatever its label.
   scene["materials"][0].erase("label");
+  EXPECT_EQ(Parse(scene).model.cells[0].material, 0);
+
+  // With several materials, labels in the mesh need labels on every material.
+  scene["materials"].push_back(json::parse(R"({"label": 7, "youngs_modulus": 10, "poisson_ratio": 0.1})"));
   EXPECT_CONTAINS(ParseError(scene), "materials[0]: missing key 'label'");
+  scene["materials"].erase(1);
 
   // An explicitly named label array must exist.
   scene["material_array"] = "tissue";
