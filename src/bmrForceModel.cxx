@@ -236,6 +236,25 @@ HourglassModes(const double (&u)[8][3], const Eigen::Matrix3d & F, const double 
   }
 }
 
+// Adds the block-local nodal forces of cells [begin, end) (component-major,
+// one column per cell) to the nodal vector, serially and in cell order.
+template <std::size_t N, std::size_t Block>
+void
+AddBlockForces(const std::array<Index, N> * cellNodes, Index begin, Index end, const double (&forces)[3 * N][Block], double * f)
+{
+  for (Index cell = begin; cell < end; ++cell)
+  {
+    const Index local = cell - begin;
+    for (std::size_t a = 0; a < N; ++a)
+    {
+      double * fa = f + 3 * static_cast<std::size_t>(cellNodes[cell][a]);
+      fa[0] += forces[3 * a][local];
+      fa[1] += forces[3 * a + 1][local];
+      fa[2] += forces[3 * a + 2][local];
+    }
+  }
+}
+
 // Per-cell records of `width` values -> component-major: out[c * count + cell].
 std::vector<double>
 ComponentMajor(const std::vector<double> & records, std::size_t width)
@@ -727,17 +746,7 @@ ForceModel::AddHexahedronForces(Index begin, Index end, const double * u, double
       }
     }
   }
-  for (Index e = begin; e < end; ++e)
-  {
-    const Index local = e - begin;
-    for (int a = 0; a < 8; ++a)
-    {
-      double * fa = f + 3 * static_cast<std::size_t>(m_HexNodes[e][a]);
-      fa[0] += forces[3 * a][local];
-      fa[1] += forces[3 * a + 1][local];
-      fa[2] += forces[3 * a + 2][local];
-    }
-  }
+  AddBlockForces(m_HexNodes.data(), begin, end, forces, f);
   return firstInverted == std::numeric_limits<Index>::max() ? Index{ -1 } : firstInverted;
 }
 
@@ -835,17 +844,7 @@ ForceModel::AddTetrahedronForces(Index begin, Index end, const double * u, doubl
       }
     }
   }
-  for (Index t = begin; t < end; ++t)
-  {
-    const Index local = t - begin;
-    for (int a = 0; a < 4; ++a)
-    {
-      double * fa = f + 3 * static_cast<std::size_t>(m_TetNodes[t][a]);
-      fa[0] += forces[3 * a][local];
-      fa[1] += forces[3 * a + 1][local];
-      fa[2] += forces[3 * a + 2][local];
-    }
-  }
+  AddBlockForces(m_TetNodes.data(), begin, end, forces, f);
   return firstInverted == std::numeric_limits<Index>::max() ? Index{ -1 } : firstInverted;
 }
 

@@ -75,21 +75,8 @@ TwoCellModel()
   return model;
 }
 
-std::string
-ErrorMessage(const std::function<void()> & action)
-{
-  try
-  {
-    action();
-  }
-  catch (const bmr::Error & error)
-  {
-    return error.what();
-  }
-  return "(no bmr::Error thrown)";
-}
+using bmr::test::ErrorMessage;
 
-#define EXPECT_CONTAINS(text, part) EXPECT_NE(std::string(text).find(part), std::string::npos) << "message: " << (text)
 
 void
 ExpectSameMesh(const bmr::Model & expected, const bmr::MeshData & read)

@@ -26,21 +26,8 @@ using json = nlohmann::json;
 namespace
 {
 
-#define EXPECT_CONTAINS(text, part) EXPECT_NE(std::string(text).find(part), std::string::npos) << "message: " << (text)
 
-std::string
-ErrorMessage(const std::function<void()> & action)
-{
-  try
-  {
-    action();
-  }
-  catch (const bmr::Error & error)
-  {
-    return error.what();
-  }
-  return "(no bmr::Error thrown)";
-}
+using bmr::test::ErrorMessage;
 
 std::string
 ReadText(const fs::path & path)
