@@ -115,6 +115,51 @@ struct ContactSurface
   std::string                 slaveNodeSet; // empty: all boundary nodes of the mesh
 };
 
+/** Basis of the moving-least-squares shape functions of the meshless discretization. */
+enum class MlsBasis : std::uint8_t
+{
+  Linear,           // Element-Free Galerkin, basis [1, x, y, z]
+  ModifiedQuadratic // modified MLS (Joldes et al. 2015): quadratic basis at the nodal density of a linear one
+};
+
+struct MlsSettings
+{
+  MlsBasis basis = MlsBasis::Linear;
+  /** Support radius of node I = dilatation x its local nodal spacing (mean
+   *  distance to its nearest neighbours). Smaller supports make dynamic
+   *  relaxation converge faster (less smoothing, better conditioning); 1.6
+   *  keeps enough neighbours for jittered clouds (see docs/solver.md). */
+  double dilatation = 1.6;
+  /** Modified MLS only: regularisation mu of the quadratic coefficients, in
+   *  coordinates scaled by the support radius (see docs/solver.md). */
+  double quadraticRegularization = 1e-3;
+};
+
+/** How essential boundary conditions act on a meshless model. */
+enum class EssentialBoundaryImposition : std::uint8_t
+{
+  Ebciem, // the MLS-interpolated displacement meets the prescribed value (Joldes et al. 2017)
+  Nodal   // the nodal parameter is set (inexact: MLS is not interpolating); for comparison
+};
+
+/** Meshless (MTLED) discretization: the model's nodes carry MLS shape
+ *  functions, integrals are sums over integration points. Cells, if the model
+ *  has any, only describe the body (output, boundary) and are not integrated. */
+struct MeshlessDiscretization
+{
+  MlsSettings                 shapeFunctions;
+  EssentialBoundaryImposition essentialBoundary = EssentialBoundaryImposition::Ebciem;
+  std::vector<Vector3>        integrationPoints;    // mm, reference configuration
+  std::vector<double>         integrationWeights;   // mm^3
+  std::vector<Index>          integrationMaterials; // index into Model::materials, one per point
+};
+
+enum class Discretization : std::uint8_t
+{
+  FiniteElement,
+  Meshless
+};
+
 struct Model
 {
   std::vector<Vector3>                        nodes; // mm
@@ -127,6 +172,9 @@ struct Model
   Vector3                             bodyAcceleration = Vector3::Zero(); // mm/s^2 (gravity: 0,0,-9810)
   LoadCurve                           bodyForceCurve;
   std::vector<ContactSurface>         contactSurfaces;
+
+  Discretization         discretization = Discretization::FiniteElement;
+  MeshlessDiscretization meshless; // used when discretization == Meshless
 
   /** Checks indices, cell shapes (no degenerate or inverted cell), materials and
    *  node-set references; throws bmr::Error naming the first offending object. */

@@ -46,6 +46,7 @@ struct ModelCounts
   std::size_t tetrahedra = 0;
   std::size_t dofs = 0; // 3 per node
   std::size_t materials = 0;
+  std::size_t integrationPoints = 0; // meshless models only
 };
 
 ModelCounts

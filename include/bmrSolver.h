@@ -72,7 +72,12 @@ struct SolveResult
 {
   std::vector<Vector3>         displacements;  // mm, per node
   std::vector<Vector3>         reactionForces; // N, per node; nonzero only at constrained or contacting nodes
-  std::vector<Eigen::Matrix3d> cauchyStress;   // Pa, per cell, only if SolverSettings::computeStress
+                                               // (meshless with EBCIEM: the point reaction at each constrained node)
+  std::vector<Eigen::Matrix3d> cauchyStress;   // Pa, per cell (meshless: per integration point), if computeStress
+  /** Meshless only: the nodal parameters u_I of the MLS field u(x) = sum phi_I(x) u_I
+   *  (`displacements` holds the interpolated, physical values at the nodes).
+   *  Evaluate anywhere in the body with bmr::InterpolateDisplacements. */
+  std::vector<Vector3>         nodalParameters;
 
   bool        converged = false; // explicit dynamics: reached end time
   int         steps = 0;

@@ -1,5 +1,6 @@
 #include "bmrForceModel.h"
 
+#include "bmrNeoHookean.h"
 #include "bmrShape.h"
 #include "bmrUnits.h"
 
@@ -17,57 +18,6 @@ namespace bmr
 
 namespace
 {
-
-// Cofactor matrix cof(F) = J F^-T, columns from cross products of F's columns.
-inline Eigen::Matrix3d
-Cofactor(const Eigen::Matrix3d & F)
-{
-  Eigen::Matrix3d cof;
-  cof.col(0) = F.col(1).cross(F.col(2));
-  cof.col(1) = F.col(2).cross(F.col(0));
-  cof.col(2) = F.col(0).cross(F.col(1));
-  return cof;
-}
-
-// J^(-2/3) without libm's cbrt (a tenth of the kernel's time, and it does not
-// vectorise): the single-precision exponent estimate of the cube root refined
-// by three Halley steps (cubic convergence): 3.3e-15 relative over 1e-30..1e30.
-inline double
-InverseCubeRootSquared(double J)
-{
-  const float  single = static_cast<float>(J);
-  std::int32_t bits;
-  std::memcpy(&bits, &single, sizeof bits);
-  bits = bits / 3 + 709921077;
-  float estimate;
-  std::memcpy(&estimate, &bits, sizeof estimate);
-  double x = estimate;
-  for (int k = 0; k < 3; ++k)
-  {
-    const double x3 = x * x * x;
-    x *= (x3 + 2.0 * J) / (2.0 * x3 + J);
-  }
-  return 1.0 / (x * x);
-}
-
-// First Piola-Kirchhoff stress of the compressible neo-Hookean solid,
-// W = mu/2 (J^-2/3 I1 - 3) + kappa/2 (J - 1)^2. The volumetric part takes the
-// dilatation `volumeRatio` (the element's own J, or the averaged nodal J of the
-// ANP tetrahedron); the isochoric part always uses the element's F.
-inline Eigen::Matrix3d
-FirstPiola(const Eigen::Matrix3d & F, const Eigen::Matrix3d & cof, double J, double volumeRatio, double mu, double kappa)
-{
-  const double isochoricFactor = mu * InverseCubeRootSquared(J);
-  const double I1 = F.squaredNorm();
-  return isochoricFactor * F + (kappa * (volumeRatio - 1.0) - isochoricFactor * I1 / (3.0 * J)) * cof;
-}
-
-inline double
-StrainEnergyDensity(const Eigen::Matrix3d & F, double J, double volumeRatio, double mu, double kappa)
-{
-  return 0.5 * mu * (F.squaredNorm() * InverseCubeRootSquared(J) - 3.0) +
-         0.5 * kappa * (volumeRatio - 1.0) * (volumeRatio - 1.0);
-}
 
 template <int N>
 inline Eigen::Matrix3d
@@ -390,11 +340,16 @@ ScheduleCells(const Model & model, CellType type, Index blockSize)
 
 } // namespace
 
-ForceModel::ForceModel(const Model & model, const SolverSettings & settings, int threads)
+FiniteElementForceModel::FiniteElementForceModel(const Model & model, const SolverSettings & settings, int threads)
   : m_Threads(std::max(1, threads))
   , m_NodeCount(static_cast<Index>(model.nodes.size()))
   , m_AverageNodalPressure(settings.tetrahedron == TetrahedronFormulation::AverageNodalPressure)
+  , m_HourglassControl(settings.hourglassCoefficient > 0.0)
 {
+  for (const Cell & cell : model.cells)
+  {
+    m_CellTypes.push_back(cell.type);
+  }
   // Kernel order: hexahedra, then tetrahedra, each colour by colour and block by block.
   const CellSchedule hexSchedule = ScheduleCells(model, CellType::Hexahedron, kCellsPerBlock);
   const CellSchedule tetSchedule = ScheduleCells(model, CellType::Tetrahedron, kCellsPerBlock);
@@ -553,7 +508,7 @@ ForceModel::ForceModel(const Model & model, const SolverSettings & settings, int
 }
 
 Index
-ForceModel::ComputeInternalForces(const double * u, double * f)
+FiniteElementForceModel::ComputeInternalForces(const double * u, double * f)
 {
   const Index       hexCount = HexahedronCount();
   const bool        anp = UsesAverageNodalPressure();
@@ -619,7 +574,7 @@ ForceModel::ComputeInternalForces(const double * u, double * f)
 // The small inner loops are unrolled explicitly: GCC vectorises the loop over
 // cells (one cell per lane) only when no inner loop remains.
 Index
-ForceModel::AddHexahedronForces(Index begin, Index end, const double * u, double * f) const
+FiniteElementForceModel::AddHexahedronForces(Index begin, Index end, const double * u, double * f) const
 {
   const std::size_t  count = m_HexNodes.size();
   const double *     B = m_HexB.data();
@@ -770,7 +725,7 @@ ForceModel::AddHexahedronForces(Index begin, Index end, const double * u, double
   }
 
 void
-ForceModel::TetrahedronDilatations(Index begin, Index end, const double * u)
+FiniteElementForceModel::TetrahedronDilatations(Index begin, Index end, const double * u)
 {
   const std::size_t count = m_TetNodes.size();
   const double *    B = m_TetB.data();
@@ -785,7 +740,7 @@ ForceModel::TetrahedronDilatations(Index begin, Index end, const double * u)
 }
 
 Index
-ForceModel::AddTetrahedronForces(Index begin, Index end, const double * u, double * f) const
+FiniteElementForceModel::AddTetrahedronForces(Index begin, Index end, const double * u, double * f) const
 {
   const std::size_t count = m_TetNodes.size();
   const Index       hexCount = HexahedronCount();
@@ -852,7 +807,7 @@ ForceModel::AddTetrahedronForces(Index begin, Index end, const double * u, doubl
 
 template <typename CellMass>
 std::vector<double>
-ForceModel::LumpToNodes(const CellMass & cellMass) const
+FiniteElementForceModel::LumpToNodes(const CellMass & cellMass) const
 {
   std::vector<double> masses(m_NodeCount, 0.0);
   auto                add = [&](Index k, const Index * nodes, int count) {
@@ -874,13 +829,13 @@ ForceModel::LumpToNodes(const CellMass & cellMass) const
 }
 
 std::vector<double>
-ForceModel::LumpedMasses() const
+FiniteElementForceModel::LumpedMasses() const
 {
   return LumpToNodes([this](Index k) { return m_Density[k] * m_Volume[k]; });
 }
 
 std::vector<double>
-ForceModel::ScaledMasses(double timeStep, double safety) const
+FiniteElementForceModel::ScaledMasses(double timeStep, double safety) const
 {
   // Critical step 2 / sqrt(q M / rho) = timeStep / safety  =>  rho = q M (timeStep / safety)^2 / 4.
   const double factor = 0.25 * (timeStep / safety) * (timeStep / safety);
@@ -888,7 +843,7 @@ ForceModel::ScaledMasses(double timeStep, double safety) const
 }
 
 double
-ForceModel::CriticalTimeStep(Index * cell) const
+FiniteElementForceModel::CriticalTimeStep(Index * cell) const
 {
   double smallest = std::numeric_limits<double>::infinity();
   Index  where = -1;
@@ -909,7 +864,7 @@ ForceModel::CriticalTimeStep(Index * cell) const
 }
 
 Energies
-ForceModel::ComputeEnergies(const double * u) const
+FiniteElementForceModel::ComputeEnergies(const double * u) const
 {
   Energies    energies;
   const Index hexCount = HexahedronCount();
@@ -965,7 +920,7 @@ ForceModel::ComputeEnergies(const double * u) const
 }
 
 std::vector<Eigen::Matrix3d>
-ForceModel::CauchyStress(const double * u) const
+FiniteElementForceModel::CauchyStress(const double * u) const
 {
   std::vector<Eigen::Matrix3d> stress(m_ModelCell.size());
   const Index                  hexCount = HexahedronCount();
@@ -1007,6 +962,29 @@ ForceModel::CauchyStress(const double * u) const
     stress[m_ModelCell[k]] = (P * F.transpose() / J) * units::InternalToPascal;
   }
   return stress;
+}
+
+std::string
+FiniteElementForceModel::Describe(Index cell) const
+{
+  return std::string(CellTypeName(m_CellTypes[cell])) + " cell " + std::to_string(cell);
+}
+
+void
+FiniteElementForceModel::AddComponents(std::vector<std::string> & components) const
+{
+  if (HexahedronCount() > 0)
+  {
+    components.push_back("hexahedra");
+    if (m_HourglassControl)
+    {
+      components.push_back("hourglass-control");
+    }
+  }
+  if (TetrahedronCount() > 0)
+  {
+    components.push_back(UsesAverageNodalPressure() ? "anp-tetrahedra" : "linear-tetrahedra");
+  }
 }
 
 } // namespace bmr

@@ -8,11 +8,13 @@
 #ifndef bmrForceModel_h
 #define bmrForceModel_h
 
+#include "bmrMeshless.h"
 #include "bmrModel.h"
 #include "bmrSolver.h"
 
 #include <Eigen/Core>
 
+#include <string>
 #include <vector>
 
 namespace bmr
@@ -24,35 +26,62 @@ struct Energies
   double hourglass = 0.0; // N*mm
 };
 
+/** Internal forces, masses and stable time steps of one discretization; the
+ *  integrators see only this. Failures are reported by the index of the
+ *  integration unit (model cell, or integration point), which Describe() names. */
 class ForceModel
 {
 public:
-  ForceModel(const Model & model, const SolverSettings & settings, int threads);
+  virtual ~ForceModel() = default;
 
-  Index NodeCount() const { return m_NodeCount; }
+  virtual Index NodeCount() const = 0;
+
+  /** Internal forces f (3 per node, N) at displacements u (3 per node, mm).
+   *  Returns -1, or the smallest index of a unit whose Jacobian is not positive
+   *  (forces are then meaningless). */
+  virtual Index ComputeInternalForces(const double * u, double * f) = 0;
+
+  /** Lumped nodal masses (t) of the physical densities. */
+  virtual std::vector<double> LumpedMasses() const = 0;
+
+  /** Lumped nodal masses chosen so that every unit's critical time step equals
+   *  timeStep / safety (mass scaling of dynamic relaxation). */
+  virtual std::vector<double> ScaledMasses(double timeStep, double safety) const = 0;
+
+  /** Smallest unit critical time step (s) for the physical densities, and its unit. */
+  virtual double CriticalTimeStep(Index * unit = nullptr) const = 0;
+
+  virtual Energies ComputeEnergies(const double * u) const = 0;
+
+  /** Cauchy stress (Pa) per unit: per model cell, or per integration point. */
+  virtual std::vector<Eigen::Matrix3d> CauchyStress(const double * u) const = 0;
+
+  /** The unit for messages, e.g. "hexahedron cell 12" or "integration point 7 at (1, 2, 3) mm". */
+  virtual std::string Describe(Index unit) const = 0;
+
+  /** Names of the parts in use, for SolveResult::activeComponents. */
+  virtual void AddComponents(std::vector<std::string> & components) const = 0;
+};
+
+/** Hexahedra with hourglass control and linear or ANP tetrahedra. */
+class FiniteElementForceModel : public ForceModel
+{
+public:
+  FiniteElementForceModel(const Model & model, const SolverSettings & settings, int threads);
+
+  Index NodeCount() const override { return m_NodeCount; }
   Index HexahedronCount() const { return static_cast<Index>(m_HexNodes.size()); }
   Index TetrahedronCount() const { return static_cast<Index>(m_TetNodes.size()); }
   bool  UsesAverageNodalPressure() const { return m_AverageNodalPressure && !m_TetNodes.empty(); }
 
-  /** Internal forces f (3 per node, N) at displacements u (3 per node, mm).
-   *  Returns -1, or the smallest index of a cell whose Jacobian is not positive
-   *  (forces are then meaningless). */
-  Index ComputeInternalForces(const double * u, double * f);
-
-  /** Lumped nodal masses (t) of the physical densities. */
-  std::vector<double> LumpedMasses() const;
-
-  /** Lumped nodal masses chosen so that every cell's critical time step equals
-   *  timeStep / safety (mass scaling of dynamic relaxation). */
-  std::vector<double> ScaledMasses(double timeStep, double safety) const;
-
-  /** Smallest cell critical time step (s) for the physical densities, and its cell. */
-  double CriticalTimeStep(Index * cell = nullptr) const;
-
-  Energies ComputeEnergies(const double * u) const;
-
-  /** Cauchy stress per cell (Pa), cells in model order. */
-  std::vector<Eigen::Matrix3d> CauchyStress(const double * u) const;
+  Index                        ComputeInternalForces(const double * u, double * f) override;
+  std::vector<double>          LumpedMasses() const override;
+  std::vector<double>          ScaledMasses(double timeStep, double safety) const override;
+  double                       CriticalTimeStep(Index * cell = nullptr) const override;
+  Energies                     ComputeEnergies(const double * u) const override;
+  std::vector<Eigen::Matrix3d> CauchyStress(const double * u) const override;
+  std::string                  Describe(Index cell) const override;
+  void                         AddComponents(std::vector<std::string> & components) const override;
 
   /** Model cell index of the given kernel cell (hexahedra first, then tetrahedra). */
   Index ModelCell(Index kernelCell) const { return m_ModelCell[kernelCell]; }
@@ -87,6 +116,8 @@ private:
   int   m_Threads;
   Index m_NodeCount;
   bool  m_AverageNodalPressure;
+  bool  m_HourglassControl;
+  std::vector<CellType> m_CellTypes; // model cells, for messages
 
   // Hexahedra: nodes, B = (1/V) integral dN/dX (8x3) and X^T h (3x4), from
   // which the hourglass vectors follow, both component-major like m_TetB;
@@ -121,6 +152,54 @@ private:
   std::vector<Index> m_HexColourOffsets;
   std::vector<Index> m_TetBlockOffsets;
   std::vector<Index> m_TetColourOffsets;
+};
+
+/** Meshless (MTLED) internal forces: the deformation gradient at each
+ *  integration point from the MLS shape-function derivatives of its
+ *  neighbours, neo-Hookean stress, f_I = sum_p w_p P_p grad phi_I(x_p).
+ *  Forces are gathered node by node from per-point stresses, so the sums run
+ *  in a fixed order whatever the thread count. */
+class MeshlessForceModel : public ForceModel
+{
+public:
+  /** `shapeFunctions`: the table at model.meshless.integrationPoints, with
+   *  gradients. Throws bmr::Error for a node in the support of no integration
+   *  point (it would have neither mass nor stiffness). */
+  MeshlessForceModel(const Model & model, ShapeFunctionTable shapeFunctions, int threads);
+
+  Index                        NodeCount() const override { return m_NodeCount; }
+  Index                        PointCount() const { return m_Table.PointCount(); }
+  Index                        ComputeInternalForces(const double * u, double * f) override;
+  std::vector<double>          LumpedMasses() const override;
+  std::vector<double>          ScaledMasses(double timeStep, double safety) const override;
+  double                       CriticalTimeStep(Index * point = nullptr) const override;
+  Energies                     ComputeEnergies(const double * u) const override;
+  std::vector<Eigen::Matrix3d> CauchyStress(const double * u) const override;
+  std::string                  Describe(Index point) const override;
+  void                         AddComponents(std::vector<std::string> & components) const override;
+
+  /** Deformation gradient at an integration point. */
+  Eigen::Matrix3d DeformationGradientAt(Index point, const double * u) const;
+
+private:
+  /** Nodal lumped masses from a mass per integration point, shared equally by its neighbours. */
+  template <typename PointMass>
+  std::vector<double> LumpToNodes(const PointMass & pointMass) const;
+
+  int                  m_Threads;
+  Index                m_NodeCount;
+  ShapeFunctionTable   m_Table; // rows: integration points
+  std::vector<Vector3> m_Positions;
+  std::vector<double>  m_Weight;    // mm^3
+  std::vector<double>  m_Mu;        // internal units
+  std::vector<double>  m_Kappa;
+  std::vector<double>  m_Density;
+  std::vector<double>  m_WaveBound; // (lambda + 2 mu) n sum |grad phi|^2
+  // Transposed table: for node I, the points in its support and grad phi_I there.
+  std::vector<Index>  m_NodeOffsets;
+  std::vector<Index>  m_NodePoints;
+  std::vector<double> m_NodeGradients; // 3 per entry
+  std::vector<double> m_WeightedStress; // w_p P_p, 9 per point, per force evaluation
 };
 
 } // namespace bmr

@@ -436,6 +436,19 @@ WriteResultVtu(const std::string & path, const Model & model, const SolveResult 
   grid->GetPointData()->AddArray(displacement);
   grid->GetPointData()->AddArray(reaction);
   grid->GetPointData()->SetActiveVectors("displacement");
+  if (!result.nodalParameters.empty())
+  {
+    // Meshless: the MLS field's parameters, so the field can be evaluated anywhere later.
+    vtkNew<vtkDoubleArray> parameters;
+    parameters->SetName("mls_nodal_parameter");
+    parameters->SetNumberOfComponents(3);
+    parameters->SetNumberOfTuples(static_cast<vtkIdType>(nodeCount));
+    for (std::size_t node = 0; node < nodeCount; ++node)
+    {
+      parameters->SetTuple(static_cast<vtkIdType>(node), result.nodalParameters[node].data());
+    }
+    grid->GetPointData()->AddArray(parameters);
+  }
 
   if (!result.cauchyStress.empty())
   {

@@ -175,10 +175,64 @@ CheckCell(const Model & model, Index cellIndex, double lengthScale)
 
 } // namespace
 
+namespace
+{
+
+void
+ValidateMeshless(const Model & model)
+{
+  const MeshlessDiscretization & meshless = model.meshless;
+  const std::size_t              count = meshless.integrationPoints.size();
+  if (count == 0)
+  {
+    throw Error("the meshless model has no integration points. Make them with bmr::MakeMeshlessFromCells or "
+                "bmr::MakeIntegrationPoints (scene: \"discretization\": \"meshless\").");
+  }
+  if (meshless.integrationWeights.size() != count || meshless.integrationMaterials.size() != count)
+  {
+    throw Error("the meshless model has " + std::to_string(count) + " integration points but " +
+                std::to_string(meshless.integrationWeights.size()) + " weights and " +
+                std::to_string(meshless.integrationMaterials.size()) + " materials; give one of each per point.");
+  }
+  for (std::size_t p = 0; p < count; ++p)
+  {
+    const std::string label = "integration point " + std::to_string(p);
+    if (!meshless.integrationPoints[p].allFinite())
+    {
+      throw Error(label + " has a non-finite coordinate.");
+    }
+    if (!(meshless.integrationWeights[p] > 0.0) || !std::isfinite(meshless.integrationWeights[p]))
+    {
+      throw Error(label + " has weight " + std::to_string(meshless.integrationWeights[p]) +
+                  " mm^3; weights must be positive.");
+    }
+    const Index material = meshless.integrationMaterials[p];
+    if (material < 0 || material >= static_cast<Index>(model.materials.size()))
+    {
+      throw Error(label + " refers to material " + std::to_string(material) + " but the model has " +
+                  std::to_string(model.materials.size()) + " materials.");
+    }
+  }
+  if (model.cells.empty())
+  {
+    for (const ContactSurface & surface : model.contactSurfaces)
+    {
+      if (surface.slaveNodeSet.empty())
+      {
+        throw Error("contact surface '" + surface.name + "': a meshless model without cells has no known "
+                    "boundary; name the body's surface nodes in slave_node_set.");
+      }
+    }
+  }
+}
+
+} // namespace
+
 void
 Model::Validate() const
 {
-  if (nodes.empty() || cells.empty())
+  const bool isMeshless = discretization == Discretization::Meshless;
+  if (nodes.empty() || (cells.empty() && !isMeshless))
   {
     throw Error("the model has no nodes or no cells. Give a mesh with hexahedra or tetrahedra.");
   }
@@ -219,8 +273,13 @@ Model::Validate() const
   {
     CheckCell(*this, c, lengthScale);
   }
+  if (isMeshless)
+  {
+    ValidateMeshless(*this);
+  }
   // A node outside every cell has no mass and no stiffness: it cannot be solved for.
-  std::vector<char> used(nodes.size(), 0);
+  // (Meshless nodes get mass from integration points; the solver checks that.)
+  std::vector<char> used(nodes.size(), isMeshless ? 1 : 0);
   for (const Cell & cell : cells)
   {
     for (int a = 0; a < NodesPerCell(cell.type); ++a)

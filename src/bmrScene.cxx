@@ -2,6 +2,7 @@
 
 #include "bmrMeshGenerators.h"
 #include "bmrMeshIO.h"
+#include "bmrMeshless.h"
 
 #include <nlohmann/json.hpp>
 #include <omp.h>
@@ -373,8 +374,9 @@ public:
 
   Scene Parse()
   {
-    m_Root.AllowOnly({ "description", "mesh", "material_array", "materials", "node_sets", "fixed",
-                       "prescribed_displacements", "gravity", "gravity_curve", "contact", "solver", "output" });
+    m_Root.AllowOnly({ "description", "mesh", "material_array", "materials", "discretization", "meshless",
+                       "node_sets", "fixed", "prescribed_displacements", "gravity", "gravity_curve", "contact",
+                       "solver", "output" });
     m_Scene.path = m_ScenePath;
     if (const auto description = m_Root.Optional("description"))
     {
@@ -390,6 +392,7 @@ public:
     ParseContact();
     ParseSolver();
     ParseOutput();
+    ParseDiscretization();
     try
     {
       m_Scene.model.Validate();
@@ -1034,6 +1037,90 @@ private:
     }
   }
 
+  /** "discretization": "meshless" turns the mesh into the body of a meshless
+   *  model: its nodes carry MLS shape functions, its cells only bound the body
+   *  for the background integration grid. */
+  void ParseDiscretization()
+  {
+    const auto discretization = m_Root.Optional("discretization");
+    const bool meshless =
+      discretization && discretization->Choice({ "finite_element", "meshless" }) == "meshless";
+    const auto options = m_Root.Optional("meshless");
+    if (!meshless)
+    {
+      if (options)
+      {
+        options->Fail("meshless options need \"discretization\": \"meshless\"");
+      }
+      return;
+    }
+    if (m_Scene.settings.computeStress)
+    {
+      m_Root.Child("solver").Child("compute_stress").Fail(
+        "the meshless model's stresses live at its integration points and are not written to the .vtu result; "
+        "remove compute_stress (the C++ API returns them in SolveResult::cauchyStress)");
+    }
+    MlsSettings         shapeFunctions;
+    IntegrationSettings integration;
+    Model &             model = TheModel();
+    if (options)
+    {
+      options->AllowOnly({ "basis", "dilatation", "quadratic_regularization", "essential_boundary", "integration" });
+      if (const auto value = options->Optional("basis"))
+      {
+        shapeFunctions.basis = value->Choice({ "linear", "modified_quadratic" }) == "linear"
+                                 ? MlsBasis::Linear
+                                 : MlsBasis::ModifiedQuadratic;
+      }
+      if (const auto value = options->Optional("dilatation"))
+      {
+        shapeFunctions.dilatation = value->PositiveNumber();
+      }
+      if (const auto value = options->Optional("quadratic_regularization"))
+      {
+        shapeFunctions.quadraticRegularization = value->PositiveNumber();
+      }
+      if (const auto value = options->Optional("essential_boundary"))
+      {
+        model.meshless.essentialBoundary = value->Choice({ "ebciem", "nodal" }) == "ebciem"
+                                             ? EssentialBoundaryImposition::Ebciem
+                                             : EssentialBoundaryImposition::Nodal;
+      }
+      if (const auto value = options->Optional("integration"))
+      {
+        value->AllowOnly({ "cell_size", "points_per_direction", "adaptive", "adaptive_tolerance", "max_levels" });
+        if (const auto item = value->Optional("cell_size"))
+        {
+          integration.cellSize = item->NonNegativeNumber();
+        }
+        if (const auto item = value->Optional("points_per_direction"))
+        {
+          integration.pointsPerDirection = item->IntegerInRange(1, 3);
+        }
+        if (const auto item = value->Optional("adaptive"))
+        {
+          integration.adaptive = item->Boolean();
+        }
+        if (const auto item = value->Optional("adaptive_tolerance"))
+        {
+          integration.adaptiveTolerance = item->PositiveNumber();
+        }
+        if (const auto item = value->Optional("max_levels"))
+        {
+          integration.maxSubdivisionLevels = item->IntegerInRange(0, 6);
+        }
+      }
+    }
+    try
+    {
+      MakeMeshlessFromCells(model, shapeFunctions, integration, m_Scene.settings.threads);
+    }
+    catch (const Error & error)
+    {
+      (options ? *options : *discretization).Fail(error.what());
+    }
+  }
+
   void ParseOutput()
   {
     const std::string stem = fs::path(m_ScenePath).stem().string();
@@ -1142,6 +1229,10 @@ CountModel(const Model & model)
   }
   counts.dofs = 3 * counts.nodes;
   counts.materials = model.materials.size();
+  if (model.discretization == Discretization::Meshless)
+  {
+    counts.integrationPoints = model.meshless.integrationPoints.size();
+  }
   return counts;
 }
 
@@ -1184,6 +1275,8 @@ MakeReportJson(const Scene & scene, const SolveResult & result, const std::strin
   report["tetrahedra"] = counts.tetrahedra;
   report["dofs"] = counts.dofs;
   report["materials"] = counts.materials;
+  report["discretization"] = counts.integrationPoints > 0 ? "meshless" : "finite_element";
+  report["integration_points"] = counts.integrationPoints;
   report["threads"] = scene.settings.threads > 0 ? scene.settings.threads : omp_get_max_threads();
   return report.dump(2) + "\n";
 }
@@ -1211,10 +1304,19 @@ FormatReportTable(const Scene & scene, const SolveResult & result)
     row("message", result.message);
   }
   row("mesh", scene.meshSource);
-  row("model", WithThousands(counts.nodes) + " nodes, " + WithThousands(counts.dofs) + " DOF, " +
-                 WithThousands(counts.cells) + " cells (" + WithThousands(counts.hexahedra) + " hexahedra, " +
-                 WithThousands(counts.tetrahedra) + " tetrahedra), " + std::to_string(counts.materials) +
-                 (counts.materials == 1 ? " material" : " materials"));
+  const std::string materials =
+    std::to_string(counts.materials) + (counts.materials == 1 ? " material" : " materials");
+  if (counts.integrationPoints > 0)
+  {
+    row("model", "meshless: " + WithThousands(counts.nodes) + " nodes, " + WithThousands(counts.dofs) + " DOF, " +
+                   WithThousands(counts.integrationPoints) + " integration points, " + materials);
+  }
+  else
+  {
+    row("model", WithThousands(counts.nodes) + " nodes, " + WithThousands(counts.dofs) + " DOF, " +
+                   WithThousands(counts.cells) + " cells (" + WithThousands(counts.hexahedra) + " hexahedra, " +
+                   WithThousands(counts.tetrahedra) + " tetrahedra), " + materials);
+  }
   row("components", JoinNames(result.activeComponents));
   const std::string steps = WithThousands(static_cast<std::size_t>(std::max(result.steps, 0))) + " steps";
   if (explicitDynamics)

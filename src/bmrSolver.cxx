@@ -1,7 +1,9 @@
 #include "bmrSolver.h"
 
 #include "bmrContact.h"
+#include "bmrEssentialBoundary.h"
 #include "bmrForceModel.h"
+#include "bmrMeshless.h"
 #include "bmrShape.h"
 #include "bmrUnits.h"
 
@@ -148,11 +150,25 @@ struct Solver::Impl
   Index                                      criticalCell = -1;
   double                                     lengthScale = 1.0;
 
+  // Meshless only: shape functions at the nodes (physical displacement =
+  // Phi u), the EBCIEM projection (built per solve, with that solve's masses),
+  // and the contact slave nodes with a buffer of their physical displacements.
+  bool                               meshless = false;
+  std::unique_ptr<MovingLeastSquares> shapeFunctions;
+  ShapeFunctionTable                 nodeShapes;
+  std::unique_ptr<EssentialBoundary> essential;
+  std::vector<Index>                 contactSlaves;
+  std::vector<double>                physicalBuffer;
+  std::vector<double>                projectedBuffer;
+
   Impl(const Model & m, const SolverSettings & s);
   void        CheckSettings() const;
   void        BuildConstraints();
   void        ApplyConstraints(double * u, const std::vector<double> & curveFactors) const;
+  void        PrepareEssentialBoundary(const std::vector<double> & mass);
   void        EnforceContact(double * u, std::vector<char> & inContact);
+  void        EnforceMeshlessContact(double * u, std::vector<char> & inContact);
+  std::vector<double> PhysicalDisplacements(const std::vector<double> & u) const;
   void        CentralDifferenceStep(const std::vector<double> & u,
                                     const std::vector<double> & uPrevious,
                                     const std::vector<double> & f,
@@ -180,7 +196,18 @@ Solver::Impl::Impl(const Model & m, const SolverSettings & s)
   CheckSettings();
   model.Validate();
   threads = settings.threads > 0 ? settings.threads : omp_get_max_threads();
-  forces = std::make_unique<ForceModel>(model, settings, threads);
+  meshless = model.discretization == Discretization::Meshless;
+  if (meshless)
+  {
+    shapeFunctions = std::make_unique<MovingLeastSquares>(model.nodes, model.meshless.shapeFunctions);
+    forces = std::make_unique<MeshlessForceModel>(
+      model, shapeFunctions->Evaluate(model.meshless.integrationPoints, true, threads, "integration point"), threads);
+    nodeShapes = shapeFunctions->Evaluate(model.nodes, false, threads, "node");
+  }
+  else
+  {
+    forces = std::make_unique<FiniteElementForceModel>(model, settings, threads);
+  }
   physicalMass = forces->LumpedMasses();
   criticalTimeStep = forces->CriticalTimeStep(&criticalCell);
 
@@ -193,18 +220,13 @@ Solver::Impl::Impl(const Model & m, const SolverSettings & s)
 
   components.push_back("neo-hookean");
   components.push_back("lumped-mass");
-  if (forces->HexahedronCount() > 0)
+  if (meshless)
   {
-    components.push_back("hexahedra");
-    if (settings.hourglassCoefficient > 0.0)
-    {
-      components.push_back("hourglass-control");
-    }
+    components.push_back("meshless");
+    components.push_back(model.meshless.shapeFunctions.basis == MlsBasis::Linear ? "mls-linear"
+                                                                                  : "mls-modified-quadratic");
   }
-  if (forces->TetrahedronCount() > 0)
-  {
-    components.push_back(forces->UsesAverageNodalPressure() ? "anp-tetrahedra" : "linear-tetrahedra");
-  }
+  forces->AddComponents(components);
   components.push_back(settings.integrator == Integrator::DynamicRelaxation ? "dynamic-relaxation"
                                                                             : "explicit-dynamics");
   if (settings.integrator == Integrator::DynamicRelaxation)
@@ -219,6 +241,12 @@ Solver::Impl::Impl(const Model & m, const SolverSettings & s)
   if (!model.prescribedDisplacements.empty())
   {
     components.push_back("prescribed-displacements");
+  }
+  if (meshless && !constrained.empty())
+  {
+    components.push_back(model.meshless.essentialBoundary == EssentialBoundaryImposition::Ebciem
+                           ? "ebciem"
+                           : "nodal-essential-boundary");
   }
   if (!model.bodyAcceleration.isZero())
   {
@@ -240,7 +268,10 @@ Solver::Impl::Impl(const Model & m, const SolverSettings & s)
     {
       contacts.push_back(std::make_unique<RigidContact>(
         surface, surface.slaveNodeSet.empty() ? boundary : model.NodeSet(surface.slaveNodeSet), model.nodes));
+      contactSlaves.insert(contactSlaves.end(), contacts.back()->SlaveNodes().begin(), contacts.back()->SlaveNodes().end());
     }
+    std::sort(contactSlaves.begin(), contactSlaves.end());
+    contactSlaves.erase(std::unique(contactSlaves.begin(), contactSlaves.end()), contactSlaves.end());
   }
   if (settings.computeStress)
   {
@@ -340,6 +371,16 @@ Solver::Impl::BuildConstraints()
 void
 Solver::Impl::ApplyConstraints(double * u, const std::vector<double> & curveFactors) const
 {
+  if (essential)
+  {
+    std::vector<double> targets(constrained.size());
+    for (std::size_t k = 0; k < constrained.size(); ++k)
+    {
+      targets[k] = constrained[k].curve < 0 ? 0.0 : constrained[k].value * curveFactors[constrained[k].curve];
+    }
+    essential->Impose(u, targets);
+    return;
+  }
   for (const ConstrainedDof & c : constrained)
   {
     u[c.dof] = c.curve < 0 ? 0.0 : c.value * curveFactors[c.curve];
@@ -347,13 +388,105 @@ Solver::Impl::ApplyConstraints(double * u, const std::vector<double> & curveFact
 }
 
 void
+Solver::Impl::PrepareEssentialBoundary(const std::vector<double> & mass)
+{
+  essential.reset();
+  if (meshless && !constrained.empty() && model.meshless.essentialBoundary == EssentialBoundaryImposition::Ebciem)
+  {
+    std::vector<Index> dofs;
+    for (const ConstrainedDof & c : constrained)
+    {
+      dofs.push_back(c.dof);
+    }
+    essential = std::make_unique<EssentialBoundary>(nodeShapes, dofs, mass);
+  }
+}
+
+void
 Solver::Impl::EnforceContact(double * u, std::vector<char> & inContact)
 {
+  if (meshless)
+  {
+    EnforceMeshlessContact(u, inContact);
+    return;
+  }
   std::fill(inContact.begin(), inContact.end(), 0);
   for (auto & contact : contacts)
   {
     contact->Enforce(u, dofConstrained, inContact, threads);
   }
+}
+
+void
+Solver::Impl::EnforceMeshlessContact(double * u, std::vector<char> & inContact)
+{
+  // Contact acts on the MLS-interpolated positions of the slave nodes. The
+  // projection's correction is added to the slaves' parameters; as the
+  // neighbours' parameters contribute too, this under-corrects and is
+  // repeated (it converges geometrically; what is left is taken up in the
+  // next step).
+  constexpr int kContactIterations = 8;
+  if (contacts.empty())
+  {
+    return;
+  }
+  physicalBuffer.resize(3 * model.nodes.size(), 0.0);
+  projectedBuffer.resize(3 * model.nodes.size(), 0.0);
+  const Index slaveCount = static_cast<Index>(contactSlaves.size());
+  for (int iteration = 0; iteration < kContactIterations; ++iteration)
+  {
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (Index s = 0; s < slaveCount; ++s)
+    {
+      const Index   node = contactSlaves[s];
+      const Vector3 value = nodeShapes.Interpolate(node, u);
+      for (int i = 0; i < 3; ++i)
+      {
+        physicalBuffer[3 * node + i] = value[i];
+        projectedBuffer[3 * node + i] = value[i];
+      }
+    }
+    std::fill(inContact.begin(), inContact.end(), 0);
+    for (auto & contact : contacts)
+    {
+      contact->Enforce(projectedBuffer.data(), dofConstrained, inContact, threads);
+    }
+    double largest = 0.0;
+    for (const Index node : contactSlaves)
+    {
+      for (int i = 0; i < 3; ++i)
+      {
+        const double correction = projectedBuffer[3 * node + i] - physicalBuffer[3 * node + i];
+        u[3 * node + i] += correction;
+        largest = std::max(largest, std::abs(correction));
+      }
+    }
+    if (largest <= 1e-9 * lengthScale)
+    {
+      break;
+    }
+  }
+}
+
+std::vector<double>
+Solver::Impl::PhysicalDisplacements(const std::vector<double> & u) const
+{
+  if (!meshless)
+  {
+    return u;
+  }
+  std::vector<double> physical(u.size());
+  const Index         nodeCount = static_cast<Index>(model.nodes.size());
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (Index n = 0; n < nodeCount; ++n)
+  {
+    const Vector3 value = nodeShapes.Interpolate(n, u.data());
+    for (int i = 0; i < 3; ++i)
+    {
+      physical[3 * n + i] = value[i];
+    }
+  }
+  return physical;
 }
 
 void
@@ -390,8 +523,7 @@ Solver::Impl::CheckForces(Index inverted, int step, bool explicitDynamics, doubl
     return;
   }
   std::ostringstream message;
-  message << CellTypeName(model.cells[inverted].type) << " cell " << inverted << " inverted (J <= 0) at "
-          << StepLabel(step) << ". Likely cause: ";
+  message << forces->Describe(inverted) << " inverted (J <= 0) at " << StepLabel(step) << ". Likely cause: ";
   if (explicitDynamics && timeStep > criticalTimeStep)
   {
     message << "the time step " << timeStep << " s exceeds the critical time step " << criticalTimeStep
@@ -462,33 +594,64 @@ SolveResult
 Solver::Impl::Finish(const std::vector<double> & u, const std::vector<char> & inContact, double gravityFactor, int steps)
 {
   const std::size_t nodeCount = model.nodes.size();
-  CheckHexahedronCorners(u, steps);
-  std::vector<double> f(3 * nodeCount);
+  if (!meshless)
+  {
+    CheckHexahedronCorners(u, steps);
+  }
+  const std::vector<double> physical = PhysicalDisplacements(u);
+  std::vector<double>       f(3 * nodeCount);
   forces->ComputeInternalForces(u.data(), f.data());
+  for (std::size_t d = 0; d < f.size(); ++d)
+  {
+    // Reaction = internal minus external force: what the support or surface must supply.
+    f[d] -= gravityForce.empty() ? 0.0 : gravityFactor * gravityForce[d];
+  }
   SolveResult result;
   result.displacements.resize(nodeCount);
   result.reactionForces.assign(nodeCount, Vector3::Zero());
   for (std::size_t n = 0; n < nodeCount; ++n)
   {
-    result.displacements[n] = Vector3(u[3 * n], u[3 * n + 1], u[3 * n + 2]);
+    result.displacements[n] = Vector3(physical[3 * n], physical[3 * n + 1], physical[3 * n + 2]);
     result.maxDisplacement = std::max(result.maxDisplacement, result.displacements[n].norm());
-    if (nodeConstrained[n] || inContact[n])
+    if ((nodeConstrained[n] && !essential) || inContact[n])
     {
-      // Reaction = internal minus external force: what the support or surface must supply.
-      for (int i = 0; i < 3; ++i)
-      {
-        const double external = gravityForce.empty() ? 0.0 : gravityFactor * gravityForce[3 * n + i];
-        result.reactionForces[n][i] = f[3 * n + i] - external;
-      }
+      result.reactionForces[n] = Vector3(f[3 * n], f[3 * n + 1], f[3 * n + 2]);
     }
     result.contactNodes += inContact[n] ? 1 : 0;
+  }
+  if (meshless)
+  {
+    // The contact set of the last iteration may miss nodes that touch within
+    // round-off; a free slave node carries no residual at rest, so every slave
+    // reports its residual.
+    for (const Index node : contactSlaves)
+    {
+      result.reactionForces[node] = Vector3(f[3 * node], f[3 * node + 1], f[3 * node + 2]);
+    }
+  }
+  if (essential)
+  {
+    // EBCIEM: the reaction is the multiplier of each constrained point.
+    const std::vector<double> reactions = essential->Reactions(f.data());
+    for (std::size_t k = 0; k < constrained.size(); ++k)
+    {
+      result.reactionForces[constrained[k].dof / 3][constrained[k].dof % 3] = reactions[k];
+    }
+  }
+  if (meshless)
+  {
+    result.nodalParameters.resize(nodeCount);
+    for (std::size_t n = 0; n < nodeCount; ++n)
+    {
+      result.nodalParameters[n] = Vector3(u[3 * n], u[3 * n + 1], u[3 * n + 2]);
+    }
   }
   const Energies energies = forces->ComputeEnergies(u.data());
   result.strainEnergy = energies.strain * units::InternalEnergyToJoule;
   result.hourglassEnergy = energies.hourglass * units::InternalEnergyToJoule;
   for (const auto & contact : contacts)
   {
-    result.maxPenetration = std::max(result.maxPenetration, contact->MaxPenetration(u.data()));
+    result.maxPenetration = std::max(result.maxPenetration, contact->MaxPenetration(physical.data()));
   }
   if (settings.computeStress)
   {
@@ -566,6 +729,7 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
     }
   };
   scaleMasses(massScale);
+  PrepareEssentialBoundary(mass); // uniform rescaling on restart leaves the projection unchanged
   std::vector<char>   inContact(model.nodes.size(), 0);
   std::vector<double> curveFactors(curves.size(), 0.0);
 
@@ -754,6 +918,7 @@ Solver::Impl::SolveExplicitDynamics(const ProgressCallback & progress)
   {
     inverseMass[d] = 1.0 / physicalMass[d / 3];
   }
+  PrepareEssentialBoundary(physicalMass);
   std::vector<char>   inContact(model.nodes.size(), 0);
   std::vector<double> curveFactors(curves.size(), 0.0);
   auto                loadFactor = [](const LoadCurve & curve, double time) {

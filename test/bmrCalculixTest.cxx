@@ -7,6 +7,7 @@
 //     approaches a quadratic-tetrahedron CalculiX reference.
 // Skipped (GTEST_SKIP) only when ccx is not installed.
 #include "bmrCalculix.h"
+#include "bmrMeshless.h"
 #include "bmrSolver.h"
 #include "bmrTestUtilities.h"
 
@@ -372,10 +373,39 @@ struct IndentationError
   double force = 0.0; // |F - F_ref| / |F_ref|, vertical reaction on the patch
 };
 
-IndentationError
-TledError(const IndentationReference & reference, GridCells cells, int n)
+/** The grid's nodes as a finite-element or a meshless model (same nodes, body and loads). */
+enum class Discretisation
 {
-  const Model    model = MakeIndentationModel(reference.problem, { n, n, n / 2 }, cells);
+  Hexahedra,
+  AnpTetrahedra,
+  Meshless
+};
+
+const char *
+DiscretisationName(Discretisation discretisation)
+{
+  switch (discretisation)
+  {
+    case Discretisation::Hexahedra:
+      return "hexahedra";
+    case Discretisation::AnpTetrahedra:
+      return "ANP tetrahedra";
+    case Discretisation::Meshless:
+      break;
+  }
+  return "meshless";
+}
+
+IndentationError
+TledError(const IndentationReference & reference, Discretisation discretisation, int n)
+{
+  Model model = MakeIndentationModel(reference.problem, { n, n, n / 2 },
+                                     discretisation == Discretisation::AnpTetrahedra ? GridCells::Tetrahedra
+                                                                                      : GridCells::Hexahedra);
+  if (discretisation == Discretisation::Meshless)
+  {
+    MakeMeshlessFromCells(model, {}, {}, 1);
+  }
   SolverSettings settings;
   settings.integrator = Integrator::DynamicRelaxation;
   settings.tetrahedron = TetrahedronFormulation::AverageNodalPressure;
@@ -403,7 +433,7 @@ TledError(const IndentationReference & reference, GridCells cells, int n)
 
 void
 CheckConvergence(const IndentationReference & reference,
-                 GridCells                    cells,
+                 Discretisation               discretisation,
                  double                       finestRmsTolerance,
                  double                       finestForceTolerance)
 {
@@ -411,10 +441,11 @@ CheckConvergence(const IndentationReference & reference,
   std::vector<IndentationError> errors;
   for (const int n : grids)
   {
-    errors.push_back(TledError(reference, cells, n));
-    ::testing::Test::RecordProperty(std::string(cells == GridCells::Hexahedra ? "hex" : "tet") + "_n" + std::to_string(n) + "_rms_pct",
-                   std::to_string(100.0 * errors.back().rms));
-    std::cout << (cells == GridCells::Hexahedra ? "hexahedra " : "ANP tetrahedra ") << n << "x" << n << "x" << n / 2
+    errors.push_back(TledError(reference, discretisation, n));
+    ::testing::Test::RecordProperty(std::string(DiscretisationName(discretisation)) + "_n" + std::to_string(n) +
+                                      "_rms_pct",
+                                    std::to_string(100.0 * errors.back().rms));
+    std::cout << DiscretisationName(discretisation) << " " << n << "x" << n << "x" << n / 2
               << ": RMS error " << 100.0 * errors.back().rms << " %, max " << 100.0 * errors.back().max
               << " %, force " << 100.0 * errors.back().force << " %" << std::endl;
   }
@@ -432,14 +463,14 @@ TEST(CalculixIndentation, HexahedraConvergeToReference)
 {
   BMR_REQUIRE_CALCULIX();
   const IndentationReference reference = SolveReference(0.45);
-  CheckConvergence(reference, GridCells::Hexahedra, 0.02, 0.05);
+  CheckConvergence(reference, Discretisation::Hexahedra, 0.02, 0.05);
 }
 
 TEST(CalculixIndentation, AnpTetrahedraConvergeToReference)
 {
   BMR_REQUIRE_CALCULIX();
   const IndentationReference reference = SolveReference(0.45);
-  CheckConvergence(reference, GridCells::Tetrahedra, 0.035, 0.12);
+  CheckConvergence(reference, Discretisation::AnpTetrahedra, 0.035, 0.12);
 }
 
 TEST(CalculixIndentation, NearlyIncompressibleBothElementTypesConvergeToReference)
@@ -447,8 +478,17 @@ TEST(CalculixIndentation, NearlyIncompressibleBothElementTypesConvergeToReferenc
   // Brain tissue's nu = 0.49: hexahedra and ANP tetrahedra must not lock.
   BMR_REQUIRE_CALCULIX();
   const IndentationReference reference = SolveReference(0.49);
-  CheckConvergence(reference, GridCells::Hexahedra, 0.025, 0.05);
-  CheckConvergence(reference, GridCells::Tetrahedra, 0.04, 0.12);
+  CheckConvergence(reference, Discretisation::Hexahedra, 0.025, 0.05);
+  CheckConvergence(reference, Discretisation::AnpTetrahedra, 0.04, 0.12);
+}
+
+TEST(CalculixIndentation, MeshlessConvergesToReference)
+{
+  // The same grids' nodes as a meshless body (linear MLS, EBCIEM, default
+  // integration): the errors must fall with refinement as for the elements.
+  BMR_REQUIRE_CALCULIX();
+  const IndentationReference reference = SolveReference(0.45);
+  CheckConvergence(reference, Discretisation::Meshless, 0.05, 0.15);
 }
 
 } // namespace

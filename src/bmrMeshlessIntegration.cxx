@@ -1,0 +1,993 @@
+// Integration points of the meshless (MTLED) discretization: the body region
+// (union of cells or inside of a closed surface), Gauss points of a regular
+// background grid kept where they lie inside the body (Horton et al. 2010),
+// and adaptive subdivision of the background cells guided by the integrals of
+// the MLS shape functions (Joldes, Wittek, Miller 2015).
+#include "bmrMeshless.h"
+
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Side_of_triangle_mesh.h>
+#include <CGAL/Surface_mesh.h>
+
+#include <omp.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdint>
+#include <exception>
+#include <limits>
+#include <map>
+#include <sstream>
+
+namespace bmr
+{
+
+namespace
+{
+// Barycentric slack of the inside test: points on a shared face or on the
+// boundary are found despite rounding (dimensionless, relative to the cell).
+constexpr double kBarycentricTolerance = 1e-10;
+// A tetrahedron with |6 V| below this fraction of its longest edge cubed is
+// degenerate and contains nothing.
+constexpr double kDegenerateTetrahedron = 1e-14;
+// Background grids larger than this are a mistake (cell size far too small).
+constexpr double kMaxBackgroundCells = 2e8;
+constexpr int    kMaxSubdivisionLevels = 6;
+// Points per MovingLeastSquares::Evaluate call in adaptive integration: large
+// enough to amortise the call, small enough to bound the table's memory.
+constexpr Index  kPointsPerEvaluation = 8192;
+
+int
+ThreadCount(int threads)
+{
+  return threads > 0 ? threads : omp_get_max_threads();
+}
+
+/** Kuhn split of a hexahedron (VTK corner numbering) around its diagonal 0-6:
+ *  every face is split along the diagonal through its lowest corner, the same
+ *  split MakeBlockMesh uses for tetrahedra, so neighbouring cells agree. */
+constexpr int kHexahedronTetrahedra[6][4] = { { 0, 1, 2, 6 }, { 0, 1, 5, 6 }, { 0, 3, 2, 6 },
+                                              { 0, 3, 7, 6 }, { 0, 4, 5, 6 }, { 0, 4, 7, 6 } };
+
+/** Affine map from a point to the last three barycentric coordinates. */
+struct TetrahedronMap
+{
+  Vector3         origin;
+  Eigen::Matrix3d inverse;
+};
+
+// ---------------------------------------------------------------------------
+// Point location in the union of cells: uniform bucket grid over cell boxes.
+// ---------------------------------------------------------------------------
+class CellLocator
+{
+public:
+  explicit CellLocator(const Model & model)
+  {
+    const Index cellCount = static_cast<Index>(model.cells.size());
+    const Index nodeCount = static_cast<Index>(model.nodes.size());
+    m_Materials.resize(cellCount);
+    m_CellBoxes.resize(cellCount);
+    m_TetrahedronBegin.assign(cellCount + 1, 0);
+    double meanExtent = 0.0;
+    for (Index c = 0; c < cellCount; ++c)
+    {
+      const Cell & cell = model.cells[c];
+      if (cell.type != CellType::Hexahedron && cell.type != CellType::Tetrahedron)
+      {
+        std::ostringstream message;
+        message << "BodyRegion::FromCells: cell " << c
+                << " has an unknown cell type; supported: hexahedron, tetrahedron.";
+        throw Error(message.str());
+      }
+      Eigen::AlignedBox3d box;
+      for (int k = 0; k < NodesPerCell(cell.type); ++k)
+      {
+        const Index node = cell.nodes[k];
+        if (node < 0 || node >= nodeCount)
+        {
+          std::ostringstream message;
+          message << "BodyRegion::FromCells: cell " << c << " refers to node " << node << " but the model has "
+                  << nodeCount << " nodes. Fix the cell's node ids.";
+          throw Error(message.str());
+        }
+        box.extend(model.nodes[node]);
+      }
+      m_Bounds.extend(box);
+      const double extent = box.sizes().maxCoeff();
+      meanExtent += extent;
+      // Expanded so that the box test never rejects what the barycentric test accepts.
+      const Vector3 slack = Vector3::Constant(1e-9 * extent);
+      m_CellBoxes[c] = Eigen::AlignedBox3d(box.min() - slack, box.max() + slack);
+      m_Materials[c] = cell.material;
+
+      auto addTetrahedron = [&](Index a, Index b, Index d, Index e) {
+        const Vector3 & x0 = model.nodes[a];
+        Eigen::Matrix3d edges;
+        edges.col(0) = model.nodes[b] - x0;
+        edges.col(1) = model.nodes[d] - x0;
+        edges.col(2) = model.nodes[e] - x0;
+        const double longest = std::max({ edges.col(0).norm(), edges.col(1).norm(), edges.col(2).norm(),
+                                          (edges.col(1) - edges.col(0)).norm(), (edges.col(2) - edges.col(0)).norm(),
+                                          (edges.col(2) - edges.col(1)).norm() });
+        const double determinant = edges.determinant();
+        if (!(std::abs(determinant) > kDegenerateTetrahedron * longest * longest * longest))
+        {
+          return; // flat: no volume to contain anything
+        }
+        m_Tetrahedra.push_back({ x0, edges.inverse() });
+      };
+      if (cell.type == CellType::Tetrahedron)
+      {
+        addTetrahedron(cell.nodes[0], cell.nodes[1], cell.nodes[2], cell.nodes[3]);
+      }
+      else
+      {
+        for (const auto & t : kHexahedronTetrahedra)
+        {
+          addTetrahedron(cell.nodes[t[0]], cell.nodes[t[1]], cell.nodes[t[2]], cell.nodes[t[3]]);
+        }
+      }
+      m_TetrahedronBegin[c + 1] = static_cast<Index>(m_Tetrahedra.size());
+    }
+    meanExtent /= std::max<Index>(cellCount, 1);
+    BuildBuckets(meanExtent);
+  }
+
+  const Eigen::AlignedBox3d & Bounds() const { return m_Bounds; }
+
+  /** Smallest index of a cell containing x, -1 if none. Buckets list cells in
+   *  ascending order, so the first hit is the smallest. */
+  Index FindCell(const Vector3 & x) const
+  {
+    if (!m_SearchBox.contains(x))
+    {
+      return -1;
+    }
+    const Index bucket = BucketOf(x);
+    for (Index e = m_BucketBegin[bucket]; e < m_BucketBegin[bucket + 1]; ++e)
+    {
+      const Index c = m_BucketCells[e];
+      if (!m_CellBoxes[c].contains(x))
+      {
+        continue;
+      }
+      for (Index t = m_TetrahedronBegin[c]; t < m_TetrahedronBegin[c + 1]; ++t)
+      {
+        const Vector3 lambda = m_Tetrahedra[t].inverse * (x - m_Tetrahedra[t].origin);
+        if (lambda.minCoeff() >= -kBarycentricTolerance && lambda.sum() <= 1.0 + kBarycentricTolerance)
+        {
+          return c;
+        }
+      }
+    }
+    return -1;
+  }
+
+  Index Material(Index cell) const { return m_Materials[cell]; }
+
+private:
+  void BuildBuckets(double meanExtent)
+  {
+    const Index cellCount = static_cast<Index>(m_CellBoxes.size());
+    const Vector3 slack = Vector3::Constant(1e-9 * m_Bounds.sizes().maxCoeff());
+    m_SearchBox = Eigen::AlignedBox3d(m_Bounds.min() - slack, m_Bounds.max() + slack);
+    // Buckets about as large as a cell: a cell overlaps ~8 buckets and a bucket
+    // holds ~8 cells. Capped so a few huge cells cannot blow up memory.
+    const Vector3 extent = m_SearchBox.sizes();
+    double        size = std::max(meanExtent, 1e-12 * extent.maxCoeff());
+    if (!(size > 0.0))
+    {
+      size = 1.0;
+    }
+    auto dimensions = [&](double s) {
+      std::array<double, 3> d{};
+      for (int a = 0; a < 3; ++a)
+      {
+        d[a] = std::max(1.0, std::ceil(extent[a] / s));
+      }
+      return d;
+    };
+    const double maxBuckets = 8.0 * std::max<Index>(cellCount, 1) + 64.0;
+    auto         d = dimensions(size);
+    while (d[0] * d[1] * d[2] > maxBuckets)
+    {
+      size *= 1.25;
+      d = dimensions(size);
+    }
+    for (int a = 0; a < 3; ++a)
+    {
+      m_Dimensions[a] = static_cast<Index>(d[a]);
+      m_InverseBucketSize[a] = m_Dimensions[a] / std::max(extent[a], std::numeric_limits<double>::min());
+    }
+    const Index bucketCount = m_Dimensions[0] * m_Dimensions[1] * m_Dimensions[2];
+
+    // Two passes (count, fill) in cell order keep each bucket's list ascending.
+    m_BucketBegin.assign(bucketCount + 1, 0);
+    auto forEachBucket = [&](Index c, auto && visit) {
+      const std::array<Index, 3> lo = Coordinates(m_CellBoxes[c].min());
+      const std::array<Index, 3> hi = Coordinates(m_CellBoxes[c].max());
+      for (Index k = lo[2]; k <= hi[2]; ++k)
+        for (Index j = lo[1]; j <= hi[1]; ++j)
+          for (Index i = lo[0]; i <= hi[0]; ++i)
+            visit(i + m_Dimensions[0] * (j + m_Dimensions[1] * k));
+    };
+    for (Index c = 0; c < cellCount; ++c)
+    {
+      forEachBucket(c, [&](Index b) { ++m_BucketBegin[b + 1]; });
+    }
+    for (Index b = 0; b < bucketCount; ++b)
+    {
+      m_BucketBegin[b + 1] += m_BucketBegin[b];
+    }
+    m_BucketCells.resize(m_BucketBegin[bucketCount]);
+    std::vector<Index> fill(m_BucketBegin.begin(), m_BucketBegin.end() - 1);
+    for (Index c = 0; c < cellCount; ++c)
+    {
+      forEachBucket(c, [&](Index b) { m_BucketCells[fill[b]++] = c; });
+    }
+  }
+
+  std::array<Index, 3> Coordinates(const Vector3 & x) const
+  {
+    std::array<Index, 3> ijk{};
+    for (int a = 0; a < 3; ++a)
+    {
+      const double u = std::floor((x[a] - m_SearchBox.min()[a]) * m_InverseBucketSize[a]);
+      ijk[a] = static_cast<Index>(std::clamp(u, 0.0, static_cast<double>(m_Dimensions[a] - 1)));
+    }
+    return ijk;
+  }
+
+  Index BucketOf(const Vector3 & x) const
+  {
+    const std::array<Index, 3> ijk = Coordinates(x);
+    return ijk[0] + m_Dimensions[0] * (ijk[1] + m_Dimensions[1] * ijk[2]);
+  }
+
+  std::vector<Index>               m_Materials;
+  std::vector<Eigen::AlignedBox3d> m_CellBoxes;
+  std::vector<Index>               m_TetrahedronBegin;
+  std::vector<TetrahedronMap>      m_Tetrahedra;
+  Eigen::AlignedBox3d              m_Bounds;
+  Eigen::AlignedBox3d              m_SearchBox;
+  std::array<Index, 3>             m_Dimensions{ 1, 1, 1 };
+  Vector3                          m_InverseBucketSize = Vector3::Ones();
+  std::vector<Index>               m_BucketBegin;
+  std::vector<Index>               m_BucketCells;
+};
+
+// ---------------------------------------------------------------------------
+// Inside of a closed triangulated surface: CGAL ray parity with exact predicates.
+// ---------------------------------------------------------------------------
+using SurfaceKernel = CGAL::Exact_predicates_inexact_constructions_kernel;
+using SurfaceMesh = CGAL::Surface_mesh<SurfaceKernel::Point_3>;
+using SideOfSurface = CGAL::Side_of_triangle_mesh<SurfaceMesh, SurfaceKernel>;
+
+class SurfaceLocator
+{
+public:
+  SurfaceLocator(const std::vector<Vector3> & vertices, const std::vector<std::array<Index, 3>> & triangles)
+  {
+    if (triangles.empty())
+    {
+      throw Error("BodyRegion::FromSurface: the surface has no triangles. Give a closed triangulated surface.");
+    }
+    const Index vertexCount = static_cast<Index>(vertices.size());
+    std::map<std::pair<Index, Index>, int> edgeUse;
+    std::map<std::pair<Index, Index>, int> directedUse;
+    for (std::size_t t = 0; t < triangles.size(); ++t)
+    {
+      const auto & c = triangles[t];
+      for (int k = 0; k < 3; ++k)
+      {
+        if (c[k] < 0 || c[k] >= vertexCount)
+        {
+          std::ostringstream message;
+          message << "BodyRegion::FromSurface: triangle " << t << " refers to vertex " << c[k]
+                  << " but the surface has " << vertexCount << " vertices. Fix the triangle's vertex ids.";
+          throw Error(message.str());
+        }
+        if (!vertices[c[k]].allFinite())
+        {
+          std::ostringstream message;
+          message << "BodyRegion::FromSurface: vertex " << c[k] << " has a non-finite coordinate.";
+          throw Error(message.str());
+        }
+      }
+      if (c[0] == c[1] || c[1] == c[2] || c[2] == c[0])
+      {
+        std::ostringstream message;
+        message << "BodyRegion::FromSurface: triangle " << t << " repeats a vertex (" << c[0] << ", " << c[1] << ", "
+                << c[2] << "). Remove degenerate triangles.";
+        throw Error(message.str());
+      }
+      for (int k = 0; k < 3; ++k)
+      {
+        ++edgeUse[std::minmax(c[k], c[(k + 1) % 3])];
+        ++directedUse[{ c[k], c[(k + 1) % 3] }];
+        m_Bounds.extend(vertices[c[k]]);
+      }
+    }
+    std::size_t boundaryEdges = 0;
+    for (const auto & [edge, count] : edgeUse)
+    {
+      if (count == 1)
+      {
+        ++boundaryEdges;
+      }
+      else if (count > 2)
+      {
+        std::ostringstream message;
+        message << "BodyRegion::FromSurface: edge (" << edge.first << ", " << edge.second << ") is shared by " << count
+                << " triangles; the surface must be a closed 2-manifold. Repair the surface.";
+        throw Error(message.str());
+      }
+    }
+    if (boundaryEdges > 0)
+    {
+      const auto first = std::find_if(edgeUse.begin(), edgeUse.end(), [](const auto & e) { return e.second == 1; });
+      std::ostringstream message;
+      message << "BodyRegion::FromSurface: the surface is not closed: " << boundaryEdges
+              << " boundary edges (used by one triangle only), e.g. (" << first->first.first << ", "
+              << first->first.second << "). Close its holes so that it bounds a volume.";
+      throw Error(message.str());
+    }
+    for (const auto & [edge, count] : directedUse)
+    {
+      if (count != 1)
+      {
+        std::ostringstream message;
+        message << "BodyRegion::FromSurface: the triangles are not consistently oriented (edge " << edge.first << " -> "
+                << edge.second << " is used twice in the same direction). Orient all triangles the same way.";
+        throw Error(message.str());
+      }
+    }
+
+    m_Mesh = std::make_unique<SurfaceMesh>();
+    std::vector<SurfaceMesh::Vertex_index> handles(vertices.size());
+    for (std::size_t v = 0; v < vertices.size(); ++v)
+    {
+      handles[v] = m_Mesh->add_vertex(SurfaceKernel::Point_3(vertices[v].x(), vertices[v].y(), vertices[v].z()));
+    }
+    for (std::size_t t = 0; t < triangles.size(); ++t)
+    {
+      const auto & c = triangles[t];
+      if (m_Mesh->add_face(handles[c[0]], handles[c[1]], handles[c[2]]) == SurfaceMesh::null_face())
+      {
+        std::ostringstream message;
+        message << "BodyRegion::FromSurface: triangle " << t
+                << " makes the surface non-manifold (e.g. two sheets meet at a vertex). Repair the surface.";
+        throw Error(message.str());
+      }
+    }
+    m_Side = std::make_unique<SideOfSurface>(*m_Mesh);
+    // The AABB tree is built lazily on the first query: build it now so that
+    // later (concurrent) queries only read.
+    (*m_Side)(SurfaceKernel::Point_3(vertices[triangles[0][0]].x(), vertices[triangles[0][0]].y(),
+                                     vertices[triangles[0][0]].z()));
+  }
+
+  const Eigen::AlignedBox3d & Bounds() const { return m_Bounds; }
+
+  bool Contains(const Vector3 & x) const
+  {
+    if (!m_Bounds.contains(x))
+    {
+      return false;
+    }
+    return (*m_Side)(SurfaceKernel::Point_3(x.x(), x.y(), x.z())) != CGAL::ON_UNBOUNDED_SIDE;
+  }
+
+private:
+  std::unique_ptr<SurfaceMesh>   m_Mesh;
+  std::unique_ptr<SideOfSurface> m_Side;
+  Eigen::AlignedBox3d            m_Bounds;
+};
+
+} // namespace
+
+// ---------------------------------------------------------------------------
+// BodyRegion
+// ---------------------------------------------------------------------------
+struct BodyRegion::Impl
+{
+  std::unique_ptr<CellLocator>    cells;   // FromCells
+  std::unique_ptr<SurfaceLocator> surface; // FromSurface
+  Index                           surfaceMaterial = 0;
+};
+
+BodyRegion::BodyRegion(std::unique_ptr<Impl> impl)
+  : m_Impl(std::move(impl))
+{}
+BodyRegion::BodyRegion(BodyRegion &&) noexcept = default;
+BodyRegion & BodyRegion::operator=(BodyRegion &&) noexcept = default;
+BodyRegion::~BodyRegion() = default;
+
+BodyRegion
+BodyRegion::FromCells(const Model & model)
+{
+  if (model.cells.empty())
+  {
+    throw Error("BodyRegion::FromCells: the model has no cells, so it describes no body. Add the cells of the body "
+                "(hexahedra or tetrahedra) or use BodyRegion::FromSurface.");
+  }
+  auto impl = std::make_unique<Impl>();
+  impl->cells = std::make_unique<CellLocator>(model);
+  return BodyRegion(std::move(impl));
+}
+
+BodyRegion
+BodyRegion::FromSurface(const std::vector<Vector3> &              vertices,
+                        const std::vector<std::array<Index, 3>> & triangles,
+                        Index                                     material)
+{
+  auto impl = std::make_unique<Impl>();
+  impl->surface = std::make_unique<SurfaceLocator>(vertices, triangles);
+  impl->surfaceMaterial = material;
+  return BodyRegion(std::move(impl));
+}
+
+bool
+BodyRegion::Contains(const Vector3 & x) const
+{
+  if (m_Impl->cells)
+  {
+    return m_Impl->cells->FindCell(x) >= 0;
+  }
+  return m_Impl->surface->Contains(x);
+}
+
+Index
+BodyRegion::MaterialAt(const Vector3 & x) const
+{
+  if (m_Impl->cells)
+  {
+    const Index cell = m_Impl->cells->FindCell(x);
+    return cell >= 0 ? m_Impl->cells->Material(cell) : -1;
+  }
+  return m_Impl->surface->Contains(x) ? m_Impl->surfaceMaterial : -1;
+}
+
+Eigen::AlignedBox3d
+BodyRegion::Bounds() const
+{
+  return m_Impl->cells ? m_Impl->cells->Bounds() : m_Impl->surface->Bounds();
+}
+
+// ---------------------------------------------------------------------------
+// Integration points
+// ---------------------------------------------------------------------------
+namespace
+{
+
+/** Gauss-Legendre rule on [0, 1]. */
+struct GaussRule
+{
+  std::vector<double> abscissae;
+  std::vector<double> weights;
+};
+
+GaussRule
+MakeGaussRule(int points)
+{
+  switch (points)
+  {
+    case 1:
+      return { { 0.5 }, { 1.0 } };
+    case 2:
+    {
+      const double a = 0.5 / std::sqrt(3.0);
+      return { { 0.5 - a, 0.5 + a }, { 0.5, 0.5 } };
+    }
+    default:
+    {
+      const double a = 0.5 * std::sqrt(0.6);
+      return { { 0.5 - a, 0.5, 0.5 + a }, { 5.0 / 18.0, 8.0 / 18.0, 5.0 / 18.0 } };
+    }
+  }
+}
+
+void
+ValidateSettings(const IntegrationSettings & settings)
+{
+  std::ostringstream message;
+  message << "integration settings: ";
+  if (!std::isfinite(settings.cellSize) || settings.cellSize < 0.0)
+  {
+    message << "cellSize is " << settings.cellSize
+            << " mm; give a positive background cell edge, or 0 for the median nodal spacing.";
+    throw Error(message.str());
+  }
+  if (settings.pointsPerDirection < 1 || settings.pointsPerDirection > 3)
+  {
+    message << "pointsPerDirection is " << settings.pointsPerDirection << "; use 1, 2 or 3 Gauss points per direction.";
+    throw Error(message.str());
+  }
+  if (!(settings.adaptiveTolerance > 0.0))
+  {
+    message << "adaptiveTolerance is " << settings.adaptiveTolerance
+            << "; it must be positive (e.g. 1e-3, relative to the cell volume).";
+    throw Error(message.str());
+  }
+  if (settings.maxSubdivisionLevels < 0 || settings.maxSubdivisionLevels > kMaxSubdivisionLevels)
+  {
+    message << "maxSubdivisionLevels is " << settings.maxSubdivisionLevels << "; use 0 to " << kMaxSubdivisionLevels
+            << " (each level multiplies the points of a cell by 8).";
+    throw Error(message.str());
+  }
+}
+
+/** A cube of the background grid or one of its descendants. `path` holds the
+ *  child numbers from the background cell down, 3 bits per level, most
+ *  significant first, so that sorting leaves by it gives depth-first order. */
+struct IntegrationCell
+{
+  Index    background = 0;
+  Vector3  corner = Vector3::Zero();
+  Vector3  size = Vector3::Zero(); // edges along x, y, z
+  int      level = 0;
+  uint32_t path = 0;
+};
+
+/** Result of an accepted cell: its Gauss points inside the body. */
+struct AcceptedCell
+{
+  uint32_t             path = 0;
+  Index                background = 0;
+  std::vector<Vector3> positions;
+  std::vector<double>  weights;
+  std::vector<Index>   materials;
+};
+
+/** Per-thread accumulators of I_parent - I_children, indexed by node. */
+struct Scratch
+{
+  std::vector<double>       difference;
+  std::vector<std::uint8_t> seen;
+  std::vector<Index>        touched;
+};
+
+struct CellPoint
+{
+  Vector3 position;
+  double  weight;
+  Index   material;
+};
+
+/** Inside Gauss points of one level of a batch and their shape functions. */
+struct Evaluated
+{
+  std::vector<CellPoint> points;
+  ShapeFunctionTable     table;
+};
+
+class IntegrationGrid
+{
+public:
+  IntegrationGrid(const BodyRegion &          body,
+                  const MovingLeastSquares &  shapeFunctions,
+                  const IntegrationSettings & settings,
+                  double                      cellSize)
+    : m_Body(body)
+    , m_ShapeFunctions(shapeFunctions)
+    , m_Settings(settings)
+    , m_Rule(MakeGaussRule(settings.pointsPerDirection))
+    , m_PointsPerCell(settings.pointsPerDirection * settings.pointsPerDirection * settings.pointsPerDirection)
+  {
+    const Eigen::AlignedBox3d box = body.Bounds();
+    m_Origin = box.min();
+    double total = 1.0;
+    for (int a = 0; a < 3; ++a)
+    {
+      // Whole cells span the body's box exactly, their edges as close to
+      // cellSize as that allows: a box-shaped body (or a body made of a grid's
+      // cells) is then not cut, and cut cells would lose the weight of their
+      // outside points.
+      const double cells = std::max(1.0, std::round(box.sizes()[a] / cellSize));
+      total *= cells;
+      m_Dimensions[a] = cells;
+      m_CellSize[a] = box.sizes()[a] > 0.0 ? box.sizes()[a] / cells : cellSize;
+    }
+    if (!(total <= kMaxBackgroundCells))
+    {
+      std::ostringstream message;
+      message << "MakeIntegrationPoints: a background grid of cell size " << cellSize << " mm over the body's box of "
+              << box.sizes().transpose() << " mm would have " << total
+              << " cells. Use a larger cellSize (0: the median nodal spacing).";
+      throw Error(message.str());
+    }
+    m_BackgroundCount = static_cast<Index>(total);
+  }
+
+  Index BackgroundCount() const { return m_BackgroundCount; }
+
+  /** Background cells in grid order, x fastest, then y, then z. */
+  IntegrationCell BackgroundCell(Index index) const
+  {
+    const Index nx = static_cast<Index>(m_Dimensions[0]);
+    const Index ny = static_cast<Index>(m_Dimensions[1]);
+    const Index i = index % nx;
+    const Index j = (index / nx) % ny;
+    const Index k = index / (nx * ny);
+    IntegrationCell cell;
+    cell.background = index;
+    cell.corner = m_Origin + m_CellSize.cwiseProduct(Vector3(i, j, k));
+    cell.size = m_CellSize;
+    return cell;
+  }
+
+  /** The 8 children, x fastest. */
+  static IntegrationCell Child(const IntegrationCell & parent, int child)
+  {
+    IntegrationCell c = parent;
+    c.size = 0.5 * parent.size;
+    c.corner = parent.corner + c.size.cwiseProduct(Vector3(child & 1, (child >> 1) & 1, (child >> 2) & 1));
+    c.level = parent.level + 1;
+    c.path = parent.path | (static_cast<uint32_t>(child) << (3 * (kMaxSubdivisionLevels - c.level)));
+    return c;
+  }
+
+  /** Gauss points of the cell that lie inside the body (x fastest). */
+  void InsidePoints(const IntegrationCell & cell, std::vector<CellPoint> & points) const
+  {
+    const int    n = static_cast<int>(m_Rule.abscissae.size());
+    const double volume = cell.size.prod();
+    for (int k = 0; k < n; ++k)
+      for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i)
+        {
+          const Vector3 x =
+            cell.corner + cell.size.cwiseProduct(Vector3(m_Rule.abscissae[i], m_Rule.abscissae[j], m_Rule.abscissae[k]));
+          const Index material = m_Body.MaterialAt(x);
+          if (material >= 0)
+          {
+            points.push_back({ x, m_Rule.weights[i] * m_Rule.weights[j] * m_Rule.weights[k] * volume, material });
+          }
+        }
+  }
+
+  /** How many corners of the cell, shrunk by 1% about its centre, the body
+   *  contains: cells that only touch the body (a shared face) do not count. */
+  int CornerProbes(const IntegrationCell & cell) const
+  {
+    int inside = 0;
+    for (int corner = 0; corner < 8; ++corner)
+    {
+      const Vector3 u(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
+      inside += m_Body.Contains(cell.corner + cell.size.cwiseProduct(0.01 * Vector3::Ones() + 0.98 * u)) ? 1 : 0;
+    }
+    return inside;
+  }
+
+  /** All accepted cells descending from background cells [first, last), in
+   *  depth-first order. */
+  std::vector<AcceptedCell> Process(Index first, Index last, Scratch & scratch) const
+  {
+    std::vector<Active> active;
+    for (Index b = first; b < last; ++b)
+    {
+      active.push_back({ BackgroundCell(b) });
+    }
+    std::vector<AcceptedCell> accepted;
+    ProcessLevel(active, nullptr, scratch, accepted);
+    // Leaves of a tree sorted by (background cell, path) come in depth-first order.
+    std::sort(accepted.begin(), accepted.end(), [](const AcceptedCell & a, const AcceptedCell & b) {
+      return a.background != b.background ? a.background < b.background : a.path < b.path;
+    });
+    return accepted;
+  }
+
+  /** Background cells per work batch: a few thousand points per Evaluate
+   *  call, but at least ~64 batches so that small grids still use all threads.
+   *  Depends on the grid only, never on the thread count. */
+  Index BatchSize() const
+  {
+    const int n = m_Settings.pointsPerDirection;
+    const int perCell = (m_Settings.adaptive ? 9 : 1) * n * n * n;
+    return std::clamp<Index>(m_BackgroundCount / 64, 1, std::max<Index>(4, kPointsPerEvaluation / perCell));
+  }
+
+private:
+  /** A cell to test and where its own inside Gauss points are: computed with
+   *  its level (background cells) or inherited from its parent's test. */
+  struct Active
+  {
+    IntegrationCell cell;
+    bool            inherited = false;
+    Index           ownBegin = 0;
+    Index           ownEnd = 0;
+  };
+
+  /** Tests the cells of one level in chunks of a few thousand points (one
+   *  Evaluate call each) and recurses into the children of the divided ones,
+   *  so that memory stays bounded however deep the subdivision goes. The
+   *  inherited points of `active` are in `previous`. */
+  void ProcessLevel(std::vector<Active> &      active,
+                    const Evaluated *          previous,
+                    Scratch &                  scratch,
+                    std::vector<AcceptedCell> & accepted) const
+  {
+    const bool        adaptive = m_Settings.adaptive && m_Settings.maxSubdivisionLevels > 0;
+    const std::size_t chunk = std::max<std::size_t>(1, kPointsPerEvaluation / (9 * m_PointsPerCell));
+    for (std::size_t start = 0; start < active.size(); start += chunk)
+    {
+      const std::size_t                  stop = std::min(active.size(), start + chunk);
+      Evaluated                          current;
+      std::vector<std::array<Index, 9>> children(stop - start); // child k: [children[c][k], children[c][k + 1])
+      for (std::size_t c = 0; c < stop - start; ++c)
+      {
+        Active & a = active[start + c];
+        if (!a.inherited)
+        {
+          a.ownBegin = static_cast<Index>(current.points.size());
+          InsidePoints(a.cell, current.points);
+          a.ownEnd = static_cast<Index>(current.points.size());
+        }
+        children[c][0] = static_cast<Index>(current.points.size());
+        if (adaptive && a.cell.level < m_Settings.maxSubdivisionLevels)
+        {
+          for (int child = 0; child < 8; ++child)
+          {
+            InsidePoints(Child(a.cell, child), current.points);
+            children[c][child + 1] = static_cast<Index>(current.points.size());
+          }
+        }
+        else
+        {
+          std::fill(children[c].begin() + 1, children[c].end(), children[c][0]);
+        }
+      }
+      if (adaptive && !current.points.empty())
+      {
+        std::vector<Vector3> positions(current.points.size());
+        for (std::size_t p = 0; p < positions.size(); ++p)
+        {
+          positions[p] = current.points[p].position;
+        }
+        current.table = m_ShapeFunctions.Evaluate(positions, false, 1, "integration point");
+      }
+
+      std::vector<Active> next;
+      for (std::size_t c = 0; c < stop - start; ++c)
+      {
+        const Active &    a = active[start + c];
+        const Evaluated & own = a.inherited ? *previous : current;
+        const bool        tested = adaptive && a.cell.level < m_Settings.maxSubdivisionLevels;
+        bool              divide = false;
+        if (tested)
+        {
+          // I_parent - I_children for every shape function seen in the cell.
+          auto accumulate = [&](const Evaluated & source, Index p, double sign) {
+            const ShapeFunctionTable & table = source.table;
+            for (Index e = table.offsets[p]; e < table.offsets[p + 1]; ++e)
+            {
+              const Index node = table.nodes[e];
+              if (!scratch.seen[node])
+              {
+                scratch.seen[node] = 1;
+                scratch.touched.push_back(node);
+              }
+              scratch.difference[node] += sign * source.points[p].weight * table.values[e];
+            }
+          };
+          for (Index p = a.ownBegin; p < a.ownEnd; ++p)
+          {
+            accumulate(own, p, 1.0);
+          }
+          for (Index p = children[c][0]; p < children[c][8]; ++p)
+          {
+            accumulate(current, p, -1.0);
+          }
+          double difference = 0.0;
+          for (Index node : scratch.touched)
+          {
+            difference = std::max(difference, std::abs(scratch.difference[node]));
+            scratch.difference[node] = 0.0;
+            scratch.seen[node] = 0;
+          }
+          scratch.touched.clear();
+          const double volume = a.cell.size.prod();
+          divide = difference > m_Settings.adaptiveTolerance * volume;
+          // When all Gauss points of the cell and its children lie on the same
+          // side, the integrals cannot see a boundary crossing the cell: its
+          // part of the body would be dropped (all outside) or its outside
+          // counted (all inside), a one-sided error along the boundary. Probes
+          // near the corners detect such cells, which are divided as well.
+          const Index ownInside = a.ownEnd - a.ownBegin;
+          const Index childrenInside = children[c][8] - children[c][0];
+          if (!divide && ownInside == 0 && childrenInside == 0)
+          {
+            divide = CornerProbes(a.cell) > 0;
+          }
+          else if (!divide && ownInside == m_PointsPerCell && childrenInside == 8 * m_PointsPerCell)
+          {
+            divide = CornerProbes(a.cell) < 8;
+          }
+        }
+        if (divide)
+        {
+          for (int child = 0; child < 8; ++child)
+          {
+            next.push_back({ Child(a.cell, child), true, children[c][child], children[c][child + 1] });
+          }
+          continue;
+        }
+        // Converged: keep the finer of the two rules compared (the children's
+        // points), as adaptive quadrature does; untested: the cell's own points.
+        const Evaluated & source = tested ? current : own;
+        const Index       begin = tested ? children[c][0] : a.ownBegin;
+        const Index       end = tested ? children[c][8] : a.ownEnd;
+        if (end > begin)
+        {
+          AcceptedCell result;
+          result.path = a.cell.path;
+          result.background = a.cell.background;
+          for (Index p = begin; p < end; ++p)
+          {
+            result.positions.push_back(source.points[p].position);
+            result.weights.push_back(source.points[p].weight);
+            result.materials.push_back(source.points[p].material);
+          }
+          accepted.push_back(std::move(result));
+        }
+      }
+      if (!next.empty())
+      {
+        ProcessLevel(next, &current, scratch, accepted);
+      }
+    }
+  }
+
+  const BodyRegion &          m_Body;
+  const MovingLeastSquares &  m_ShapeFunctions;
+  const IntegrationSettings & m_Settings;
+  GaussRule                   m_Rule;
+  Vector3                     m_CellSize;
+  Index                       m_PointsPerCell;
+  Vector3                     m_Origin = Vector3::Zero();
+  std::array<double, 3>       m_Dimensions{ 1.0, 1.0, 1.0 };
+  Index                       m_BackgroundCount = 0;
+};
+
+} // namespace
+
+// Order of the points: background cells in grid order (x fastest, then y,
+// then z, from the body's minimum corner); within a cell its accepted
+// descendants depth-first, children numbered x fastest; within an accepted
+// cell its Gauss points, x fastest. Adaptive: a cell whose test passes
+// contributes its children's points (the finer rule of the two compared); a
+// cell at the deepest level its own.
+IntegrationPoints
+MakeIntegrationPoints(const BodyRegion &          body,
+                      const MovingLeastSquares &  shapeFunctions,
+                      const IntegrationSettings & settings,
+                      int                         threads)
+{
+  ValidateSettings(settings);
+  double cellSize = settings.cellSize;
+  if (cellSize == 0.0)
+  {
+    // The median, not the mean: boundary nodes have fewer close neighbours and
+    // larger spacings, and a grid of nodes then gets background cells that
+    // match it exactly (a cut cell loses the weight of its outside points).
+    const Index         nodeCount = shapeFunctions.NodeCount();
+    std::vector<double> spacings(static_cast<std::size_t>(nodeCount));
+    for (Index n = 0; n < nodeCount; ++n)
+    {
+      spacings[n] = shapeFunctions.NodalSpacing(n);
+    }
+    std::nth_element(spacings.begin(), spacings.begin() + spacings.size() / 2, spacings.end());
+    cellSize = spacings.empty() ? 0.0 : spacings[spacings.size() / 2];
+    if (!(cellSize > 0.0) || !std::isfinite(cellSize))
+    {
+      throw Error("MakeIntegrationPoints: the median nodal spacing is not positive; give IntegrationSettings::cellSize.");
+    }
+  }
+  const IntegrationGrid grid(body, shapeFunctions, settings, cellSize);
+
+  // Fixed batches of background cells, each processed whole by one thread:
+  // the result does not depend on the thread count.
+  const Index batchSize = grid.BatchSize();
+  const Index batchCount = (grid.BackgroundCount() + batchSize - 1) / batchSize;
+  std::vector<std::vector<AcceptedCell>> results(batchCount);
+  std::vector<std::exception_ptr>        errors(batchCount);
+  std::atomic<Index>                     firstFailure{ batchCount };
+  const Index                            nodeCount = shapeFunctions.NodeCount();
+
+#pragma omp parallel num_threads(ThreadCount(threads))
+  {
+    Scratch scratch;
+    if (settings.adaptive)
+    {
+      scratch.difference.assign(nodeCount, 0.0);
+      scratch.seen.assign(nodeCount, 0);
+    }
+#pragma omp for schedule(dynamic, 1)
+    for (Index batch = 0; batch < batchCount; ++batch)
+    {
+      // Batches start in increasing order, so every batch before a failed one
+      // runs and the error reported is always the first one.
+      if (batch > firstFailure.load())
+      {
+        continue;
+      }
+      try
+      {
+        const Index first = batch * batchSize;
+        results[batch] = grid.Process(first, std::min(first + batchSize, grid.BackgroundCount()), scratch);
+      }
+      catch (...)
+      {
+        errors[batch] = std::current_exception();
+        Index expected = firstFailure.load();
+        while (batch < expected && !firstFailure.compare_exchange_weak(expected, batch))
+        {
+        }
+      }
+    }
+  }
+  for (const auto & error : errors)
+  {
+    if (error)
+    {
+      std::rethrow_exception(error);
+    }
+  }
+
+  IntegrationPoints result;
+  std::size_t       count = 0;
+  for (const auto & batch : results)
+  {
+    for (const auto & cell : batch)
+    {
+      count += cell.positions.size();
+    }
+  }
+  result.positions.reserve(count);
+  result.weights.reserve(count);
+  result.materials.reserve(count);
+  for (auto & batch : results)
+  {
+    for (const auto & cell : batch)
+    {
+      result.positions.insert(result.positions.end(), cell.positions.begin(), cell.positions.end());
+      result.weights.insert(result.weights.end(), cell.weights.begin(), cell.weights.end());
+      result.materials.insert(result.materials.end(), cell.materials.begin(), cell.materials.end());
+    }
+    std::vector<AcceptedCell>().swap(batch); // free as we go: peak memory stays near one copy
+  }
+  if (result.positions.empty())
+  {
+    std::ostringstream message;
+    message << "MakeIntegrationPoints: no Gauss point of the " << grid.BackgroundCount()
+            << " background cells (cell size " << cellSize
+            << " mm) lies inside the body. Use a smaller cellSize or more pointsPerDirection.";
+    throw Error(message.str());
+  }
+  return result;
+}
+
+void
+MakeMeshlessFromCells(Model & model, const MlsSettings & shapeFunctions, const IntegrationSettings & integration,
+                      int threads)
+{
+  if (model.cells.empty())
+  {
+    throw Error("MakeMeshlessFromCells: the model has no cells, so the body's region is unknown. Give the cells of "
+                "the body (they are used for point location only), or build the integration points from a surface "
+                "with BodyRegion::FromSurface and MakeIntegrationPoints.");
+  }
+  const BodyRegion         body = BodyRegion::FromCells(model);
+  const MovingLeastSquares mls(model.nodes, shapeFunctions);
+  IntegrationPoints        points = MakeIntegrationPoints(body, mls, integration, threads);
+
+  model.meshless.shapeFunctions = shapeFunctions;
+  model.meshless.integrationPoints = std::move(points.positions);
+  model.meshless.integrationWeights = std::move(points.weights);
+  model.meshless.integrationMaterials = std::move(points.materials);
+  model.discretization = Discretization::Meshless;
+}
+
+} // namespace bmr
