@@ -84,22 +84,29 @@ EssentialBoundary::~EssentialBoundary() = default;
 void
 EssentialBoundary::Impose(double * u, const std::vector<double> & targets) const
 {
+  // Runs every step: only the constrained rows and their neighbours are touched.
   for (const auto & component : m_Components)
   {
-    const Index     rows = static_cast<Index>(component->nodes.size());
-    const Index     nodeCount = static_cast<Index>(m_InverseMass.size());
-    Eigen::Map<Eigen::VectorXd, 0, Eigen::InnerStride<3>> values(u + component->axis, nodeCount);
+    const auto &    phi = component->phi;
+    const Index     rows = phi.rows();
     Eigen::VectorXd residual(rows);
     for (Index row = 0; row < rows; ++row)
     {
-      residual[row] = targets[component->position[row]];
+      double interpolated = 0.0;
+      for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator entry(phi, row); entry; ++entry)
+      {
+        interpolated += entry.value() * u[3 * static_cast<std::size_t>(entry.col()) + component->axis];
+      }
+      residual[row] = targets[component->position[row]] - interpolated;
     }
-    residual -= component->phi * values;
     const Eigen::VectorXd multipliers = component->solver.solve(residual);
-    const Eigen::VectorXd correction = component->phi.transpose() * multipliers;
-    for (Index n = 0; n < nodeCount; ++n)
+    for (Index row = 0; row < rows; ++row)
     {
-      values[n] += m_InverseMass[n] * correction[n];
+      for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator entry(phi, row); entry; ++entry)
+      {
+        const Index node = static_cast<Index>(entry.col());
+        u[3 * static_cast<std::size_t>(node) + component->axis] += m_InverseMass[node] * entry.value() * multipliers[row];
+      }
     }
   }
 }

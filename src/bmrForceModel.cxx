@@ -843,24 +843,36 @@ FiniteElementForceModel::ScaledMasses(double timeStep, double safety) const
 }
 
 double
-FiniteElementForceModel::CriticalTimeStep(Index * cell) const
+SmallestStableStep(const std::vector<double> & waveBound, const std::vector<double> & density, Index * unit)
 {
   double smallest = std::numeric_limits<double>::infinity();
   Index  where = -1;
-  for (std::size_t k = 0; k < m_Volume.size(); ++k)
+  for (std::size_t k = 0; k < waveBound.size(); ++k)
   {
-    const double step = 2.0 / std::sqrt(m_WaveBound[k] / m_Density[k]);
+    const double step = 2.0 / std::sqrt(waveBound[k] / density[k]);
     if (step < smallest)
     {
       smallest = step;
-      where = m_ModelCell[k];
+      where = static_cast<Index>(k);
     }
   }
-  if (cell)
+  if (unit)
   {
-    *cell = where;
+    *unit = where;
   }
   return smallest;
+}
+
+double
+FiniteElementForceModel::CriticalTimeStep(Index * cell) const
+{
+  Index        kernelCell = -1;
+  const double step = SmallestStableStep(m_WaveBound, m_Density, &kernelCell);
+  if (cell)
+  {
+    *cell = kernelCell < 0 ? -1 : m_ModelCell[kernelCell];
+  }
+  return step;
 }
 
 Energies

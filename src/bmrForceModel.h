@@ -26,6 +26,11 @@ struct Energies
   double hourglass = 0.0; // N*mm
 };
 
+/** Smallest critical time step 2 / sqrt(waveBound / density) over the
+ *  integration units (cells or points), and the index of that unit. */
+double
+SmallestStableStep(const std::vector<double> & waveBound, const std::vector<double> & density, Index * unit);
+
 /** Internal forces, masses and stable time steps of one discretization; the
  *  integrators see only this. Failures are reported by the index of the
  *  integration unit (model cell, or integration point), which Describe() names. */

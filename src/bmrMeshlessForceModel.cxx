@@ -194,22 +194,7 @@ MeshlessForceModel::ScaledMasses(double timeStep, double safety) const
 double
 MeshlessForceModel::CriticalTimeStep(Index * point) const
 {
-  double smallest = std::numeric_limits<double>::infinity();
-  Index  where = -1;
-  for (Index p = 0; p < m_Table.PointCount(); ++p)
-  {
-    const double step = 2.0 / std::sqrt(m_WaveBound[p] / m_Density[p]);
-    if (step < smallest)
-    {
-      smallest = step;
-      where = p;
-    }
-  }
-  if (point)
-  {
-    *point = where;
-  }
-  return smallest;
+  return SmallestStableStep(m_WaveBound, m_Density, point);
 }
 
 Energies

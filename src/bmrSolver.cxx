@@ -160,11 +160,12 @@ struct Solver::Impl
   std::vector<Index>                 contactSlaves;
   std::vector<double>                physicalBuffer;
   std::vector<double>                projectedBuffer;
+  std::vector<double>                constraintTargets; // EBCIEM, per step
 
   Impl(const Model & m, const SolverSettings & s);
   void        CheckSettings() const;
   void        BuildConstraints();
-  void        ApplyConstraints(double * u, const std::vector<double> & curveFactors) const;
+  void        ApplyConstraints(double * u, const std::vector<double> & curveFactors);
   void        PrepareEssentialBoundary(const std::vector<double> & mass);
   void        EnforceContact(double * u, std::vector<char> & inContact);
   void        EnforceMeshlessContact(double * u, std::vector<char> & inContact);
@@ -369,21 +370,22 @@ Solver::Impl::BuildConstraints()
 }
 
 void
-Solver::Impl::ApplyConstraints(double * u, const std::vector<double> & curveFactors) const
+Solver::Impl::ApplyConstraints(double * u, const std::vector<double> & curveFactors)
 {
+  auto target = [&](const ConstrainedDof & c) { return c.curve < 0 ? 0.0 : c.value * curveFactors[c.curve]; };
   if (essential)
   {
-    std::vector<double> targets(constrained.size());
+    constraintTargets.resize(constrained.size());
     for (std::size_t k = 0; k < constrained.size(); ++k)
     {
-      targets[k] = constrained[k].curve < 0 ? 0.0 : constrained[k].value * curveFactors[constrained[k].curve];
+      constraintTargets[k] = target(constrained[k]);
     }
-    essential->Impose(u, targets);
+    essential->Impose(u, constraintTargets);
     return;
   }
   for (const ConstrainedDof & c : constrained)
   {
-    u[c.dof] = c.curve < 0 ? 0.0 : c.value * curveFactors[c.curve];
+    u[c.dof] = target(c);
   }
 }
 
