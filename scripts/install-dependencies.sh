@@ -9,7 +9,7 @@ packages=(
   libinsighttoolkit5-dev libvtk9-dev libcgal-dev libeigen3-dev
   libgtest-dev googletest libbenchmark-dev
   nlohmann-json3-dev libcli11-dev libnanoflann-dev
-  calculix-ccx mricron-data
+  calculix-ccx mricron-data insighttoolkit5-examples
   python3 python3-numpy python3-matplotlib python3-pytest
 )
 
