@@ -45,7 +45,9 @@ MeshData
 ReadMesh(const std::string & path, const std::string & labelArray = "material");
 
 /** Writes the model's nodes and cells: .vtu (XML, compressed binary) or .vtk
- *  (legacy ASCII). Cell data "material" holds each cell's material index;
+ *  (legacy ASCII). Cell data "material" holds each cell's material index, and
+ *  "youngs_modulus" (Pa), "poisson_ratio" and "density" (kg/m^3) its
+ *  properties (a scene can read them back with "material_fields");
  *  every node set becomes an unsigned-char point-data mask with the set's
  *  name (1 = in the set), so a scene can select it with {"point_data": NAME}.
  *  Written to a temporary file first and then renamed: never half-written. */
@@ -65,6 +67,33 @@ WriteResultVtu(const std::string & path, const Model & model, const SolveResult 
  *  collapse after merging are dropped. An empty surface is an error. */
 ContactSurface
 ReadSurface(const std::string & path);
+
+/** Writes a triangulated surface as .vtp (XML), .stl (binary) or .vtk
+ *  (legacy polydata), atomically. */
+void
+WriteSurface(const std::string & path, const ContactSurface & surface);
+
+/** Integration points of a meshless model with a material per point, as a
+ *  file holds them: positions (mm), weights (mm^3) and each point's
+ *  neo-Hookean properties (Pa, -, kg/m^3). */
+struct IntegrationPointData
+{
+  std::vector<Vector3>  positions;
+  std::vector<double>   weights;
+  std::vector<Material> materials;
+};
+
+/** Writes model.meshless's integration points as a .vtu of vertex cells with
+ *  point data "weight", "youngs_modulus", "poisson_ratio" and "density",
+ *  atomically. Throws bmr::Error for a model that is not meshless. */
+void
+WriteIntegrationPoints(const std::string & path, const Model & model);
+
+/** Reads a file written by WriteIntegrationPoints (or any .vtu whose points
+ *  carry those four arrays). Missing arrays, non-positive weights or
+ *  properties out of range are errors naming the file, array and point. */
+IntegrationPointData
+ReadIntegrationPoints(const std::string & path);
 
 /** Writes text to `path` through a temporary file in the same folder and a
  *  rename, so a reader sees either the old file or the complete new one. */

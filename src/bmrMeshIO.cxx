@@ -16,6 +16,9 @@
 #include <vtkPolyData.h>
 #include <vtkPolyDataReader.h>
 #include <vtkSTLReader.h>
+#include <vtkSTLWriter.h>
+#include <vtkPolyDataWriter.h>
+#include <vtkXMLPolyDataWriter.h>
 #include <vtkSmartPointer.h>
 #include <vtkUnsignedCharArray.h>
 #include <vtkUnstructuredGrid.h>
@@ -252,6 +255,34 @@ ConvertUnstructuredGrid(vtkUnstructuredGrid * grid, const std::string & path, co
   return mesh;
 }
 
+/** Cell or point data "youngs_modulus", "poisson_ratio", "density" of the
+ *  material index that materialOf(i) gives for each of `count` items. */
+template <typename MaterialOf>
+void
+AddMaterialProperties(vtkDataSetAttributes * attributes, const Model & model, MaterialOf && materialOf, std::size_t count)
+{
+  const char * names[3] = { "youngs_modulus", "poisson_ratio", "density" };
+  for (int property = 0; property < 3; ++property)
+  {
+    vtkNew<vtkDoubleArray> values;
+    values->SetName(names[property]);
+    values->SetNumberOfTuples(static_cast<vtkIdType>(count));
+    for (std::size_t item = 0; item < count; ++item)
+    {
+      const Index material = materialOf(item);
+      if (material < 0 || static_cast<std::size_t>(material) >= model.materials.size())
+      {
+        throw Error("cannot write material properties: item " + std::to_string(item) + " refers to material " +
+                    std::to_string(material) + ", which does not exist");
+      }
+      const Material & m = model.materials[material];
+      values->SetValue(static_cast<vtkIdType>(item),
+                       property == 0 ? m.youngsModulus : property == 1 ? m.poissonRatio : m.density);
+    }
+    attributes->AddArray(values);
+  }
+}
+
 vtkSmartPointer<vtkUnstructuredGrid>
 MakeGrid(const Model & model)
 {
@@ -282,6 +313,16 @@ MakeGrid(const Model & model)
     material->SetValue(static_cast<vtkIdType>(cellId), cell.material);
   }
   grid->GetCellData()->AddArray(material);
+  // A mesh whose cells carry labels rather than material indices (no such
+  // materials) is written with its labels only.
+  const bool materialsResolved = std::all_of(model.cells.begin(), model.cells.end(), [&](const Cell & cell) {
+    return cell.material >= 0 && static_cast<std::size_t>(cell.material) < model.materials.size();
+  });
+  if (!model.cells.empty() && materialsResolved)
+  {
+    AddMaterialProperties(grid->GetCellData(), model, [&](std::size_t cellId) { return model.cells[cellId].material; },
+                          model.cells.size());
+  }
   return grid;
 }
 
@@ -618,6 +659,147 @@ ReadSurface(const std::string & path)
   }
   surface.vertices = std::move(usedVertices);
   return surface;
+}
+
+void
+WriteSurface(const std::string & path, const ContactSurface & surface)
+{
+  const std::string extension = LowerCaseExtension(path);
+  if (extension != ".vtp" && extension != ".stl" && extension != ".vtk")
+  {
+    throw Error("cannot write surface '" + path + "': the file name must end in .vtp, .stl or .vtk");
+  }
+  if (surface.triangles.empty())
+  {
+    throw Error("cannot write surface '" + path + "': the surface has no triangles");
+  }
+  vtkNew<vtkPolyData> polyData;
+  vtkNew<vtkPoints>   points;
+  points->SetDataTypeToDouble();
+  for (const Vector3 & vertex : surface.vertices)
+  {
+    points->InsertNextPoint(vertex.data());
+  }
+  vtkNew<vtkCellArray> polygons;
+  for (const auto & triangle : surface.triangles)
+  {
+    const vtkIdType ids[3] = { triangle[0], triangle[1], triangle[2] };
+    polygons->InsertNextCell(3, ids);
+  }
+  polyData->SetPoints(points);
+  polyData->SetPolys(polygons);
+  WriteAtomically(path, "surface", [&](const std::string & temporaryPath) {
+    if (extension == ".vtp")
+    {
+      vtkNew<vtkXMLPolyDataWriter> writer;
+      writer->SetInputData(polyData);
+      writer->SetDataModeToAppended();
+      writer->EncodeAppendedDataOff();
+      RunWriter(writer.Get(), temporaryPath, path, "surface");
+    }
+    else if (extension == ".stl")
+    {
+      vtkNew<vtkSTLWriter> writer;
+      writer->SetInputData(polyData);
+      writer->SetFileTypeToBinary();
+      RunWriter(writer.Get(), temporaryPath, path, "surface");
+    }
+    else
+    {
+      vtkNew<vtkPolyDataWriter> writer;
+      writer->SetInputData(polyData);
+      writer->SetFileTypeToASCII();
+      RunWriter(writer.Get(), temporaryPath, path, "surface");
+    }
+  });
+}
+
+void
+WriteIntegrationPoints(const std::string & path, const Model & model)
+{
+  const MeshlessDiscretization & meshless = model.meshless;
+  if (model.discretization != Discretization::Meshless || meshless.integrationPoints.empty())
+  {
+    throw Error("cannot write integration points '" + path + "': the model is not meshless (it has no integration points)");
+  }
+  if (LowerCaseExtension(path) != ".vtu")
+  {
+    throw Error("cannot write integration points '" + path + "': the file name must end in .vtu");
+  }
+  const std::size_t count = meshless.integrationPoints.size();
+  auto              grid = vtkSmartPointer<vtkUnstructuredGrid>::New();
+  vtkNew<vtkPoints> points;
+  points->SetDataTypeToDouble();
+  points->SetNumberOfPoints(static_cast<vtkIdType>(count));
+  grid->Allocate(static_cast<vtkIdType>(count));
+  vtkNew<vtkDoubleArray> weights;
+  weights->SetName("weight");
+  weights->SetNumberOfTuples(static_cast<vtkIdType>(count));
+  for (std::size_t point = 0; point < count; ++point)
+  {
+    points->SetPoint(static_cast<vtkIdType>(point), meshless.integrationPoints[point].data());
+    const vtkIdType id = static_cast<vtkIdType>(point);
+    grid->InsertNextCell(VTK_VERTEX, 1, &id);
+    weights->SetValue(id, meshless.integrationWeights[point]);
+  }
+  grid->SetPoints(points);
+  grid->GetPointData()->AddArray(weights);
+  AddMaterialProperties(grid->GetPointData(), model, [&](std::size_t point) { return meshless.integrationMaterials[point]; },
+                        count);
+  WriteGrid(grid, path, "integration points");
+}
+
+IntegrationPointData
+ReadIntegrationPoints(const std::string & path)
+{
+  RequireReadableFile(path, "integration points");
+  if (LowerCaseExtension(path) != ".vtu")
+  {
+    throw Error("integration points '" + path + "': the file name must end in .vtu");
+  }
+  vtkNew<vtkXMLUnstructuredGridReader> reader;
+  UpdateReader(reader.Get(), path, "integration points");
+  vtkUnstructuredGrid * grid = reader->GetOutput();
+  const vtkIdType       count = grid->GetNumberOfPoints();
+  if (count == 0)
+  {
+    throw Error("integration points '" + path + "' has no points");
+  }
+  auto requireArray = [&](const char * name) {
+    vtkDataArray * array = grid->GetPointData()->GetArray(name);
+    if (array == nullptr || array->GetNumberOfComponents() != 1 || array->GetNumberOfTuples() != count)
+    {
+      throw Error("integration points '" + path + "' needs a point-data array '" + name +
+                  "' with one value per point (files written by `biomech model` have it)");
+    }
+    return array;
+  };
+  vtkDataArray *       weights = requireArray("weight");
+  vtkDataArray *       youngs = requireArray("youngs_modulus");
+  vtkDataArray *       poisson = requireArray("poisson_ratio");
+  vtkDataArray *       density = requireArray("density");
+  IntegrationPointData data;
+  data.positions.resize(count);
+  data.weights.resize(count);
+  data.materials.resize(count);
+  for (vtkIdType point = 0; point < count; ++point)
+  {
+    grid->GetPoint(point, data.positions[point].data());
+    data.weights[point] = weights->GetTuple1(point);
+    Material & material = data.materials[point];
+    material.youngsModulus = youngs->GetTuple1(point);
+    material.poissonRatio = poisson->GetTuple1(point);
+    material.density = density->GetTuple1(point);
+    const bool valid = std::isfinite(data.positions[point].sum()) && data.weights[point] > 0.0 &&
+                       material.youngsModulus > 0.0 && material.poissonRatio > -1.0 && material.poissonRatio < 0.5 &&
+                       material.density > 0.0;
+    if (!valid)
+    {
+      throw Error("integration points '" + path + "': point " + std::to_string(point) +
+                  " has an invalid weight or material (weight and E, density > 0, -1 < nu < 0.5, finite position)");
+    }
+  }
+  return data;
 }
 
 void

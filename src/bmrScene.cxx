@@ -374,7 +374,8 @@ public:
 
   Scene Parse()
   {
-    m_Root.AllowOnly({ "description", "mesh", "material_array", "materials", "discretization", "meshless",
+    m_Root.AllowOnly({ "description", "mesh", "material_array", "materials", "material_fields", "discretization",
+                       "meshless",
                        "node_sets", "fixed", "prescribed_displacements", "gravity", "gravity_curve", "contact",
                        "solver", "output" });
     m_Scene.path = m_ScenePath;
@@ -409,6 +410,24 @@ private:
 
   void ParseMaterials()
   {
+    if (m_Root.Has("material_fields"))
+    {
+      // Per-cell properties come from the mesh file (AssignMaterials).
+      for (const char * conflicting : { "materials", "material_array" })
+      {
+        if (m_Root.Has(conflicting))
+        {
+          m_Root.Child(conflicting).Fail("give either \"material_fields\" (properties per cell from the mesh file) or "
+                                         "\"materials\", not both");
+        }
+      }
+      if (!m_Root.Required("mesh").IsString())
+      {
+        m_Root.Child("material_fields")
+          .Fail("applies only to a mesh read from a file (its cell-data arrays hold the properties)");
+      }
+      return;
+    }
     const SceneValue materials = m_Root.Required("materials");
     if (materials.ArraySize() == 0)
     {
@@ -523,8 +542,85 @@ private:
     m_Scene.meshSource = source.str();
   }
 
+  /** Index of a material with these properties in the model, added when new:
+   *  cells (or integration points) with equal properties share one entry. */
+  Index MaterialIndex(Material material)
+  {
+    const auto key = std::make_tuple(material.youngsModulus, material.poissonRatio, material.density);
+    const auto [position, inserted] = m_MaterialIndexOfProperties.emplace(key, static_cast<Index>(TheModel().materials.size()));
+    if (inserted)
+    {
+      std::ostringstream name;
+      name << "E" << material.youngsModulus << "_nu" << material.poissonRatio;
+      material.name = name.str();
+      TheModel().materials.push_back(material);
+    }
+    return position->second;
+  }
+
+  /** "material_fields": each cell's neo-Hookean properties from cell-data arrays of the mesh file. */
+  void AssignMaterialFields()
+  {
+    const SceneValue fields = m_Root.Child("material_fields");
+    fields.AllowOnly({ "youngs_modulus", "poisson_ratio", "density" });
+    Model &           model = TheModel();
+    const std::size_t cellCount = model.cells.size();
+    auto              arrayOf = [&](const std::string & key) -> const std::vector<double> * {
+      if (!fields.Has(key))
+      {
+        return nullptr;
+      }
+      const SceneValue  nameValue = fields.Child(key);
+      const std::string name = nameValue.NonEmptyString();
+      const auto        found = m_MeshData.cellData.find(name);
+      if (found == m_MeshData.cellData.end() || found->second.components != 1 || found->second.Tuples() != cellCount)
+      {
+        std::vector<std::string> arrays;
+        for (const auto & entry : m_MeshData.cellData)
+        {
+          arrays.push_back(entry.first);
+        }
+        nameValue.Fail("the mesh has no one-component cell-data array '" + name + "' (cell-data arrays: " +
+                       JoinNames(arrays) + ")");
+      }
+      return &found->second.values;
+    };
+    const std::vector<double> * youngs = arrayOf("youngs_modulus");
+    const std::vector<double> * poisson = arrayOf("poisson_ratio");
+    const std::vector<double> * density = arrayOf("density");
+    if (youngs == nullptr || poisson == nullptr)
+    {
+      fields.Fail("needs \"youngs_modulus\" and \"poisson_ratio\" (names of cell-data arrays); \"density\" is optional "
+                  "(default 1000 kg/m^3)");
+    }
+    model.materials.clear();
+    for (std::size_t cellId = 0; cellId < cellCount; ++cellId)
+    {
+      Material material;
+      material.youngsModulus = (*youngs)[cellId];
+      material.poissonRatio = (*poisson)[cellId];
+      if (density != nullptr)
+      {
+        material.density = (*density)[cellId];
+      }
+      if (!(material.youngsModulus > 0.0 && material.poissonRatio > -1.0 && material.poissonRatio < 0.5 &&
+            material.density > 0.0))
+      {
+        fields.Fail("cell " + std::to_string(cellId) + " has E = " + std::to_string(material.youngsModulus) +
+                    " Pa, nu = " + std::to_string(material.poissonRatio) + ", density = " +
+                    std::to_string(material.density) + "; need E > 0, -1 < nu < 0.5, density > 0");
+      }
+      model.cells[cellId].material = MaterialIndex(material);
+    }
+  }
+
   void AssignMaterials()
   {
+    if (m_Root.Has("material_fields"))
+    {
+      AssignMaterialFields();
+      return;
+    }
     Model & model = TheModel();
     // One material without a label applies to every cell, whatever labels the
     // mesh carries (e.g. a mesh written by `biomech make-mesh`).
@@ -1065,7 +1161,8 @@ private:
     Model &             model = TheModel();
     if (options)
     {
-      options->AllowOnly({ "basis", "dilatation", "quadratic_regularization", "essential_boundary", "integration" });
+      options->AllowOnly({ "basis", "dilatation", "quadratic_regularization", "essential_boundary", "integration",
+                           "integration_points" });
       if (const auto value = options->Optional("basis"))
       {
         shapeFunctions.basis = value->Choice({ "linear", "modified_quadratic" }) == "linear"
@@ -1110,6 +1207,34 @@ private:
           integration.maxSubdivisionLevels = item->IntegerInRange(0, 6);
         }
       }
+    }
+    if (options && options->Has("integration_points"))
+    {
+      // Points, weights and per-point materials from a file (e.g. written by `biomech model`).
+      const SceneValue file = options->Child("integration_points");
+      if (options->Has("integration"))
+      {
+        file.Fail("give either \"integration_points\" (a file) or \"integration\" (settings to generate them), not both");
+      }
+      IntegrationPointData points;
+      try
+      {
+        points = ReadIntegrationPoints(ResolvePath(m_SceneFolder, file.NonEmptyString()));
+      }
+      catch (const Error & error)
+      {
+        file.Fail(error.what());
+      }
+      model.meshless.shapeFunctions = shapeFunctions;
+      model.meshless.integrationPoints = std::move(points.positions);
+      model.meshless.integrationWeights = std::move(points.weights);
+      model.meshless.integrationMaterials.resize(points.materials.size());
+      for (std::size_t point = 0; point < points.materials.size(); ++point)
+      {
+        model.meshless.integrationMaterials[point] = MaterialIndex(points.materials[point]);
+      }
+      model.discretization = Discretization::Meshless;
+      return;
     }
     try
     {
@@ -1156,6 +1281,7 @@ private:
   Scene                            m_Scene;
   MeshData                         m_MeshData;
   bool                             m_MeshFromFile = false;
+  std::map<std::tuple<double, double, double>, Index> m_MaterialIndexOfProperties;
   std::vector<std::optional<int>>  m_MaterialLabels;
 };
 

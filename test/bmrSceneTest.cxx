@@ -2,6 +2,7 @@
 // the example scenes, and the biomech command-line tool.
 #include "bmrMeshGenerators.h"
 #include "bmrMeshIO.h"
+#include "bmrMeshless.h"
 #include "bmrScene.h"
 
 #include "bmrTemporaryFolderTest.h"
@@ -271,6 +272,101 @@ TEST_F(SceneTest, MeshFileWithLabelsPointDataAndCsv)
   EXPECT_EQ(plain.model.cells[0].material, 0);
   EXPECT_EQ(plain.model.cells[1].material, 0);
   EXPECT_EQ(plain.model.cells[1].nodes[3], 4);
+}
+
+TEST_F(SceneTest, MaterialFieldsGiveEachCellItsProperties)
+{
+  // Properties vary per cell, as a membership-weighted mixture gives them.
+  bmr::Model mesh = bmr::MakeBlockMesh(bmr::Vector3(30, 10, 10), { 3, 1, 1 }, bmr::GridCells::Hexahedra);
+  mesh.materials = { bmr::Material{ "a", 3000.0, 0.49, 1000.0 }, bmr::Material{ "b", 1505.0, 0.295, 1000.0 },
+                     bmr::Material{ "c", 10.0, 0.1, 1040.0 } };
+  for (std::size_t cell = 0; cell < 3; ++cell)
+  {
+    mesh.cells[cell].material = static_cast<bmr::Index>(2 - cell);
+  }
+  bmr::WriteMesh((m_Folder / "mixed.vtu").string(), mesh);
+  json scene = json::parse(R"({
+    "mesh": "mixed.vtu",
+    "material_fields": {"youngs_modulus": "youngs_modulus", "poisson_ratio": "poisson_ratio", "density": "density"},
+    "node_sets": {"base": {"point_data": "xmin"}},
+    "fixed": [{"node_set": "base"}]
+  })");
+  const bmr::Scene parsed = Parse(scene);
+  ASSERT_EQ(parsed.model.materials.size(), 3u);
+  for (std::size_t cell = 0; cell < 3; ++cell)
+  {
+    const bmr::Material & expected = mesh.materials[2 - cell];
+    const bmr::Material & got = parsed.model.materials[parsed.model.cells[cell].material];
+    EXPECT_EQ(got.youngsModulus, expected.youngsModulus) << "cell " << cell;
+    EXPECT_EQ(got.poissonRatio, expected.poissonRatio) << "cell " << cell;
+    EXPECT_EQ(got.density, expected.density) << "cell " << cell;
+  }
+
+  // Equal properties share one material.
+  mesh.cells[0].material = 0;
+  mesh.cells[2].material = 0;
+  bmr::WriteMesh((m_Folder / "mixed.vtu").string(), mesh);
+  EXPECT_EQ(Parse(scene).model.materials.size(), 2u);
+
+  json both = scene;
+  both["materials"] = json::parse(R"([{"youngs_modulus": 3000, "poisson_ratio": 0.49}])");
+  EXPECT_CONTAINS(ParseError(both), "not both");
+  json missingArray = scene;
+  missingArray["material_fields"]["youngs_modulus"] = "stiffness";
+  EXPECT_CONTAINS(ParseError(missingArray), "no one-component cell-data array 'stiffness'");
+  json noPoisson = scene;
+  noPoisson["material_fields"].erase("poisson_ratio");
+  EXPECT_CONTAINS(ParseError(noPoisson), "needs \"youngs_modulus\" and \"poisson_ratio\"");
+  json generated = BlockScene();
+  generated.erase("materials");
+  generated["material_fields"] = scene["material_fields"];
+  generated.erase("node_sets");
+  generated["fixed"] = json::parse(R"([{"node_set": "zmin"}])");
+  EXPECT_CONTAINS(ParseError(generated), "applies only to a mesh read from a file");
+}
+
+TEST_F(SceneTest, MeshlessIntegrationPointsFromAFile)
+{
+  // Write a meshless model's integration points with two materials, read them back through a scene.
+  bmr::Model mesh = bmr::MakeBlockMesh(bmr::Vector3(20, 10, 10), { 4, 2, 2 }, bmr::GridCells::Hexahedra);
+  mesh.materials = { bmr::Material{ "brain", 3000.0, 0.49, 1000.0 }, bmr::Material{ "csf", 10.0, 0.1, 1000.0 } };
+  bmr::WriteMesh((m_Folder / "cloud.vtu").string(), mesh);
+  bmr::Model meshless = mesh;
+  bmr::MakeMeshlessFromCells(meshless, bmr::MlsSettings{}, bmr::IntegrationSettings{});
+  for (std::size_t point = 0; point < meshless.meshless.integrationPoints.size(); ++point)
+  {
+    meshless.meshless.integrationMaterials[point] = meshless.meshless.integrationPoints[point].x() < 10.0 ? 0 : 1;
+  }
+  bmr::WriteIntegrationPoints((m_Folder / "points.vtu").string(), meshless);
+
+  json scene = json::parse(R"({
+    "mesh": "cloud.vtu",
+    "materials": [{"youngs_modulus": 3000, "poisson_ratio": 0.49}],
+    "discretization": "meshless",
+    "meshless": {"integration_points": "points.vtu"},
+    "node_sets": {"base": {"point_data": "xmin"}},
+    "fixed": [{"node_set": "base"}]
+  })");
+  const bmr::Scene parsed = Parse(scene);
+  const bmr::MeshlessDiscretization & read = parsed.model.meshless;
+  ASSERT_EQ(parsed.model.discretization, bmr::Discretization::Meshless);
+  ASSERT_EQ(read.integrationPoints.size(), meshless.meshless.integrationPoints.size());
+  for (std::size_t point = 0; point < read.integrationPoints.size(); ++point)
+  {
+    EXPECT_EQ(read.integrationPoints[point], meshless.meshless.integrationPoints[point]);
+    EXPECT_EQ(read.integrationWeights[point], meshless.meshless.integrationWeights[point]);
+    const double expectedModulus = meshless.meshless.integrationPoints[point].x() < 10.0 ? 3000.0 : 10.0;
+    EXPECT_EQ(parsed.model.materials[read.integrationMaterials[point]].youngsModulus, expectedModulus);
+  }
+
+  json both = scene;
+  both["meshless"]["integration"] = json::parse(R"({"points_per_direction": 2})");
+  EXPECT_CONTAINS(ParseError(both), "not both");
+  json missing = scene;
+  missing["meshless"]["integration_points"] = "nothing.vtu";
+  EXPECT_CONTAINS(ParseError(missing), "nothing.vtu");
+  EXPECT_CONTAINS(ErrorMessage([&] { bmr::WriteIntegrationPoints((m_Folder / "fe.vtu").string(), mesh); }),
+                  "not meshless");
 }
 
 TEST_F(SceneTest, BadInputsNameTheOffendingKey)
