@@ -2,10 +2,14 @@
 //
 //   biomech solve SCENE.json [--output-dir DIR] [--threads N] [--quiet]
 //   biomech make-mesh --shape block --size X Y Z --divisions I J K -o mesh.vtu
+//   biomech model IMAGE [--mask M] [--craniotomy-centre X Y Z --craniotomy-radius R]
+//                 [--intraoperative-surface S | --sparse-displacements CSV] -o DIR
+//   biomech classify | mask | grid | surfaces | loads   (the model's steps one at a time)
 //
 // Exit status: 0 success (solve converged), 2 solve finished but did not
 // converge (results written, report says so), 1 any error (nothing written).
 #include "bmrMeshGenerators.h"
+#include "bmrModelCommands.h"
 #include "bmrMeshIO.h"
 #include "bmrScene.h"
 #include "bmrSolver.h"
@@ -282,6 +286,8 @@ main(int argc, char ** argv)
     ->capture_default_str();
   makeMesh->add_option("-o,--output", makeMeshOptions.outputPath, "Output mesh (.vtu or .vtk)")->required();
 
+  const std::function<int()> runModelCommand = bmr::app::AddModelCommands(app);
+
   try
   {
     app.parse(argc, argv);
@@ -303,7 +309,11 @@ main(int argc, char ** argv)
     {
       return RunSolve(solveOptions);
     }
-    return RunMakeMesh(makeMeshOptions);
+    if (makeMesh->parsed())
+    {
+      return RunMakeMesh(makeMeshOptions);
+    }
+    return runModelCommand();
   }
   catch (const std::exception & error)
   {

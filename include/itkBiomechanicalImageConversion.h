@@ -4,11 +4,13 @@
 #ifndef itkBiomechanicalImageConversion_h
 #define itkBiomechanicalImageConversion_h
 
-#include "bmrImageVolume.h"
-
+// ITK first: its bundled Eigen (used by ITK's own headers) must come before
+// the system Eigen that the core's headers include.
 #include "itkImage.h"
 #include "itkImageRegionConstIterator.h"
 #include "itkVectorImage.h"
+
+#include "bmrImageVolume.h"
 
 #include <type_traits>
 

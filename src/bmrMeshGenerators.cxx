@@ -2,6 +2,8 @@
 // blocks, ellipsoids on a regular grid, and closed ellipsoid surfaces.
 #include "bmrMeshGenerators.h"
 
+#include "bmrShape.h"
+
 #include <Eigen/Geometry>
 
 #include <algorithm>
@@ -17,61 +19,6 @@ namespace bmr
 namespace
 {
 
-// Unit-cube corner offsets in VTK_HEXAHEDRON order.
-constexpr int kCorner[8][3] = { { 0, 0, 0 }, { 1, 0, 0 }, { 1, 1, 0 }, { 0, 1, 0 },
-                                { 0, 0, 1 }, { 1, 0, 1 }, { 1, 1, 1 }, { 0, 1, 1 } };
-
-int
-CornerIndex(int i, int j, int k)
-{
-  for (int c = 0; c < 8; ++c)
-  {
-    if (kCorner[c][0] == i && kCorner[c][1] == j && kCorner[c][2] == k)
-    {
-      return c;
-    }
-  }
-  return -1;
-}
-
-double
-TetVolume(const Vector3 & a, const Vector3 & b, const Vector3 & c, const Vector3 & d)
-{
-  return (b - a).cross(c - a).dot(d - a) / 6.0;
-}
-
-/** The six Kuhn tetrahedra of a grid cell, as corner indices (VTK hexahedron
- *  numbering). Every tetrahedron contains the main diagonal corner 0 -> 6 and
- *  is a monotone path from (0,0,0) to (1,1,1), so each cube face is split along
- *  the diagonal from its lowest to its highest corner: neighbouring cells agree.
- *  Orientation is made positive for a unit cube. */
-const std::array<std::array<int, 4>, 6> &
-KuhnTetrahedra()
-{
-  static const std::array<std::array<int, 4>, 6> tets = [] {
-    std::array<std::array<int, 4>, 6> result{};
-    const int permutations[6][3] = { { 0, 1, 2 }, { 0, 2, 1 }, { 1, 0, 2 }, { 1, 2, 0 }, { 2, 0, 1 }, { 2, 1, 0 } };
-    for (int p = 0; p < 6; ++p)
-    {
-      int position[3] = { 0, 0, 0 };
-      std::array<int, 4> tet{};
-      tet[0] = CornerIndex(0, 0, 0);
-      for (int step = 0; step < 3; ++step)
-      {
-        position[permutations[p][step]] = 1;
-        tet[step + 1] = CornerIndex(position[0], position[1], position[2]);
-      }
-      auto corner = [](int c) { return Vector3(kCorner[c][0], kCorner[c][1], kCorner[c][2]); };
-      if (TetVolume(corner(tet[0]), corner(tet[1]), corner(tet[2]), corner(tet[3])) < 0.0)
-      {
-        std::swap(tet[1], tet[2]);
-      }
-      result[p] = tet;
-    }
-    return result;
-  }();
-  return tets;
-}
 
 /** Adds the cells of one grid cell whose 8 corner node ids (VTK order) are given. */
 void
@@ -86,7 +33,7 @@ AddGridCell(Model & model, const std::array<Index, 8> & corners, bool hexahedron
     model.cells.push_back(cell);
     return;
   }
-  for (const auto & tet : KuhnTetrahedra())
+  for (const auto & tet : KuhnTetrahedra)
   {
     Cell cell;
     cell.type = CellType::Tetrahedron;
@@ -128,7 +75,7 @@ CellIsValid(const Model & model, const Cell & cell, double minTetVolume, double 
   {
     return MinCornerJacobian(model, cell) > minCornerJacobian;
   }
-  return TetVolume(model.nodes[cell.nodes[0]], model.nodes[cell.nodes[1]], model.nodes[cell.nodes[2]],
+  return TetrahedronVolume(model.nodes[cell.nodes[0]], model.nodes[cell.nodes[1]], model.nodes[cell.nodes[2]],
                    model.nodes[cell.nodes[3]]) > minTetVolume;
 }
 
@@ -182,7 +129,7 @@ MakeBlockMesh(const Vector3 & size, const std::array<int, 3> & divisions, GridCe
         std::array<Index, 8> corners{};
         for (int c = 0; c < 8; ++c)
         {
-          corners[c] = nodeId(i + kCorner[c][0], j + kCorner[c][1], k + kCorner[c][2]);
+          corners[c] = nodeId(i + HexahedronCornerOffsets[c][0], j + HexahedronCornerOffsets[c][1], k + HexahedronCornerOffsets[c][2]);
         }
         bool hexahedron = cells == GridCells::Hexahedra;
         if (cells == GridCells::Mixed)
@@ -405,7 +352,7 @@ MakeEllipsoidMesh(const Vector3 & semiAxes, double spacing, GridCells cells, con
         std::array<Index, 8> corners{};
         for (int c = 0; c < 8; ++c)
         {
-          corners[c] = node(i + kCorner[c][0], j + kCorner[c][1], k + kCorner[c][2]);
+          corners[c] = node(i + HexahedronCornerOffsets[c][0], j + HexahedronCornerOffsets[c][1], k + HexahedronCornerOffsets[c][2]);
         }
         bool hexahedron = cells == GridCells::Hexahedra;
         if (cells == GridCells::Mixed)
@@ -435,7 +382,7 @@ MakeEllipsoidMesh(const Vector3 & semiAxes, double spacing, GridCells cells, con
     bool         onSurface = false;
     for (int c = 0; c < 8 && !onSurface; ++c)
     {
-      onSurface = !inside(g[0] - kCorner[c][0], g[1] - kCorner[c][1], g[2] - kCorner[c][2]);
+      onSurface = !inside(g[0] - HexahedronCornerOffsets[c][0], g[1] - HexahedronCornerOffsets[c][1], g[2] - HexahedronCornerOffsets[c][2]);
     }
     if (onSurface)
     {

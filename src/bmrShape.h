@@ -16,6 +16,17 @@ using HexahedronGradients = Eigen::Matrix<double, 8, 3>;
 using TetrahedronCoordinates = Eigen::Matrix<double, 4, 3>;
 using TetrahedronGradients = Eigen::Matrix<double, 4, 3>;
 
+/** Corner offsets of the unit cube in VTK_HEXAHEDRON order. */
+constexpr int HexahedronCornerOffsets[8][3] = { { 0, 0, 0 }, { 1, 0, 0 }, { 1, 1, 0 }, { 0, 1, 0 },
+                                                { 0, 0, 1 }, { 1, 0, 1 }, { 1, 1, 1 }, { 0, 1, 1 } };
+
+/** The six Kuhn tetrahedra of a grid cube, as corners of HexahedronCornerOffsets.
+ *  Each is a monotone path from corner 0 to corner 6, positively oriented for
+ *  a unit cube, so every cube face is split along the diagonal from its lowest
+ *  to its highest corner and neighbouring cubes' tetrahedra conform. */
+constexpr int KuhnTetrahedra[6][4] = { { 0, 1, 2, 6 }, { 0, 5, 1, 6 }, { 0, 2, 3, 6 },
+                                       { 0, 3, 7, 6 }, { 0, 4, 5, 6 }, { 0, 7, 4, 6 } };
+
 /** Natural coordinates of the hexahedron's nodes in VTK order. */
 inline const Eigen::Matrix<double, 8, 3> &
 HexahedronNaturalCoordinates()

@@ -29,13 +29,7 @@ namespace
 
 
 using bmr::test::ErrorMessage;
-
-std::string
-ReadText(const fs::path & path)
-{
-  std::ifstream stream(path);
-  return std::string((std::istreambuf_iterator<char>(stream)), std::istreambuf_iterator<char>());
-}
+using bmr::test::ReadText;
 
 void
 WriteText(const fs::path & path, const std::string & text)
@@ -631,32 +625,13 @@ TEST(SceneExamples, BrainSizedScenesHaveAboutOneHundredThousandDofs)
 namespace
 {
 
-struct CommandResult
-{
-  int         exitCode = -1;
-  std::string out;
-  std::string err;
-};
+using bmr::test::CommandResult;
 
 class SceneCliTest : public bmr::test::TemporaryFolderTest
 {
 protected:
 
-  CommandResult Biomech(const std::string & arguments) const
-  {
-    const fs::path outPath = m_Folder / "stdout.txt";
-    const fs::path errPath = m_Folder / "stderr.txt";
-    const std::string command = std::string("'") + BMR_BIOMECH_EXECUTABLE + "' " + arguments + " > '" +
-                                outPath.string() + "' 2> '" + errPath.string() + "' < /dev/null";
-    const int status = std::system(command.c_str());
-    CommandResult result;
-    result.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    result.out = ReadText(outPath);
-    result.err = ReadText(errPath);
-    fs::remove(outPath);
-    fs::remove(errPath);
-    return result;
-  }
+  CommandResult Biomech(const std::string & arguments) const { return bmr::test::RunBiomech(m_Folder, arguments); }
 
   std::string Example(const std::string & name) const
   {

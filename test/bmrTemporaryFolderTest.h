@@ -8,9 +8,13 @@
 #include <algorithm>
 #include "bmrModel.h"
 
+#include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <functional>
+#include <iterator>
 #include <string>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #define EXPECT_CONTAINS(text, part) EXPECT_NE(std::string(text).find(part), std::string::npos) << "message: " << (text)
@@ -33,6 +37,40 @@ ErrorMessage(const std::function<void()> & action)
     return error.what();
   }
   return "(no bmr::Error thrown)";
+}
+
+inline std::string
+ReadText(const std::filesystem::path & path)
+{
+  std::ifstream stream(path);
+  return std::string((std::istreambuf_iterator<char>(stream)), std::istreambuf_iterator<char>());
+}
+
+/** Exit status and output of a run of the biomech command-line tool. */
+struct CommandResult
+{
+  int         exitCode = -1;
+  std::string out;
+  std::string err;
+};
+
+/** Runs `biomech ARGUMENTS` (arguments already quoted for the shell), with
+ *  its output captured through files in `folder`. */
+inline CommandResult
+RunBiomech(const std::filesystem::path & folder, const std::string & arguments)
+{
+  const std::filesystem::path outPath = folder / "stdout.txt";
+  const std::filesystem::path errPath = folder / "stderr.txt";
+  const std::string command = std::string("'") + BMR_BIOMECH_EXECUTABLE + "' " + arguments + " > '" +
+                              outPath.string() + "' 2> '" + errPath.string() + "' < /dev/null";
+  const int     status = std::system(command.c_str());
+  CommandResult result;
+  result.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  result.out = ReadText(outPath);
+  result.err = ReadText(errPath);
+  std::filesystem::remove(outPath);
+  std::filesystem::remove(errPath);
+  return result;
 }
 
 class TemporaryFolderTest : public ::testing::Test

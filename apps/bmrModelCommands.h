@@ -1,0 +1,25 @@
+// The model-building subcommands of `biomech` (classify, mask, grid,
+// surfaces, loads, model): from a preoperative MRI to a scene that `biomech
+// solve` runs. Kept in their own translation unit, so that the ITK filters'
+// templates compile once and in parallel with the rest of the tool.
+#ifndef bmrModelCommands_h
+#define bmrModelCommands_h
+
+#include <CLI/CLI.hpp>
+
+#include <functional>
+
+namespace bmr
+{
+namespace app
+{
+
+/** Adds the subcommands to `app`. The returned function runs the one that
+ *  was parsed and returns its exit status, or -1 when none of them was. */
+std::function<int()>
+AddModelCommands(CLI::App & app);
+
+} // namespace app
+} // namespace bmr
+
+#endif

@@ -1,0 +1,151 @@
+// Surfaces and boundary regions of a patient-specific brain model: the brain
+// surface and a rigid skull (contact master) surface as level sets of a signed
+// distance volume, and node regions on a model's boundary (craniotomy,
+// skull base). Plain C++ and VTK, no ITK: the signed distance of a mask comes
+// from the ITK layer (itkBrainSurfaceMeshSource.h).
+//
+// Units: mm, ITK physical space (LPS; +z superior).
+#ifndef bmrBrainSurfaces_h
+#define bmrBrainSurfaces_h
+
+#include "bmrImageVolume.h"
+#include "bmrModel.h"
+
+#include <string>
+#include <vector>
+
+namespace bmr
+{
+
+struct IsosurfaceSettings
+{
+  /** Windowed-sinc smoothing iterations (Taubin's low-pass filter, VTK); 0 = none.
+   *  20 removes the voxel staircase and keeps the enclosed volume within
+   *  about 0.3% of the unsmoothed surface's on brain-sized shapes. */
+  int smoothingIterations = 20;
+  /** Pass band of the windowed-sinc filter (0 < band <= 2; smaller smooths more). */
+  double smoothingPassBand = 0.1;
+  /** Target mean edge length (mm) of an edge-collapse decimation (CGAL,
+   *  topology preserving, Lindstrom-Turk placement); 0 = no decimation. A value
+   *  at or below the current mean edge length leaves the surface as it is. */
+  double targetEdgeLength = 0.0;
+  /** Keep only the connected component with the most triangles. */
+  bool keepLargestComponent = true;
+  /** Name given to the resulting ContactSurface. */
+  std::string name = "isosurface";
+};
+
+/** Closed, manifold, outward-oriented (right-hand rule normals point to where
+ *  field > level) triangulated surface of {field = level}, in physical space
+ *  (spacing, origin and direction cosines of field.geometry respected).
+ *
+ *  The volume is padded by one voxel of "outside" value, so the surface is
+ *  closed even where the level set reaches the image border (it is then clipped
+ *  at the border). Marching cubes (VTK flying edges), largest component,
+ *  windowed-sinc smoothing, optional edge-collapse decimation (CGAL).
+ *
+ *  Errors (bmr::Error): a volume with no voxels, more than one component, a NaN,
+ *  no voxel below the level (nothing inside), or a result that is not closed and
+ *  manifold. Warnings (decimation that had to be skipped to keep the surface
+ *  manifold, dropped components) go to `warnings` when given. */
+ContactSurface
+ExtractIsosurface(const ScalarVolume &       field,
+                  double                     level,
+                  const IsosurfaceSettings & settings = IsosurfaceSettings{},
+                  std::vector<std::string> * warnings = nullptr);
+
+struct BrainSurfaceSettings
+{
+  /** Gap (mm) between the brain surface and the rigid skull surface: the skull
+   *  is the level +skullGap of the signed distance, i.e. the boundary of the
+   *  brain mask dilated by skullGap. The brain can move this far outward before
+   *  it touches bone; the CSF layer between brain and skull is about 1-3 mm
+   *  thick, so 1.5 mm is the default. */
+  double skullGap = 1.5;
+  IsosurfaceSettings isosurface;
+};
+
+struct BrainSurfaces
+{
+  ContactSurface brain; // name "brain"
+  ContactSurface skull; // name "skull", bodySide Inside: a ready contact master surface
+};
+
+/** Brain (level 0) and skull (level skullGap) surfaces of a signed distance
+ *  volume (mm, negative inside the brain). The volume must extend at least
+ *  skullGap + 1 voxel beyond the brain, or the skull is clipped at the border
+ *  (the ITK layer pads by skullGap + 2 voxels). Errors as ExtractIsosurface,
+ *  and a negative or non-finite skullGap. */
+BrainSurfaces
+ExtractBrainSurfaces(const ScalarVolume &         signedDistance,
+                     const BrainSurfaceSettings & settings = BrainSurfaceSettings{},
+                     std::vector<std::string> *   warnings = nullptr);
+
+/** Closedness check used by the functions above and by tests: every edge is
+ *  shared by exactly two triangles, each of the two orientations once
+ *  (consistently oriented, manifold edges). */
+bool
+IsClosedOrientedSurface(const ContactSurface & surface);
+
+/** Signed volume (mm^3) enclosed by a closed triangulated surface; positive
+ *  when the normals point outward. */
+double
+EnclosedVolume(const ContactSurface & surface);
+
+// ---------------------------------------------------------------------------
+// Regions on a model's boundary. `surfaceNodes` are node ids (for example
+// model.BoundaryNodes() or model.NodeSet("surface")); results are sorted ids,
+// a subset of surfaceNodes. An id out of range is a bmr::Error.
+// ---------------------------------------------------------------------------
+
+/** Surface nodes within `radius` (mm, inclusive) of `centre` (mm): a craniotomy
+ *  or any spherical region. Selecting no node is a bmr::Error that names the
+ *  region (centre, radius), gives the distance from the centre to the nearest
+ *  surface node and suggests a radius that reaches it. */
+std::vector<Index>
+SurfaceNodesInSphere(const Model &              model,
+                     const std::vector<Index> & surfaceNodes,
+                     const Vector3 &            centre,
+                     double                     radius);
+
+/** Surface nodes that have a non-zero voxel of `regionMask` whose centre lies
+ *  within `tolerance` mm of the node. tolerance < 0 (default) means one voxel
+ *  diagonal (|spacing|), so a mask drawn on the image's boundary voxels catches
+ *  the surface nodes between them. An empty mask, or a mask that selects no
+ *  node, is a bmr::Error (the latter gives the distance from the mask to the
+ *  nearest surface node). */
+std::vector<Index>
+SurfaceNodesInMask(const Model &              model,
+                   const std::vector<Index> & surfaceNodes,
+                   const LabelVolume &        regionMask,
+                   double                     tolerance = -1.0);
+
+struct SkullBaseSettings
+{
+  /** Height (mm) of the fixed band above the lowest surface node, measured
+   *  along `superior`. The brain rests on the skull base and is tethered by the
+   *  brain stem at the foramen magnum; 10 mm above the most inferior point
+   *  covers the cut end of the brain stem (medulla) of an adult brain mask
+   *  without reaching far up the cerebellum. */
+  double height = 10.0;
+  /** Superior direction in physical space (normalised here): LPS +z. */
+  Vector3 superior = Vector3::UnitZ();
+  /** When sphereRadius > 0, the region is the sphere (sphereCentre, sphereRadius) instead of the band. */
+  Vector3 sphereCentre = Vector3::Zero();
+  double  sphereRadius = 0.0;
+  /** When not null (and no sphere is given), the region is this mask (see
+   *  SurfaceNodesInMask, with maskTolerance). Not owned; must outlive the call. */
+  const LabelVolume * mask = nullptr;
+  double              maskTolerance = -1.0;
+};
+
+/** The fixed skull-base / brain-stem region: by default the surface nodes whose
+ *  height along `superior` is at most the lowest surface node's + height.
+ *  Errors: no surface nodes, height < 0, direction of zero length, and the
+ *  errors of the sphere and mask variants. */
+std::vector<Index>
+SkullBaseNodes(const Model & model, const std::vector<Index> & surfaceNodes, const SkullBaseSettings & settings = {});
+
+} // namespace bmr
+
+#endif

@@ -1,0 +1,468 @@
+#include "bmrSurfaceLoads.h"
+
+#include <Eigen/Dense>
+
+#include <CGAL/AABB_traits.h>
+#include <CGAL/AABB_tree.h>
+#include <CGAL/AABB_triangle_primitive.h>
+#include <CGAL/Simple_cartesian.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+
+namespace bmr
+{
+
+namespace
+{
+
+using Kernel = CGAL::Simple_cartesian<double>;
+using Point = Kernel::Point_3;
+using Triangle = Kernel::Triangle_3;
+using TriangleIterator = std::vector<Triangle>::const_iterator;
+using Primitive = CGAL::AABB_triangle_primitive<Kernel, TriangleIterator>;
+using AabbTree = CGAL::AABB_tree<CGAL::AABB_traits<Kernel, Primitive>>;
+
+constexpr std::size_t kListedInWarning = 20; // entries named in one warning before "... and N more"
+
+std::string
+Describe(const Vector3 & v)
+{
+  std::ostringstream text;
+  text.precision(6);
+  text << "(" << v.x() << ", " << v.y() << ", " << v.z() << ")";
+  return text.str();
+}
+
+// Closest points on a triangulated surface (CGAL's AABB tree). Zero-area
+// triangles are left out: they add no points and CGAL's projection onto
+// them is ill-defined.
+class ClosestPointQuery
+{
+public:
+  ClosestPointQuery(const std::vector<Vector3> & vertices, const std::vector<std::array<Index, 3>> & triangles,
+                    const std::string & surfaceName)
+  {
+    for (std::size_t t = 0; t < triangles.size(); ++t)
+    {
+      Vector3 p[3];
+      for (int k = 0; k < 3; ++k)
+      {
+        const Index v = triangles[t][k];
+        if (v < 0 || static_cast<std::size_t>(v) >= vertices.size())
+        {
+          throw Error(surfaceName + ": triangle " + std::to_string(t) + " refers to vertex " + std::to_string(v) +
+                      ", which does not exist (" + std::to_string(vertices.size()) + " vertices)");
+        }
+        p[k] = vertices[v];
+        if (!p[k].allFinite())
+        {
+          throw Error(surfaceName + ": vertex " + std::to_string(v) + " is not finite; fix the surface file");
+        }
+      }
+      if ((p[1] - p[0]).cross(p[2] - p[0]).norm() > 0.0)
+      {
+        m_Triangles.emplace_back(Point(p[0].x(), p[0].y(), p[0].z()), Point(p[1].x(), p[1].y(), p[1].z()),
+                                 Point(p[2].x(), p[2].y(), p[2].z()));
+      }
+    }
+    if (m_Triangles.empty())
+    {
+      throw Error(surfaceName + " has no triangle of non-zero area; give a triangulated surface");
+    }
+    m_Tree.insert(m_Triangles.begin(), m_Triangles.end());
+    m_Tree.build();
+    m_Tree.accelerate_distance_queries();
+  }
+
+  Vector3 Closest(const Vector3 & x) const
+  {
+    const Point c = m_Tree.closest_point(Point(x.x(), x.y(), x.z()));
+    return { c.x(), c.y(), c.z() };
+  }
+
+private:
+  std::vector<Triangle> m_Triangles;
+  AabbTree              m_Tree;
+};
+
+void
+ValidateExposedNodes(const Model & model, const std::vector<Index> & exposedNodes, const char * function)
+{
+  if (exposedNodes.empty())
+  {
+    throw Error(std::string(function) +
+                ": no exposed nodes; select the craniotomy region first (SurfaceNodesInSphere or SurfaceNodesInMask)");
+  }
+  for (const Index node : exposedNodes)
+  {
+    if (node < 0 || static_cast<std::size_t>(node) >= model.nodes.size())
+    {
+      throw Error(std::string(function) + ": exposed node id " + std::to_string(node) + " is not a node of the model (" +
+                  std::to_string(model.nodes.size()) + " nodes)");
+    }
+  }
+}
+
+void
+ValidateSettings(const SurfaceLoadSettings & settings, const char * function)
+{
+  if (!(settings.maxDistance > 0.0) || !std::isfinite(settings.maxDistance) || !(settings.smoothing >= 0.0) ||
+      !std::isfinite(settings.smoothing))
+  {
+    throw Error(std::string(function) + ": maxDistance must be a positive number of mm and smoothing >= 0 (given " +
+                std::to_string(settings.maxDistance) + " and " + std::to_string(settings.smoothing) + ")");
+  }
+}
+
+// Max and RMS of distances, summed in input order (deterministic).
+void
+FillDistanceStatistics(const std::vector<double> & distances, LoadReport & report)
+{
+  double maximum = 0.0;
+  double sumSquares = 0.0;
+  for (const double d : distances)
+  {
+    maximum = std::max(maximum, d);
+    sumSquares += d * d;
+  }
+  report.maxCorrespondenceDistance = maximum;
+  report.rmsCorrespondenceDistance = distances.empty() ? 0.0 : std::sqrt(sumSquares / distances.size());
+}
+
+std::string
+Trim(const std::string & text)
+{
+  const auto first = text.find_first_not_of(" \t\r");
+  if (first == std::string::npos)
+  {
+    return {};
+  }
+  const auto last = text.find_last_not_of(" \t\r");
+  return text.substr(first, last - first + 1);
+}
+
+std::vector<std::string>
+SplitFields(const std::string & line)
+{
+  std::vector<std::string> fields;
+  std::stringstream        stream(line);
+  std::string              field;
+  while (std::getline(stream, field, ','))
+  {
+    fields.push_back(Trim(field));
+  }
+  if (!line.empty() && line.back() == ',')
+  {
+    fields.emplace_back();
+  }
+  return fields;
+}
+
+} // namespace
+
+PrescribedDisplacement
+DisplacementsFromSurface(const Model &               model,
+                         const std::vector<Index> &  exposedNodes,
+                         const ContactSurface &      intraoperativeSurface,
+                         const SurfaceLoadSettings & settings,
+                         LoadReport *                report)
+{
+  const char * function = "DisplacementsFromSurface";
+  ValidateExposedNodes(model, exposedNodes, function);
+  ValidateSettings(settings, function);
+  const std::string surfaceName = "intraoperative surface '" + intraoperativeSurface.name + "'";
+  const ClosestPointQuery query(intraoperativeSurface.vertices, intraoperativeSurface.triangles, surfaceName);
+
+  LoadReport             local;
+  LoadReport &           out = report ? *report : local;
+  out = LoadReport{};
+  PrescribedDisplacement load;
+  std::vector<double>    usedDistances;
+  std::ostringstream     rejected;
+  rejected.precision(4);
+  for (const Index node : exposedNodes)
+  {
+    const Vector3 & x = model.nodes[node];
+    const Vector3   displacement = query.Closest(x) - x;
+    const double    distance = displacement.norm();
+    if (distance > settings.maxDistance)
+    {
+      if (out.rejectedPoints < kListedInWarning)
+      {
+        rejected << (out.rejectedPoints > 0 ? ", " : "") << "node " << node << " (" << distance << " mm)";
+      }
+      ++out.rejectedPoints;
+      continue;
+    }
+    load.nodes.push_back(node);
+    load.displacements.push_back(displacement);
+    usedDistances.push_back(distance);
+  }
+  out.usedPoints = load.nodes.size();
+  FillDistanceStatistics(usedDistances, out);
+  if (out.rejectedPoints > 0)
+  {
+    std::ostringstream warning;
+    warning << out.rejectedPoints << " of " << exposedNodes.size() << " exposed nodes are farther than "
+            << settings.maxDistance << " mm from the " << surfaceName << " and are left out of the load: "
+            << rejected.str();
+    if (out.rejectedPoints > kListedInWarning)
+    {
+      warning << ", ... and " << out.rejectedPoints - kListedInWarning << " more";
+    }
+    out.warnings.push_back(warning.str());
+  }
+  if (load.nodes.empty())
+  {
+    throw Error(std::string(function) + ": every exposed node is farther than " + std::to_string(settings.maxDistance) +
+                " mm from the " + surfaceName + " (" + rejected.str() +
+                "). Check that the surface is registered to the preoperative image (same physical space, mm) "
+                "and that the craniotomy region faces it, or raise maxDistance");
+  }
+  return load;
+}
+
+PrescribedDisplacement
+DisplacementsFromSparsePoints(const Model &                model,
+                              const std::vector<Index> &   exposedNodes,
+                              const std::vector<Vector3> & points,
+                              const std::vector<Vector3> & displacements,
+                              const SurfaceLoadSettings &  settings,
+                              LoadReport *                 report)
+{
+  const char * function = "DisplacementsFromSparsePoints";
+  ValidateExposedNodes(model, exposedNodes, function);
+  ValidateSettings(settings, function);
+  if (points.size() != displacements.size())
+  {
+    throw Error(std::string(function) + ": " + std::to_string(points.size()) + " points but " +
+                std::to_string(displacements.size()) + " displacements; give one displacement per point");
+  }
+  if (points.empty())
+  {
+    throw Error(std::string(function) + ": no measurement points; give at least one point with its displacement");
+  }
+  for (std::size_t i = 0; i < points.size(); ++i)
+  {
+    if (!points[i].allFinite() || !displacements[i].allFinite())
+    {
+      throw Error(std::string(function) + ": measurement point " + std::to_string(i) + " at " + Describe(points[i]) +
+                  " mm with displacement " + Describe(displacements[i]) +
+                  " mm has a NaN or infinite value; remove or fix it");
+    }
+  }
+  const auto boundary = model.BoundaryTriangles();
+  if (boundary.empty())
+  {
+    throw Error(std::string(function) + ": the model has no boundary faces (no cells?); cannot place the points");
+  }
+  const ClosestPointQuery query(model.nodes, boundary, "model boundary surface");
+
+  LoadReport   local;
+  LoadReport & out = report ? *report : local;
+  out = LoadReport{};
+  std::vector<Vector3> keptPoints, keptDisplacements;
+  std::vector<double>  usedDistances;
+  std::ostringstream   rejected;
+  rejected.precision(4);
+  for (std::size_t i = 0; i < points.size(); ++i)
+  {
+    const double distance = (query.Closest(points[i]) - points[i]).norm();
+    if (distance > settings.maxDistance)
+    {
+      if (out.rejectedPoints < kListedInWarning)
+      {
+        rejected << (out.rejectedPoints > 0 ? ", " : "") << "point " << i << " at " << Describe(points[i]) << " mm ("
+                 << distance << " mm)";
+      }
+      ++out.rejectedPoints;
+      continue;
+    }
+    keptPoints.push_back(points[i]);
+    keptDisplacements.push_back(displacements[i]);
+    usedDistances.push_back(distance);
+  }
+  out.usedPoints = keptPoints.size();
+  FillDistanceStatistics(usedDistances, out);
+  if (out.rejectedPoints > 0)
+  {
+    std::ostringstream warning;
+    warning << out.rejectedPoints << " of " << points.size() << " measurement points are farther than "
+            << settings.maxDistance << " mm from the model surface and are rejected: " << rejected.str();
+    if (out.rejectedPoints > kListedInWarning)
+    {
+      warning << ", ... and " << out.rejectedPoints - kListedInWarning << " more";
+    }
+    out.warnings.push_back(warning.str());
+  }
+  if (keptPoints.empty())
+  {
+    throw Error(std::string(function) + ": every measurement point is farther than " +
+                std::to_string(settings.maxDistance) + " mm from the model surface (" + rejected.str() +
+                "). Check that the points are in the preoperative image's physical space (mm), or raise maxDistance");
+  }
+
+  PrescribedDisplacement load;
+  load.nodes = exposedNodes;
+  load.displacements.resize(exposedNodes.size());
+  const std::size_t n = keptPoints.size();
+
+  Vector3 centroid = Vector3::Zero();
+  for (const auto & p : keptPoints)
+  {
+    centroid += p;
+  }
+  centroid /= static_cast<double>(n);
+  double scale = 0.0;
+  for (const auto & p : keptPoints)
+  {
+    scale = std::max(scale, (p - centroid).norm());
+  }
+
+  if (n < 4 || scale < 1e-9)
+  {
+    // An affine field needs 4 non-coplanar points; with fewer (or all at one
+    // place) the only defensible field is a translation: the mean displacement.
+    Vector3 mean = Vector3::Zero();
+    for (const auto & d : keptDisplacements)
+    {
+      mean += d;
+    }
+    mean /= static_cast<double>(n);
+    out.warnings.push_back(std::string(function) + ": only " + std::to_string(n) +
+                           " distinct measurement point(s) kept; every exposed node gets their mean displacement " +
+                           Describe(mean) + " mm (a translation). Give 4 or more points to interpolate a field");
+    std::fill(load.displacements.begin(), load.displacements.end(), mean);
+    return load;
+  }
+
+  // Polyharmonic spline phi(r) = r with an affine part, in coordinates centred
+  // at the points' centroid and scaled by their extent (conditioning only:
+  // phi is homogeneous of degree 1, so the interpolant is unchanged). ITK's
+  // ThinPlateSplineKernelTransform is not used because the core does not
+  // include ITK; the dense solve below is a few lines of Eigen.
+  auto scaled = [&](const Vector3 & x) -> Vector3 { return (x - centroid) / scale; };
+  const Eigen::Index size = static_cast<Eigen::Index>(n) + 4;
+  Eigen::MatrixXd    system = Eigen::MatrixXd::Zero(size, size);
+  Eigen::MatrixXd    rhs = Eigen::MatrixXd::Zero(size, 3);
+  std::vector<Vector3> q(n);
+  for (std::size_t i = 0; i < n; ++i)
+  {
+    q[i] = scaled(keptPoints[i]);
+  }
+  for (std::size_t i = 0; i < n; ++i)
+  {
+    const auto ii = static_cast<Eigen::Index>(i);
+    for (std::size_t j = 0; j < n; ++j)
+    {
+      system(ii, static_cast<Eigen::Index>(j)) = (q[i] - q[j]).norm();
+    }
+    system(ii, ii) += settings.smoothing / scale;
+    system(ii, n) = system(n, ii) = 1.0;
+    for (int d = 0; d < 3; ++d)
+    {
+      system(ii, n + 1 + d) = system(n + 1 + d, ii) = q[i][d];
+    }
+    rhs.row(ii) = keptDisplacements[i].transpose();
+  }
+  const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> decomposition(system);
+  const Eigen::MatrixXd coefficients = decomposition.solve(rhs);
+  if (!coefficients.allFinite())
+  {
+    throw Error(std::string(function) + ": the interpolation system of " + std::to_string(n) +
+                " points could not be solved; remove duplicate points");
+  }
+  if (decomposition.rank() < size && decomposition.rank() >= static_cast<Eigen::Index>(n) + 3)
+  {
+    out.warnings.push_back(std::string(function) + ": the " + std::to_string(n) +
+                           " measurement points are coplanar; the displacement gradient across their plane is "
+                           "taken as zero (minimum-norm affine part)");
+  }
+
+  const auto count = static_cast<std::int64_t>(exposedNodes.size());
+#pragma omp parallel for schedule(static)
+  for (std::int64_t e = 0; e < count; ++e)
+  {
+    const Vector3 x = scaled(model.nodes[exposedNodes[e]]);
+    Vector3       u = coefficients.row(static_cast<Eigen::Index>(n)).transpose();
+    for (int d = 0; d < 3; ++d)
+    {
+      u += x[d] * coefficients.row(static_cast<Eigen::Index>(n) + 1 + d).transpose();
+    }
+    for (std::size_t i = 0; i < n; ++i)
+    {
+      u += (x - q[i]).norm() * coefficients.row(static_cast<Eigen::Index>(i)).transpose();
+    }
+    load.displacements[e] = u;
+  }
+  return load;
+}
+
+SparseDisplacements
+ReadSparseDisplacements(const std::string & csvPath)
+{
+  std::ifstream file(csvPath);
+  if (!file)
+  {
+    throw Error("sparse displacements '" + csvPath + "': cannot open the file; check the path");
+  }
+  SparseDisplacements result;
+  std::string         line;
+  std::size_t         lineNumber = 0;
+  bool                headerSeen = false;
+  const std::vector<std::string> header{ "x", "y", "z", "ux", "uy", "uz" };
+  while (std::getline(file, line))
+  {
+    ++lineNumber;
+    const std::string trimmed = Trim(line);
+    if (trimmed.empty() || trimmed[0] == '#')
+    {
+      continue;
+    }
+    const auto  fields = SplitFields(trimmed);
+    const std::string where = "sparse displacements '" + csvPath + "', line " + std::to_string(lineNumber);
+    if (!headerSeen)
+    {
+      if (fields != header)
+      {
+        throw Error(where + ": expected the header 'x,y,z,ux,uy,uz' (mm), found '" + trimmed + "'");
+      }
+      headerSeen = true;
+      continue;
+    }
+    if (fields.size() != 6)
+    {
+      throw Error(where + ": expected 6 comma-separated numbers x,y,z,ux,uy,uz, found " + std::to_string(fields.size()) +
+                  " fields in '" + trimmed + "'");
+    }
+    double values[6];
+    for (int f = 0; f < 6; ++f)
+    {
+      const char * begin = fields[f].c_str();
+      char *       end = nullptr;
+      values[f] = std::strtod(begin, &end);
+      if (fields[f].empty() || end != begin + fields[f].size() || !std::isfinite(values[f]))
+      {
+        throw Error(where + ": field " + header[f] + " = '" + fields[f] + "' is not a finite number");
+      }
+    }
+    result.points.emplace_back(values[0], values[1], values[2]);
+    result.displacements.emplace_back(values[3], values[4], values[5]);
+  }
+  if (!headerSeen)
+  {
+    throw Error("sparse displacements '" + csvPath + "': the file is empty; expected the header 'x,y,z,ux,uy,uz' and rows");
+  }
+  if (result.points.empty())
+  {
+    throw Error("sparse displacements '" + csvPath + "': the file has a header but no rows of points");
+  }
+  return result;
+}
+
+} // namespace bmr
