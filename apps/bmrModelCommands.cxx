@@ -576,13 +576,17 @@ RunModel(const ModelOptions & options)
                          ImageGridKindName(options.grid.Settings(0).kind) + ", " + std::to_string(options.grid.elementSize) +
                          " mm)";
   scene["mesh"] = "model.vtu";
-  scene["material_fields"] = { { "youngs_modulus", "youngs_modulus" },
-                               { "poisson_ratio", "poisson_ratio" },
-                               { "density", "density" } };
   if (meshless)
   {
+    // A point cloud: each integration point carries its material.
     scene["discretization"] = "meshless";
     scene["meshless"] = { { "integration_points", "integration-points.vtu" } };
+  }
+  else
+  {
+    scene["material_fields"] = { { "youngs_modulus", "youngs_modulus" },
+                                 { "poisson_ratio", "poisson_ratio" },
+                                 { "density", "density" } };
   }
   scene["node_sets"] = { { "skull_base", { { "point_data", "skull_base" } } } };
   scene["fixed"] = json::array({ { { "node_set", "skull_base" } } });

@@ -36,7 +36,8 @@ struct MeshData
   std::map<std::string, DataArray> cellData;
 };
 
-/** Reads a volume mesh from .vtu (XML) or .vtk (legacy) unstructured grid.
+/** Reads a volume mesh from .vtu (XML) or .vtk (legacy) unstructured grid
+ *  (a file without cells gives a point cloud, e.g. a meshless model's nodes).
  *  Supported cells: VTK_HEXAHEDRON (12) and VTK_TETRA (10); any other cell
  *  type is an error that names the cell. `labelArray` names the cell-data
  *  array of integer material labels; when the file has no such array,

@@ -164,10 +164,11 @@ ConvertUnstructuredGrid(vtkUnstructuredGrid * grid, const std::string & path, co
   MeshData mesh;
   const vtkIdType pointCount = grid->GetNumberOfPoints();
   const vtkIdType cellCount = grid->GetNumberOfCells();
-  if (pointCount == 0 || cellCount == 0)
+  // A mesh without cells is a meshless point cloud; the scene decides whether it may be one.
+  if (pointCount == 0)
   {
-    throw Error("mesh '" + path + "' has no " + (pointCount == 0 ? "points" : "cells") +
-                "; a volume mesh of hexahedra (VTK_HEXAHEDRON) or tetrahedra (VTK_TETRA) is needed");
+    throw Error("mesh '" + path +
+                "' has no points; a volume mesh of hexahedra (VTK_HEXAHEDRON) or tetrahedra (VTK_TETRA) is needed");
   }
 
   mesh.model.nodes.resize(pointCount);

@@ -428,6 +428,10 @@ private:
       }
       return;
     }
+    if (!m_Root.Has("materials") && MaterialsComeWithIntegrationPoints())
+    {
+      return;
+    }
     const SceneValue materials = m_Root.Required("materials");
     if (materials.ArraySize() == 0)
     {
@@ -540,6 +544,12 @@ private:
     }
     TheModel().materials = materials;
     m_Scene.meshSource = source.str();
+  }
+
+  /** A meshless scene whose integration points come from a file with a material per point. */
+  bool MaterialsComeWithIntegrationPoints() const
+  {
+    return m_Root.Has("meshless") && m_Root.Child("meshless").Has("integration_points");
   }
 
   /** Index of a material with these properties in the model, added when new:
@@ -1142,6 +1152,11 @@ private:
     const bool meshless =
       discretization && discretization->Choice({ "finite_element", "meshless" }) == "meshless";
     const auto options = m_Root.Optional("meshless");
+    if (!meshless && TheModel().cells.empty())
+    {
+      m_Root.Child("mesh").Fail("the mesh has no cells: finite elements need hexahedra or tetrahedra (a point cloud "
+                                "needs \"discretization\": \"meshless\" with \"meshless\": {\"integration_points\": FILE})");
+    }
     if (!meshless)
     {
       if (options)

@@ -5,6 +5,7 @@
 #include "itkImageFileReader.h"
 
 #include "bmrImageGrids.h"
+#include "bmrMeshGenerators.h"
 #include "itkBiomechanicalGridImageFilter.h"
 
 #include <gtest/gtest.h>
@@ -324,4 +325,37 @@ TEST(ImageGridItkFilter, MeshMatchesCoreModel)
 
   filter->SetElementSize(0.25); // below the 1 mm voxels
   EXPECT_THROW(filter->Update(), itk::ExceptionObject);
+}
+
+TEST(ImageGridRasterize, VoxelCentresInsideTheCellsAreMarked)
+{
+  // A 20 x 10 x 10 mm block at the origin on 1 mm voxels whose centres sit at
+  // k + 0.5: exactly 20 x 10 x 10 centres lie inside, for hexahedra and for
+  // their tetrahedra alike; none outside.
+  bmr::ImageGeometry grid;
+  grid.size = { 30, 20, 20 };
+  grid.origin = bmr::Vector3(-4.5, -4.5, -4.5);
+  for (const bmr::GridCells cells : { bmr::GridCells::Hexahedra, bmr::GridCells::Tetrahedra, bmr::GridCells::Mixed })
+  {
+    const bmr::Model       block = bmr::MakeBlockMesh(bmr::Vector3(20, 10, 10), { 4, 2, 2 }, cells);
+    const bmr::LabelVolume volume = bmr::RasterizeCells(block, grid);
+    std::size_t            marked = 0;
+    for (int k = 0; k < grid.size[2]; ++k)
+    {
+      for (int j = 0; j < grid.size[1]; ++j)
+      {
+        for (int i = 0; i < grid.size[0]; ++i)
+        {
+          const bmr::Vector3 centre = grid.IndexToPoint(bmr::Vector3(i, j, k));
+          const bool inside = (centre.array() > 0.0).all() && centre.x() < 20.0 && centre.y() < 10.0 && centre.z() < 10.0;
+          EXPECT_EQ(volume.At(i, j, k) != 0, inside) << "voxel " << i << ", " << j << ", " << k;
+          marked += volume.At(i, j, k) != 0 ? 1 : 0;
+        }
+      }
+    }
+    EXPECT_EQ(marked, 2000u);
+  }
+  bmr::Model empty;
+  empty.nodes.push_back(bmr::Vector3::Zero());
+  EXPECT_THROW(bmr::RasterizeCells(empty, grid), bmr::Error);
 }

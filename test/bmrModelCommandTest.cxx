@@ -1,0 +1,350 @@
+// The model-building subcommands of biomech, end to end: from an MRI (a
+// synthetic head, and Colin27 from Debian's mricron-data) to a scene that
+// `biomech solve` runs, and every bad input named with nothing written.
+//
+// ITK headers first: ITK's bundled Eigen must come before the system Eigen.
+#include "itkImage.h"
+#include "itkImageFileWriter.h"
+#include "itkImageRegionIteratorWithIndex.h"
+
+#include "bmrMeshIO.h"
+#include "bmrScene.h"
+
+#include "bmrTemporaryFolderTest.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+namespace
+{
+
+using ImageType = itk::Image<float, 3>;
+using bmr::test::CommandResult;
+using bmr::test::ReadText;
+
+const fs::path Colin27Folder("/usr/share/mricron/templates");
+
+/** A synthetic head: a 36 mm ball of "white matter" (intensity 110) with a
+ *  "grey matter" shell (80) and a central "ventricle" (40), noise-free, in a
+ *  64 x 60 x 56 image of 1 mm voxels whose origin is not zero. */
+ImageType::Pointer
+SyntheticHead(float outsideValue = 0.0f)
+{
+  auto                  image = ImageType::New();
+  ImageType::RegionType region;
+  region.SetSize({ { 64, 60, 56 } });
+  image->SetRegions(region);
+  const double origin[3] = { -31.5, -29.5, -27.5 };
+  image->SetOrigin(origin);
+  image->Allocate();
+  for (itk::ImageRegionIteratorWithIndex<ImageType> it(image, region); !it.IsAtEnd(); ++it)
+  {
+    ImageType::PointType point;
+    image->TransformIndexToPhysicalPoint(it.GetIndex(), point);
+    const double radius = point.GetVectorFromOrigin().GetNorm();
+    it.Set(radius > 18.0 ? outsideValue : radius > 14.0 ? 80.0f : radius > 5.0 ? 110.0f : 40.0f);
+  }
+  return image;
+}
+
+void
+WriteTestImage(const ImageType * image, const fs::path & path)
+{
+  auto writer = itk::ImageFileWriter<ImageType>::New();
+  writer->SetInput(image);
+  writer->SetFileName(path.string());
+  writer->Update();
+}
+
+/** Values of a CSV written by biomech (header line first), by row. */
+std::vector<std::vector<double>>
+ReadCsv(const fs::path & path)
+{
+  std::vector<std::vector<double>> rows;
+  std::ifstream                    stream(path);
+  std::string                      line;
+  std::getline(stream, line); // header
+  while (std::getline(stream, line))
+  {
+    std::vector<double> row;
+    std::stringstream   fields(line);
+    std::string         field;
+    while (std::getline(fields, field, ','))
+    {
+      row.push_back(std::stod(field));
+    }
+    rows.push_back(row);
+  }
+  return rows;
+}
+
+class ModelCommandTest : public bmr::test::TemporaryFolderTest
+{
+protected:
+  CommandResult Biomech(const std::string & arguments) const { return bmr::test::RunBiomech(m_Folder, arguments); }
+
+  std::string Quoted(const fs::path & path) const { return "'" + path.string() + "'"; }
+
+  /** The synthetic head and its mask (the ball) in the test folder. */
+  void WriteSyntheticHead()
+  {
+    const ImageType::Pointer head = SyntheticHead(5.0f);
+    WriteTestImage(head, m_Folder / "head.nii.gz");
+    const ImageType::Pointer mask = SyntheticHead(0.0f);
+    for (itk::ImageRegionIteratorWithIndex<ImageType> it(mask, mask->GetBufferedRegion()); !it.IsAtEnd(); ++it)
+    {
+      it.Set(it.Get() > 0.0f ? 1.0f : 0.0f);
+    }
+    WriteTestImage(mask, m_Folder / "mask.nii.gz");
+  }
+
+  /** Files in the folder, recursively (empty when it does not exist). */
+  std::size_t FileCount(const fs::path & folder) const
+  {
+    std::size_t count = 0;
+    if (fs::exists(folder))
+    {
+      for (const auto & entry : fs::recursive_directory_iterator(folder))
+      {
+        count += entry.is_regular_file() ? 1 : 0;
+      }
+    }
+    return count;
+  }
+};
+
+} // namespace
+
+TEST_F(ModelCommandTest, Colin27GivesASolvableModelLoadedBySparseDisplacements)
+{
+  if (!fs::exists(Colin27Folder / "ch2.nii.gz"))
+  {
+    GTEST_SKIP() << "mricron-data is not installed (scripts/install-dependencies.sh installs it)";
+  }
+  // Measurements on the brain surface around a superior craniotomy: points of
+  // the brain surface within 25 mm of its centre, pushed down by a smooth sag
+  // of at most 4 mm (Colin27 in ITK's LPS space: +z is superior).
+  const bmr::Vector3  centre(-11.0, 43.0, 84.0);
+  const double        radius = 30.0;
+  const CommandResult surfaces = Biomech("surfaces " + Quoted(Colin27Folder / "ch2bet.nii.gz") + " -o " +
+                                         Quoted(m_Folder / "brain.vtp") + " --skull-output " +
+                                         Quoted(m_Folder / "skull.vtp"));
+  ASSERT_EQ(surfaces.exitCode, 0) << surfaces.err;
+  const bmr::ContactSurface brain = bmr::ReadSurface((m_Folder / "brain.vtp").string());
+  std::ofstream             csv(m_Folder / "measurements.csv");
+  csv << "x,y,z,ux,uy,uz\n";
+  std::size_t measurements = 0;
+  double      deepest = 0.0;
+  for (std::size_t vertex = 0; vertex < brain.vertices.size(); vertex += 37)
+  {
+    const bmr::Vector3 & x = brain.vertices[vertex];
+    const double         r = (x - centre).norm();
+    if (r < 25.0 && x.z() > 60.0)
+    {
+      const double sag = -4.0 * (1.0 - (r / radius) * (r / radius));
+      csv << x.x() << "," << x.y() << "," << x.z() << ",0,0," << sag << "\n";
+      deepest = std::min(deepest, sag);
+      ++measurements;
+    }
+  }
+  csv.close();
+  ASSERT_GT(measurements, 20u);
+
+  const fs::path      output = m_Folder / "model";
+  const CommandResult model =
+    Biomech("model " + Quoted(Colin27Folder / "ch2.nii.gz") + " --mask " + Quoted(Colin27Folder / "ch2bet.nii.gz") +
+            " --craniotomy-centre -11 43 84 --craniotomy-radius 30 --sparse-displacements " +
+            Quoted(m_Folder / "measurements.csv") + " --grid hexahedra --element-size 5 -o " + Quoted(output));
+  ASSERT_EQ(model.exitCode, 0) << model.err;
+
+  // The size: 30,000 to 100,000 degrees of freedom; volume within 2% of the mask.
+  const json report = json::parse(ReadText(output / "model-report.json"));
+  const auto dofs = report["grid"]["dofs"].get<std::size_t>();
+  EXPECT_GE(dofs, 30000u);
+  EXPECT_LE(dofs, 100000u);
+  EXPECT_LT(std::abs(report["grid"]["volume_error"].get<double>()), 0.02);
+  EXPECT_EQ(report["classification"]["centroids"].size(), 3u);
+  EXPECT_TRUE(report["classification"]["converged"].get<bool>());
+  EXPECT_EQ(report["loads"]["used"].get<std::size_t>(), measurements);
+  EXPECT_EQ(report["loads"]["rejected"].get<std::size_t>(), 0u);
+  for (const char * step : { "read", "classify", "grid", "materials", "surfaces", "loads", "write", "total" })
+  {
+    EXPECT_TRUE(report["seconds"].contains(step)) << step;
+  }
+
+  // Every exposed node is loaded, with a displacement inside the measured
+  // range (the thin-plate spline may overshoot a little between points:
+  // 0.5 mm allowed, see bmrSurfacesLoadsTest for its accuracy).
+  const auto loads = ReadCsv(output / "exposed-displacements.csv");
+  EXPECT_EQ(loads.size(), report["regions"]["exposed_nodes"].get<std::size_t>());
+  EXPECT_GT(loads.size(), 50u);
+  for (const auto & row : loads)
+  {
+    ASSERT_EQ(row.size(), 4u);
+    EXPECT_NEAR(row[1], 0.0, 0.5);
+    EXPECT_NEAR(row[2], 0.0, 0.5);
+    EXPECT_GE(row[3], deepest - 0.5);
+    EXPECT_LE(row[3], 0.5);
+  }
+
+  // The scene solves; the exposed nodes end exactly where they were sent.
+  const CommandResult solve = Biomech("solve " + Quoted(output / "scene.json") + " -d " + Quoted(output));
+  ASSERT_EQ(solve.exitCode, 0) << solve.out << solve.err;
+  const json solveReport = json::parse(ReadText(output / "brain-report.json"));
+  EXPECT_TRUE(solveReport["converged"].get<bool>());
+  EXPECT_GT(solveReport["max_displacement_mm"].get<double>(), 0.8 * -deepest);
+  EXPECT_LT(solveReport["max_displacement_mm"].get<double>(), -deepest + 1.0);
+  // The skull encloses the model, not just the mask: were it made from the
+  // mask, the corners of the staircase grid would start outside it and about
+  // 1,400 nodes would be pushed in (measured); pushing the top down brings
+  // only a few nodes against the skull.
+  EXPECT_LT(solveReport["contact_nodes"].get<int>(), 200);
+
+  const bmr::Scene scene = bmr::ReadScene((output / "scene.json").string());
+  ASSERT_EQ(scene.model.prescribedDisplacements.size(), 1u);
+  const bmr::MeshData result = bmr::ReadMesh((output / "brain-result.vtu").string());
+  const bmr::DataArray & displacement = result.pointData.at("displacement");
+  const bmr::PrescribedDisplacement & load = scene.model.prescribedDisplacements[0];
+  for (std::size_t k = 0; k < load.nodes.size(); ++k)
+  {
+    for (int c = 0; c < 3; ++c)
+    {
+      EXPECT_NEAR(displacement.values[3 * load.nodes[k] + c], load.displacements[k][c], 1e-9);
+    }
+  }
+}
+
+TEST_F(ModelCommandTest, EveryGridKindGivesAParsableScene)
+{
+  WriteSyntheticHead();
+  for (const std::string kind : { "hexahedra", "tetrahedra", "mixed", "meshless" })
+  {
+    const fs::path      output = m_Folder / kind;
+    const CommandResult run = Biomech("model " + Quoted(m_Folder / "head.nii.gz") + " --mask " +
+                                      Quoted(m_Folder / "mask.nii.gz") + " --grid " + kind +
+                                      " --element-size 4 --craniotomy-centre 0 0 18 --craniotomy-radius 10"
+                                      " --gravity 0 0 -9810 --quiet -o " + Quoted(output));
+    ASSERT_EQ(run.exitCode, 0) << kind << ": " << run.err;
+    const bmr::Scene scene = bmr::ReadScene((output / "scene.json").string());
+    EXPECT_EQ(scene.model.discretization == bmr::Discretization::Meshless, kind == "meshless") << kind;
+    EXPECT_EQ(fs::exists(output / "integration-points.vtu"), kind == "meshless") << kind;
+    EXPECT_EQ(scene.model.bodyAcceleration, bmr::Vector3(0, 0, -9810)) << kind;
+    ASSERT_EQ(scene.model.contactSurfaces.size(), 1u) << kind;
+    // Materials mix the three classes: CSF (10 Pa) at the centre, parenchyma (3000 Pa) elsewhere.
+    double softest = std::numeric_limits<double>::max();
+    double stiffest = 0.0;
+    for (const bmr::Material & material : scene.model.materials)
+    {
+      softest = std::min(softest, material.youngsModulus);
+      stiffest = std::max(stiffest, material.youngsModulus);
+    }
+    EXPECT_LT(softest, 1500.0) << kind;
+    EXPECT_NEAR(stiffest, 3000.0, 1e-6) << kind;
+    // The skull base is the lowest 10 mm of the surface.
+    for (const bmr::Index node : scene.model.NodeSet("skull_base"))
+    {
+      EXPECT_LE(scene.model.nodes[node].z(), -18.0 + 10.0 + 1.0) << kind;
+    }
+  }
+}
+
+TEST_F(ModelCommandTest, StepsRunOneAtATime)
+{
+  WriteSyntheticHead();
+  const CommandResult classify = Biomech("classify " + Quoted(m_Folder / "head.nii.gz") + " --mask " +
+                                         Quoted(m_Folder / "mask.nii.gz") + " -o " + Quoted(m_Folder / "tissue"));
+  ASSERT_EQ(classify.exitCode, 0) << classify.err;
+  EXPECT_TRUE(fs::exists(m_Folder / "tissue-memberships.nii.gz"));
+  EXPECT_TRUE(fs::exists(m_Folder / "tissue-labels.nii.gz"));
+  // Three intensities inside the mask: the centroids are exactly 40, 80 and 110.
+  EXPECT_NE(classify.out.find("centroids 40 80 110"), std::string::npos) << classify.out;
+
+  const CommandResult grid = Biomech("grid " + Quoted(m_Folder / "mask.nii.gz") + " --grid hexahedra --element-size 4 " +
+                                     "--memberships " + Quoted(m_Folder / "tissue-memberships.nii.gz") + " -o " +
+                                     Quoted(m_Folder / "grid.vtu"));
+  ASSERT_EQ(grid.exitCode, 0) << grid.err;
+  const bmr::MeshData mesh = bmr::ReadMesh((m_Folder / "grid.vtu").string());
+  ASSERT_TRUE(mesh.cellData.count("youngs_modulus"));
+
+  std::ofstream csv(m_Folder / "points.csv");
+  csv << "x,y,z,ux,uy,uz\n0,0,18,0,0,-2\n5,0,17.3,0,0,-2\n0,5,17.3,0,0,-2\n-5,0,17.3,0,0,-2\n0,-5,17.3,0,0,-2\n";
+  csv.close();
+  const CommandResult loads = Biomech("loads " + Quoted(m_Folder / "grid.vtu") +
+                                      " --craniotomy-centre 0 0 18 --craniotomy-radius 8 --sparse-displacements " +
+                                      Quoted(m_Folder / "points.csv") + " -o " + Quoted(m_Folder / "loads.csv"));
+  ASSERT_EQ(loads.exitCode, 0) << loads.err;
+  const auto rows = ReadCsv(m_Folder / "loads.csv");
+  ASSERT_FALSE(rows.empty());
+  for (const auto & row : rows)
+  {
+    // A uniform measured displacement is reproduced exactly (affine part of the spline).
+    EXPECT_NEAR(row[3], -2.0, 1e-8);
+  }
+
+  const CommandResult surfaces = Biomech("surfaces " + Quoted(m_Folder / "mask.nii.gz") + " --skull-gap 2 -o " +
+                                         Quoted(m_Folder / "brain.vtp") + " --skull-output " +
+                                         Quoted(m_Folder / "skull.stl"));
+  ASSERT_EQ(surfaces.exitCode, 0) << surfaces.err;
+  const bmr::ContactSurface skull = bmr::ReadSurface((m_Folder / "skull.stl").string());
+  for (const bmr::Vector3 & vertex : skull.vertices)
+  {
+    EXPECT_NEAR(vertex.norm(), 20.0, 0.6); // the 18 mm ball's boundary lies at 18 mm +- half a voxel, plus 2 mm
+  }
+}
+
+TEST_F(ModelCommandTest, BadInputsExitOneNameTheProblemAndWriteNothing)
+{
+  WriteSyntheticHead();
+  const std::string head = Quoted(m_Folder / "head.nii.gz");
+  const std::string mask = Quoted(m_Folder / "mask.nii.gz");
+  const std::string craniotomy = " --craniotomy-centre 0 0 18 --craniotomy-radius 10";
+
+  // A mask on another grid.
+  auto shifted = SyntheticHead(0.0f);
+  const double origin[3] = { -30.0, -29.5, -27.5 };
+  shifted->SetOrigin(origin);
+  WriteTestImage(shifted, m_Folder / "shifted.nii.gz");
+  // An empty mask.
+  auto empty = SyntheticHead(0.0f);
+  empty->FillBuffer(0.0f);
+  WriteTestImage(empty, m_Folder / "empty.nii.gz");
+  // An image with a NaN inside the brain (MetaImage: ITK's NIfTI reader does not return NaN voxels as NaN).
+  auto withNaN = SyntheticHead(5.0f);
+  withNaN->SetPixel({ { 32, 30, 28 } }, std::numeric_limits<float>::quiet_NaN());
+  WriteTestImage(withNaN, m_Folder / "nan.mha");
+
+  const std::vector<std::pair<std::string, std::string>> cases = {
+    { "model " + head + " --mask " + Quoted(m_Folder / "shifted.nii.gz") + craniotomy, "not on the image grid" },
+    { "model " + head + " --mask " + Quoted(m_Folder / "empty.nii.gz") + craniotomy, "mask" },
+    { "model " + Quoted(m_Folder / "nan.mha") + " --mask " + mask + craniotomy, "NaN" },
+    { "model " + head + " --mask " + mask + " --craniotomy-centre 0 0 60 --craniotomy-radius 10", "nearest" },
+    { "model " + head + " --mask " + mask + craniotomy + " --element-size 0.5", "voxel" },
+    { "model " + head + " --mask " + mask + craniotomy + " --element-size 30", "across" },
+    { "model " + head + " --mask " + mask + " --classes 5" + craniotomy, "distinct" },
+    { "model " + Quoted(m_Folder / "missing.nii.gz") + " --mask " + mask, "no such file" },
+    { "model " + head + " --mask " + mask + " --sparse-displacements " + Quoted(m_Folder / "points.csv"),
+      "craniotomy" },
+  };
+  for (const auto & [arguments, expected] : cases)
+  {
+    const fs::path      output = m_Folder / "out";
+    const CommandResult run = Biomech(arguments + " -o " + Quoted(output));
+    EXPECT_EQ(run.exitCode, 1) << arguments << "\n" << run.err;
+    EXPECT_NE(run.err.find("biomech: error:"), std::string::npos) << run.err;
+    EXPECT_NE(run.err.find(expected), std::string::npos) << "expected '" << expected << "' in: " << run.err;
+    EXPECT_EQ(FileCount(output), 0u) << arguments;
+    fs::remove_all(output);
+  }
+}
