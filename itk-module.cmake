@@ -8,8 +8,23 @@ itk_module(BiomechanicalRegistration
     ITKCommon
     ITKIOImageBase
     ITKMesh
+    ITKStatistics
+    ITKImageFilterBase
+    ITKImageFunction
+    ITKImageGrid
+    ITKImageIntensity
+    ITKThresholding
+    ITKSmoothing
+    ITKDistanceMap
+    ITKTransform
+    ITKDisplacementField
+    ITKRegistrationMethodsv4
+    ITKOptimizersv4
+    ITKMetricsv4
   TEST_DEPENDS
     ITKTestKernel
+    ITKIONIFTI
+    ITKIOMeta
   DESCRIPTION
     "${DOCUMENTATION}"
   EXCLUDE_FROM_DEFAULT

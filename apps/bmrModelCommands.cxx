@@ -609,7 +609,9 @@ RunModel(const ModelOptions & options)
   {
     warnings.push_back("the scene has no load (no intraoperative measurements and no --gravity): its solution is zero");
   }
-  scene["solver"] = { { "integrator", "dynamic_relaxation" }, { "tolerance", 0.001 } };
+  // 0.01 mm, as the brain-sized examples: far below the 0.1 mm a registration needs, and
+  // reached by CGAL tetrahedra (slivers, soft CSF) that stall near 0.001 mm with contact.
+  scene["solver"] = { { "integrator", "dynamic_relaxation" }, { "tolerance", 0.01 } };
   scene["output"] = { { "vtu", "brain-result.vtu" }, { "report", "brain-report.json" } };
 
   // Check that the scene parses before writing anything.

@@ -120,7 +120,10 @@ struct ImageGrid
 };
 
 /** Builds the grid of the body given by `labels` (0 = outside, > 0 = tissue
- *  label; a mask is labels {0, 1}).
+ *  label; a mask is labels {0, 1}). Only the largest face-connected part of
+ *  the tissue voxels is meshed (specks of a skull-stripped mask would be loose
+ *  pieces of the model); a warning says what was dropped, and maskVolume is
+ *  that part's volume.
  *  Hexahedra: a regular grid of cubes of edge elementSize aligned with the
  *  image axes and centred on the body's bounding box; a cube is kept when at
  *  least half of its volume lies inside the body (computed exactly from the

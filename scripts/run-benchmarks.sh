@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Builds the module in Release and runs the benchmark driver, then draws the
-# error-against-run-time plot. Writes docs/benchmarks.md,
-# docs/benchmark-error-vs-time.csv and docs/benchmark-error-vs-time.png.
+# error-against-run-time plot, then times model building from an MRI. Writes
+# docs/benchmarks.md, docs/benchmark-error-vs-time.csv,
+# docs/benchmark-error-vs-time.png and docs/model-building-benchmark.md.
 #
 #   scripts/run-benchmarks.sh [bmrBenchmark options, e.g. --quick or --threads 1,2]
 #
@@ -17,7 +18,7 @@ build="${BUILD_DIR:-${root}/build-bench}"
 jobs="${JOBS:-2}"
 
 cmake -S "${root}" -B "${build}" -DCMAKE_BUILD_TYPE=Release
-cmake --build "${build}" --target bmrBenchmark -j "${jobs}"
+cmake --build "${build}" --target bmrBenchmark biomech -j "${jobs}"
 
 command -v ccx >/dev/null 2>&1 || echo "run-benchmarks: ccx (calculix-ccx) not found; the CalculiX-referenced part is skipped" >&2
 
@@ -32,4 +33,6 @@ if [ -f docs/benchmark-error-vs-time.csv ]; then
   # Debian's interpreter: the python3 first on PATH may not see python3-matplotlib.
   /usr/bin/python3 scripts/plot-benchmarks.py docs/benchmark-error-vs-time.csv docs/benchmark-error-vs-time.png
 fi
-echo "run-benchmarks: wrote docs/benchmarks.md"
+# Model building from an MRI (Colin27): docs/model-building-benchmark.md.
+/usr/bin/python3 scripts/benchmark-model-building.py "${build}/apps/biomech"
+echo "run-benchmarks: wrote docs/benchmarks.md and docs/model-building-benchmark.md"

@@ -18,6 +18,7 @@
 #include <Eigen/Dense>
 
 #include <algorithm>
+#include <numeric>
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -741,8 +742,101 @@ DerivedFacetDistance(const ImageGridSettings & settings)
   return settings.facetDistance > 0.0 ? settings.facetDistance : settings.elementSize / 8.0;
 }
 
+/** Keeps the largest set of tetrahedra connected through shared faces (CGAL
+ *  can leave small pieces where the mask narrows below the element size;
+ *  loose pieces would be unconstrained bodies) and drops unused nodes. */
+void
+KeepLargestFaceConnectedTetrahedra(ImageGrid & grid, std::vector<std::string> * warnings)
+{
+  Model &          model = grid.model;
+  const std::size_t cellCount = model.cells.size();
+  // Union-find over cells sharing a face; faces found by sorting their node triples.
+  std::vector<std::size_t> parent(cellCount);
+  std::iota(parent.begin(), parent.end(), std::size_t{ 0 });
+  auto root = [&](std::size_t c) {
+    while (parent[c] != c)
+    {
+      parent[c] = parent[parent[c]];
+      c = parent[c];
+    }
+    return c;
+  };
+  std::vector<std::pair<std::array<Index, 3>, std::size_t>> faces;
+  faces.reserve(4 * cellCount);
+  for (std::size_t c = 0; c < cellCount; ++c)
+  {
+    const auto & n = model.cells[c].nodes;
+    for (int omitted = 0; omitted < 4; ++omitted)
+    {
+      std::array<Index, 3> face{};
+      for (int v = 0, f = 0; v < 4; ++v)
+      {
+        if (v != omitted)
+        {
+          face[f++] = n[v];
+        }
+      }
+      std::sort(face.begin(), face.end());
+      faces.emplace_back(face, c);
+    }
+  }
+  std::sort(faces.begin(), faces.end());
+  for (std::size_t f = 1; f < faces.size(); ++f)
+  {
+    if (faces[f].first == faces[f - 1].first)
+    {
+      parent[root(faces[f].second)] = root(faces[f - 1].second);
+    }
+  }
+  std::map<std::size_t, std::size_t> sizeOfRoot;
+  for (std::size_t c = 0; c < cellCount; ++c)
+  {
+    ++sizeOfRoot[root(c)];
+  }
+  if (sizeOfRoot.size() <= 1)
+  {
+    return;
+  }
+  const auto largest = std::max_element(sizeOfRoot.begin(), sizeOfRoot.end(), [](const auto & a, const auto & b) {
+                         return a.second < b.second;
+                       })->first;
+  Model              kept;
+  kept.materials = model.materials;
+  std::vector<int>   keptLabels;
+  std::vector<Index> newIndex(model.nodes.size(), -1);
+  for (std::size_t c = 0; c < cellCount; ++c)
+  {
+    if (root(c) != largest)
+    {
+      continue;
+    }
+    Cell cell = model.cells[c];
+    for (int v = 0; v < 4; ++v)
+    {
+      Index & node = newIndex[cell.nodes[v]];
+      if (node < 0)
+      {
+        node = static_cast<Index>(kept.nodes.size());
+        kept.nodes.push_back(model.nodes[cell.nodes[v]]);
+      }
+      cell.nodes[v] = node;
+    }
+    kept.cells.push_back(cell);
+    keptLabels.push_back(grid.cellLabels[c]);
+  }
+  if (warnings)
+  {
+    warnings->push_back("grid: the tetrahedral mesh has " + std::to_string(sizeOfRoot.size()) +
+                        " face-connected parts; kept the largest (" + std::to_string(kept.cells.size()) +
+                        " tetrahedra), dropped " + std::to_string(cellCount - kept.cells.size()) +
+                        " tetrahedra in the others (where the mask narrows below the element size)");
+  }
+  model = std::move(kept);
+  grid.cellLabels = std::move(keptLabels);
+}
+
 ImageGrid
-MakeTetrahedralGrid(const Body & body, const ImageGridSettings & settings)
+MakeTetrahedralGrid(const Body & body, const ImageGridSettings & settings, std::vector<std::string> * warnings)
 {
   const ImageGeometry & geometry = body.Geometry();
   if (!(settings.facetAngle > 0.0 && settings.facetAngle <= 30.0))
@@ -832,6 +926,7 @@ MakeTetrahedralGrid(const Body & body, const ImageGridSettings & settings)
                 geometry.Describe() + ", " + std::to_string(body.voxels) +
                 " tissue voxels); use a smaller element size or check the mask.");
   }
+  KeepLargestFaceConnectedTetrahedra(result, warnings);
   return result;
 }
 
@@ -839,11 +934,11 @@ MakeTetrahedralGrid(const Body & body, const ImageGridSettings & settings)
 // Meshless point cloud
 
 ImageGrid
-MakeMeshlessGrid(const Body & body, const ImageGridSettings & settings)
+MakeMeshlessGrid(const Body & body, const ImageGridSettings & settings, std::vector<std::string> * warnings)
 {
   const double h = settings.elementSize;
   // The body's surface: the boundary of the tetrahedral mesh of the same size.
-  const ImageGrid              tetrahedra = MakeTetrahedralGrid(body, settings);
+  const ImageGrid              tetrahedra = MakeTetrahedralGrid(body, settings, warnings);
   std::vector<Vector3> surfaceNodes;
   for (const Index n : tetrahedra.model.BoundaryNodes())
     surfaceNodes.push_back(tetrahedra.model.nodes[n]);
@@ -1095,13 +1190,85 @@ MeasureGridQuality(const Model & model)
   return quality;
 }
 
+/** The largest face-connected (6-connected) part of the tissue voxels: specks
+ *  of a skull-stripped mask would otherwise become loose, unloaded pieces of
+ *  the model. Labels inside the part are kept. */
+LabelVolume
+LargestConnectedTissue(const LabelVolume & labels, std::vector<std::string> & warnings)
+{
+  const ImageGeometry & geometry = labels.geometry;
+  const std::size_t     voxels = geometry.VoxelCount();
+  if (labels.components != 1 || labels.values.size() != voxels)
+  {
+    return labels; // CheckInput names the problem
+  }
+  std::vector<std::int32_t> component(voxels, -1);
+  std::vector<std::size_t>  sizes;
+  std::vector<std::size_t>  stack;
+  const std::size_t         strideY = static_cast<std::size_t>(geometry.size[0]);
+  const std::size_t         strideZ = strideY * static_cast<std::size_t>(geometry.size[1]);
+  for (std::size_t seed = 0; seed < voxels; ++seed)
+  {
+    if (labels.values[seed] == 0 || component[seed] >= 0)
+    {
+      continue;
+    }
+    const auto  id = static_cast<std::int32_t>(sizes.size());
+    std::size_t size = 0;
+    component[seed] = id;
+    stack.push_back(seed);
+    while (!stack.empty())
+    {
+      const std::size_t voxel = stack.back();
+      stack.pop_back();
+      ++size;
+      const int i = static_cast<int>(voxel % strideY);
+      const int j = static_cast<int>((voxel / strideY) % geometry.size[1]);
+      const int k = static_cast<int>(voxel / strideZ);
+      const std::pair<bool, std::size_t> neighbours[6] = {
+        { i > 0, voxel - 1 },       { i + 1 < geometry.size[0], voxel + 1 },
+        { j > 0, voxel - strideY }, { j + 1 < geometry.size[1], voxel + strideY },
+        { k > 0, voxel - strideZ }, { k + 1 < geometry.size[2], voxel + strideZ }
+      };
+      for (const auto & [exists, neighbour] : neighbours)
+      {
+        if (exists && labels.values[neighbour] != 0 && component[neighbour] < 0)
+        {
+          component[neighbour] = id;
+          stack.push_back(neighbour);
+        }
+      }
+    }
+    sizes.push_back(size);
+  }
+  if (sizes.size() <= 1)
+  {
+    return labels;
+  }
+  const auto  largest = static_cast<std::int32_t>(std::max_element(sizes.begin(), sizes.end()) - sizes.begin());
+  LabelVolume kept = labels;
+  for (std::size_t voxel = 0; voxel < voxels; ++voxel)
+  {
+    if (component[voxel] != largest)
+    {
+      kept.values[voxel] = 0;
+    }
+  }
+  warnings.push_back("grid: the mask has " + std::to_string(sizes.size()) + " separate parts; kept the largest (" +
+                     std::to_string(sizes[largest]) + " voxels), dropped " +
+                     std::to_string(std::accumulate(sizes.begin(), sizes.end(), std::size_t{ 0 }) - sizes[largest]) +
+                     " voxels in the others (they would be loose pieces of the model)");
+  return kept;
+}
+
 ImageGrid
-MakeGridFromLabels(const LabelVolume & labels, const ImageGridSettings & settings, std::vector<std::string> * warnings)
+MakeGridFromLabels(const LabelVolume & inputLabels, const ImageGridSettings & settings, std::vector<std::string> * warnings)
 {
   const auto  started = std::chrono::steady_clock::now();
+  std::vector<std::string> localWarnings;
+  const LabelVolume labels = LargestConnectedTissue(inputLabels, localWarnings);
   const Body  body = CheckInput(labels, settings);
   ImageGrid   result;
-  std::vector<std::string> localWarnings;
   switch (settings.kind)
   {
     case ImageGridKind::Hexahedra:
@@ -1118,11 +1285,11 @@ MakeGridFromLabels(const LabelVolume & labels, const ImageGridSettings & setting
       break;
     }
     case ImageGridKind::Tetrahedra:
-      result = MakeTetrahedralGrid(body, settings);
+      result = MakeTetrahedralGrid(body, settings, &localWarnings);
       AddStandardNodeSets(result.model);
       break;
     case ImageGridKind::Meshless:
-      result = MakeMeshlessGrid(body, settings);
+      result = MakeMeshlessGrid(body, settings, &localWarnings);
       break;
   }
   result.model.Validate();

@@ -1,0 +1,143 @@
+#!/usr/bin/python3
+"""Times `biomech model` (MRI -> scene) and `biomech solve` on Colin27 from
+Debian's mricron-data for every grid kind, and writes a Markdown report.
+
+    /usr/bin/python3 scripts/benchmark-model-building.py BIOMECH [--output docs/model-building-benchmark.md] [--rounds 3]
+
+Each case runs `rounds` times; the report gives the median time of every step
+with the grid's size and volume error, and one solve of the scene with its
+convergence and estimated error. Run it on a quiet machine (it reports the
+load average before and after).
+"""
+import argparse
+import json
+import os
+import platform
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+TEMPLATES = "/usr/share/mricron/templates"
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+MEASUREMENTS = os.path.join(ROOT, "examples", "data", "colin27-superior-craniotomy.csv")
+STEPS = ["read", "skull-strip", "classify", "grid", "materials", "surfaces", "loads", "write"]
+# (grid kind, element size mm, give the mask?)
+CASES = [("hexahedra", 5.0, True), ("tetrahedra", 7.0, True), ("mixed", 5.0, True), ("meshless", 7.0, True),
+         ("hexahedra", 5.0, False)]
+
+
+def cpu_model():
+    try:
+        with open("/proc/cpuinfo") as stream:
+            for line in stream:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def load_average():
+    return os.getloadavg()[0]
+
+
+def run(command, environment):
+    started = time.monotonic()
+    result = subprocess.run(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=environment)
+    if result.returncode not in (0, 2):
+        sys.exit("benchmark: failed: %s\n%s" % (" ".join(command), result.stderr))
+    return time.monotonic() - started, result.returncode
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    parser.add_argument("biomech")
+    parser.add_argument("--output", default=os.path.join(ROOT, "docs", "model-building-benchmark.md"))
+    parser.add_argument("--rounds", type=int, default=3)
+    arguments = parser.parse_args()
+    if not os.path.exists(os.path.join(TEMPLATES, "ch2.nii.gz")):
+        sys.exit("benchmark: mricron-data is not installed (scripts/install-dependencies.sh installs it)")
+
+    environment = dict(os.environ, OMP_WAIT_POLICY=os.environ.get("OMP_WAIT_POLICY", "PASSIVE"))
+    load_before = load_average()
+    rows = []
+    folder = tempfile.mkdtemp(prefix="bmr-model-benchmark-")
+    try:
+        for kind, size, with_mask in CASES:
+            rounds = arguments.rounds if with_mask else 1
+            step_times = {step: [] for step in STEPS + ["total"]}
+            wall = []
+            report = None
+            output = os.path.join(folder, "%s-%g-%s" % (kind, size, "mask" if with_mask else "atlas"))
+            for _ in range(rounds):
+                shutil.rmtree(output, ignore_errors=True)
+                command = [arguments.biomech, "model", os.path.join(TEMPLATES, "ch2.nii.gz"),
+                           "--craniotomy-centre", "-11", "43", "84", "--craniotomy-radius", "30",
+                           "--sparse-displacements", MEASUREMENTS, "--grid", kind, "--element-size", str(size),
+                           "--quiet", "-o", output]
+                if with_mask:
+                    command += ["--mask", os.path.join(TEMPLATES, "ch2bet.nii.gz")]
+                seconds, _ = run(command, environment)
+                wall.append(seconds)
+                with open(os.path.join(output, "model-report.json")) as stream:
+                    report = json.load(stream)
+                for step in step_times:
+                    if step in report["seconds"]:
+                        step_times[step].append(report["seconds"][step])
+            solve_seconds, status = run([arguments.biomech, "solve", os.path.join(output, "scene.json"), "-d", output,
+                                         "--quiet"], environment)
+            with open(os.path.join(output, "brain-report.json")) as stream:
+                solve = json.load(stream)
+            rows.append({"kind": kind, "size": size, "mask": "given" if with_mask else "atlas (Colin27 to itself)",
+                         "rounds": rounds, "steps": {k: statistics.median(v) for k, v in step_times.items() if v},
+                         "wall": statistics.median(wall), "grid": report["grid"], "solve": solve,
+                         "solve_seconds": solve_seconds, "converged": status == 0})
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+    load_after = load_average()
+
+    lines = []
+    lines.append("# Model from an MRI: benchmark")
+    lines.append("")
+    lines.append("Written by `scripts/benchmark-model-building.py` (run by `scripts/run-benchmarks.sh`). "
+                 "`biomech model` on Colin27 (`ch2.nii.gz`, 181 x 217 x 181 voxels of 1 mm) with `ch2bet.nii.gz` "
+                 "as the mask (or, last row, a mask from atlas skull stripping), a 30 mm superior craniotomy, and "
+                 "the 61 sparse displacements of `examples/data/colin27-superior-craniotomy.csv` (5 mm sag); then "
+                 "`biomech solve` of the scene it writes (dynamic relaxation to 0.001 mm, skull contact).")
+    lines.append("")
+    lines.append("Machine: %s, %d cores, load average %.2f before and %.2f after; median of %d rounds "
+                 "(the skull-stripping row: 1 round); OMP_WAIT_POLICY=%s." %
+                 (cpu_model(), os.cpu_count() or 0, load_before, load_after, arguments.rounds,
+                  environment["OMP_WAIT_POLICY"]))
+    lines.append("")
+    lines.append("Target (issue 4): classification + grid + surfaces under 15 s together.")
+    lines.append("")
+    lines.append("| grid | size mm | mask | DOF | volume error | " + " | ".join(STEPS) +
+                 " | classify + grid + surfaces | model total | solve | solve steps | solve estimated error mm |")
+    lines.append("|" + "---|" * (len(STEPS) + 10))
+    for row in rows:
+        steps = row["steps"]
+        budget = sum(steps.get(step, 0.0) for step in ("classify", "grid", "surfaces"))
+        solve = row["solve"]
+        error = solve.get("estimated_error_mm")
+        lines.append("| %s | %g | %s | %s | %+.2f%% | %s | **%.2f s** | %.2f s | %.2f s%s | %s | %s |" % (
+            row["kind"], row["size"], row["mask"], format(row["grid"]["dofs"], ","),
+            100.0 * row["grid"]["volume_error"],
+            " | ".join("%.2f" % steps[step] if step in steps else "-" for step in STEPS),
+            budget, steps.get("total", row["wall"]), row["solve_seconds"],
+            "" if row["converged"] else " (NOT CONVERGED)", format(solve.get("steps", 0), ","),
+            "%.2g" % error if error is not None else "none"))
+    lines.append("")
+    lines.append("Times are seconds of wall time per step as `model-report.json` records them; the solve time "
+                 "includes reading the scene and writing the result.")
+    lines.append("")
+    with open(arguments.output, "w") as stream:
+        stream.write("\n".join(lines))
+    print("benchmark: wrote %s" % arguments.output)
+
+
+if __name__ == "__main__":
+    main()
