@@ -73,6 +73,37 @@ ExpectNodesInsideExtent(const bmr::Model & model, const bmr::LabelVolume & label
   }
 }
 
+/** Nodes reachable from node 0 through shared cells: all of them for a connected mesh. */
+std::size_t
+NodesReachableFromNodeZero(const bmr::Model & model)
+{
+  std::vector<std::vector<int>> cellsOfNode(model.nodes.size());
+  for (std::size_t c = 0; c < model.cells.size(); ++c)
+    for (int v = 0; v < bmr::NodesPerCell(model.cells[c].type); ++v)
+      cellsOfNode[model.cells[c].nodes[v]].push_back(static_cast<int>(c));
+  std::vector<char> seen(model.nodes.size(), 0);
+  std::vector<int>  stack{ 0 };
+  seen[0] = 1;
+  std::size_t reached = 1;
+  while (!stack.empty())
+  {
+    const int node = stack.back();
+    stack.pop_back();
+    for (const int c : cellsOfNode[node])
+      for (int v = 0; v < bmr::NodesPerCell(model.cells[c].type); ++v)
+      {
+        const int next = model.cells[c].nodes[v];
+        if (!seen[next])
+        {
+          seen[next] = 1;
+          ++reached;
+          stack.push_back(next);
+        }
+      }
+  }
+  return reached;
+}
+
 bmr::ImageGridSettings
 Settings(bmr::ImageGridKind kind, double size)
 {
@@ -286,6 +317,8 @@ TEST(ImageGridColin27, BrainMaskAtBrainSizes)
   // CGAL's perturb + exude leave a few slivers in a brain-shaped surface (5.2 degrees at seed 1).
   EXPECT_GT(tet.quality.minDihedralAngleDeg, 4.0);
   EXPECT_NO_THROW(tet.model.Validate());
+  // CGAL leaves a few tetrahedra apart where the mask narrows (11 parts at 7 mm); only the largest is kept.
+  EXPECT_EQ(NodesReachableFromNodeZero(tet.model), tet.model.nodes.size());
 }
 
 TEST(ImageGridItkFilter, MeshMatchesCoreModel)
@@ -358,4 +391,34 @@ TEST(ImageGridRasterize, VoxelCentresInsideTheCellsAreMarked)
   bmr::Model empty;
   empty.nodes.push_back(bmr::Vector3::Zero());
   EXPECT_THROW(bmr::RasterizeCells(empty, grid), bmr::Error);
+}
+
+TEST(ImageGridConnectivity, OnlyTheLargestPartOfTheMaskIsMeshed)
+{
+  // The ellipsoid plus a separate 3 x 3 x 3 voxel speck in a corner, as a
+  // skull-stripped mask has them: every kind meshes the ellipsoid only, with
+  // the same volume as without the speck, and says what it dropped.
+  const bmr::LabelVolume clean = MakeEllipsoidLabels();
+  bmr::LabelVolume       specked = clean;
+  for (int k = 1; k < 4; ++k)
+    for (int j = 1; j < 4; ++j)
+      for (int i = 1; i < 4; ++i)
+        specked.At(i, j, k) = 1;
+  for (const bmr::ImageGridKind kind : { bmr::ImageGridKind::Hexahedra, bmr::ImageGridKind::Tetrahedra })
+  {
+    std::vector<std::string> warnings;
+    const bmr::ImageGrid     withSpeck = bmr::MakeGridFromLabels(specked, Settings(kind, 6.0), &warnings);
+    const bmr::ImageGrid     withoutSpeck = bmr::MakeGridFromLabels(clean, Settings(kind, 6.0));
+    EXPECT_EQ(withSpeck.model.nodes.size(), withoutSpeck.model.nodes.size());
+    EXPECT_EQ(withSpeck.model.cells.size(), withoutSpeck.model.cells.size());
+    EXPECT_DOUBLE_EQ(withSpeck.quality.maskVolume, withoutSpeck.quality.maskVolume);
+    bool named = false;
+    for (const std::string & warning : warnings)
+      named = named || (warning.find("2 separate parts") != std::string::npos &&
+                        warning.find("dropped 27 voxels") != std::string::npos);
+    EXPECT_TRUE(named) << bmr::ImageGridKindName(kind);
+    // Every node of the mesh is reachable from every other through the cells.
+    EXPECT_EQ(NodesReachableFromNodeZero(withSpeck.model), withSpeck.model.nodes.size())
+      << bmr::ImageGridKindName(kind);
+  }
 }
