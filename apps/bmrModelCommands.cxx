@@ -260,6 +260,25 @@ struct AtlasOptions
     command->add_option("--atlas-mask", atlasMask, "Atlas brain mask (voxels > 0 are brain)")->capture_default_str();
     command->add_flag("--affine-only", affineOnly, "Skip the B-spline stage of the atlas registration");
   }
+
+  /** The brain mask of `image` by atlas registration (itk::AtlasBrainMaskImageFilter). */
+  MaskImageType::Pointer BrainMask(const ImageType::Pointer & image) const
+  {
+    auto filter = itk::AtlasBrainMaskImageFilter<ImageType>::New();
+    filter->SetInput(image);
+    filter->SetAtlasImage(ReadImage<ImageType>(atlas, "atlas"));
+    filter->SetAtlasMaskImage(ReadImage<ImageType>(atlasMask, "atlas mask"));
+    filter->SetUseBSplineStage(!affineOnly);
+    try
+    {
+      filter->Update();
+    }
+    catch (const itk::ExceptionObject & exception)
+    {
+      throw Error(std::string("skull stripping failed: ") + exception.GetDescription());
+    }
+    return filter->GetOutput();
+  }
 };
 
 struct GridOptions
@@ -462,20 +481,7 @@ RunModel(const ModelOptions & options)
   else
   {
     mask = timer.Run("skull-strip", [&] {
-      auto filter = itk::AtlasBrainMaskImageFilter<ImageType>::New();
-      filter->SetInput(image);
-      filter->SetAtlasImage(ReadImage<ImageType>(options.atlas.atlas, "atlas"));
-      filter->SetAtlasMaskImage(ReadImage<ImageType>(options.atlas.atlasMask, "atlas mask"));
-      filter->SetUseBSplineStage(!options.atlas.affineOnly);
-      try
-      {
-        filter->Update();
-      }
-      catch (const itk::ExceptionObject & exception)
-      {
-        throw Error(std::string("skull stripping failed: ") + exception.GetDescription());
-      }
-      return itk::MakeBiomechanicalVolume<std::uint8_t>(filter->GetOutput());
+      return itk::MakeBiomechanicalVolume<std::uint8_t>(options.atlas.BrainMask(image).GetPointer());
     });
     report["mask"] = "atlas: " + options.atlas.atlas;
   }
@@ -730,23 +736,10 @@ RunClassify(const StepOptions & options)
 int
 RunMask(const StepOptions & options)
 {
-  const ImageType::Pointer image = ReadImage<ImageType>(options.input, "image");
-  auto                     filter = itk::AtlasBrainMaskImageFilter<ImageType>::New();
-  filter->SetInput(image);
-  filter->SetAtlasImage(ReadImage<ImageType>(options.atlas.atlas, "atlas"));
-  filter->SetAtlasMaskImage(ReadImage<ImageType>(options.atlas.atlasMask, "atlas mask"));
-  filter->SetUseBSplineStage(!options.atlas.affineOnly);
-  try
-  {
-    filter->Update();
-  }
-  catch (const itk::ExceptionObject & exception)
-  {
-    throw Error(std::string("skull stripping failed: ") + exception.GetDescription());
-  }
-  const fs::path output(options.output);
+  const MaskImageType::Pointer mask = options.atlas.BrainMask(ReadImage<ImageType>(options.input, "image"));
+  const fs::path               output(options.output);
   CreateFolder(output.has_parent_path() ? output.parent_path() : fs::path("."));
-  WriteImageAtomically(filter->GetOutput(), output);
+  WriteImageAtomically(mask.GetPointer(), output);
   std::cout << "wrote " << output.string() << "\n";
   return 0;
 }

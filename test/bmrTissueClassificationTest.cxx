@@ -14,6 +14,8 @@
 #include "itkBiomechanicalImageConversion.h"
 #include "itkFuzzyCMeansClassifierImageFilter.h"
 
+#include "bmrTemporaryFolderTest.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -84,19 +86,7 @@ FullMask(const bmr::ImageGeometry & geometry)
   return mask;
 }
 
-std::string
-ErrorMessage(const std::function<void()> & action)
-{
-  try
-  {
-    action();
-  }
-  catch (const bmr::Error & error)
-  {
-    return error.what();
-  }
-  return "(no bmr::Error thrown)";
-}
+using bmr::test::ErrorMessage;
 
 const std::string kItkData = "/usr/share/doc/insighttoolkit5-examples/examples/Data/";
 
