@@ -1,4 +1,5 @@
 #include "bmrBrainSurfaces.h"
+#include "bmrClosestPoint.h"
 
 #include <vtkCellArray.h>
 #include <vtkCleanPolyData.h>
@@ -15,9 +16,6 @@
 #include <vtkTriangleFilter.h>
 #include <vtkWindowedSincPolyDataFilter.h>
 
-#include <CGAL/AABB_traits.h>
-#include <CGAL/AABB_tree.h>
-#include <CGAL/AABB_triangle_primitive.h>
 #include <CGAL/Simple_cartesian.h>
 #include <CGAL/Surface_mesh.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Bounded_normal_change_placement.h>
@@ -210,42 +208,6 @@ DecimateToEdgeLength(const ContactSurface & surface, double edgeLength)
   }
   return decimated;
 }
-
-// Distance to a triangulated surface with CGAL's AABB tree (the same
-// library as the contact code; the tree there is private to contact).
-class SurfaceDistance
-{
-public:
-  explicit SurfaceDistance(const ContactSurface & surface)
-  {
-    for (const auto & t : surface.triangles)
-    {
-      const Vector3 & a = surface.vertices[t[0]];
-      const Vector3 & b = surface.vertices[t[1]];
-      const Vector3 & c = surface.vertices[t[2]];
-      if ((b - a).cross(c - a).norm() > 0.0)
-      {
-        m_Triangles.emplace_back(CgalPoint(a.x(), a.y(), a.z()), CgalPoint(b.x(), b.y(), b.z()), CgalPoint(c.x(), c.y(), c.z()));
-      }
-    }
-    m_Tree.insert(m_Triangles.begin(), m_Triangles.end());
-    m_Tree.build();
-    m_Tree.accelerate_distance_queries();
-    Distance(surface.vertices.front()); // builds the lazy search structure before threads query
-  }
-  double Distance(const Vector3 & x) const
-  {
-    return std::sqrt(m_Tree.squared_distance(CgalPoint(x.x(), x.y(), x.z())));
-  }
-
-private:
-  using Kernel = CGAL::Simple_cartesian<double>;
-  using CgalPoint = Kernel::Point_3;
-  using CgalTriangle = Kernel::Triangle_3;
-  using Primitive = CGAL::AABB_triangle_primitive<Kernel, std::vector<CgalTriangle>::const_iterator>;
-  std::vector<CgalTriangle>                            m_Triangles;
-  CGAL::AABB_tree<CGAL::AABB_traits<Kernel, Primitive>> m_Tree;
-};
 
 } // namespace
 
@@ -506,7 +468,7 @@ ExtractBrainSurfaces(const ScalarVolume &         signedDistance,
   ScalarVolume        skullField = signedDistance;
   const ImageGeometry & geometry = signedDistance.geometry;
   const double        band = settings.skullGap + 2.0 * geometry.spacing.maxCoeff();
-  const SurfaceDistance distance(surfaces.brain);
+  const TriangleSurfaceTree brain(surfaces.brain.vertices, surfaces.brain.triangles, "isosurface 'brain' at level 0");
   const auto          slices = geometry.size[2];
 #pragma omp parallel for schedule(dynamic, 1)
   for (int k = 0; k < slices; ++k)
@@ -518,7 +480,7 @@ ExtractBrainSurfaces(const ScalarVolume &         signedDistance,
         float & value = skullField.At(i, j, k);
         if (value > 0.0f && value <= band)
         {
-          value = static_cast<float>(distance.Distance(geometry.IndexToPoint(Vector3(i, j, k))));
+          value = static_cast<float>(std::sqrt(brain.Closest(geometry.IndexToPoint(Vector3(i, j, k))).squaredDistance));
         }
       }
     }

@@ -1,11 +1,7 @@
 #include "bmrContact.h"
+#include "bmrClosestPoint.h"
 
 #include <Eigen/Geometry>
-
-#include <CGAL/AABB_traits.h>
-#include <CGAL/AABB_tree.h>
-#include <CGAL/AABB_triangle_primitive.h>
-#include <CGAL/Simple_cartesian.h>
 
 #include <algorithm>
 #include <cmath>
@@ -17,45 +13,32 @@ namespace bmr
 namespace
 {
 constexpr int kProjectionPasses = 4;
-
-using Kernel = CGAL::Simple_cartesian<double>;
-using Point = Kernel::Point_3;
-using Triangle = Kernel::Triangle_3;
-using TriangleIterator = std::vector<Triangle>::const_iterator;
-using Primitive = CGAL::AABB_triangle_primitive<Kernel, TriangleIterator>;
-using AabbTree = CGAL::AABB_tree<CGAL::AABB_traits<Kernel, Primitive>>;
-
-Vector3
-ToVector(const Point & p)
-{
-  return { p.x(), p.y(), p.z() };
-}
 } // namespace
 
 struct RigidContact::Tree
 {
-  std::vector<Triangle>             triangles;
-  std::vector<std::array<Index, 3>> corners;
-  std::vector<Vector3>              faceNormals;
-  std::vector<Vector3>              vertexNormals; // angle-weighted pseudo-normals
+  std::vector<Vector3>                       vertices;
+  std::vector<std::array<Index, 3>>          corners; // after the orientation flip
+  std::vector<Vector3>                       faceNormals;
+  std::vector<Vector3>                       vertexNormals; // angle-weighted pseudo-normals
   std::map<std::pair<Index, Index>, Vector3> edgeNormals;
-  AabbTree                          tree;
-  bool                              closed = false;
-  double                            sideSign = -1.0; // -1: body inside, +1: body outside
+  std::unique_ptr<TriangleSurfaceTree>       surface; // over `corners`: none is degenerate, so none is left out
+  bool                                       closed = false;
+  double                                     sideSign = -1.0; // -1: body inside, +1: body outside
 
   // Signed distance of x to the surface (positive outside) and the closest point.
   double SignedDistance(const Vector3 & x, Vector3 & closest) const
   {
-    const auto   hit = tree.closest_point_and_primitive(Point(x.x(), x.y(), x.z()));
-    const auto   t = static_cast<std::size_t>(hit.second - triangles.begin());
+    const auto   hit = surface->Closest(x);
+    const auto   t = static_cast<std::size_t>(hit.triangle);
     const auto & c = corners[t];
-    closest = ToVector(hit.first);
+    closest = hit.point;
     // Barycentric coordinates of the closest point tell whether it lies on a
     // vertex, an edge or inside the face; each has its own pseudo-normal, which
     // makes the sign correct everywhere (Baerentzen and Aanaes).
-    const Vector3 a = ToVector(triangles[t].vertex(0));
-    const Vector3 v0 = ToVector(triangles[t].vertex(1)) - a;
-    const Vector3 v1 = ToVector(triangles[t].vertex(2)) - a;
+    const Vector3 a = vertices[c[0]];
+    const Vector3 v0 = vertices[c[1]] - a;
+    const Vector3 v1 = vertices[c[2]] - a;
     const Vector3 v2 = closest - a;
     const double  d00 = v0.dot(v0), d01 = v0.dot(v1), d11 = v1.dot(v1), d20 = v2.dot(v0), d21 = v2.dot(v1);
     const double  denominator = d00 * d11 - d01 * d01;
@@ -145,8 +128,6 @@ RigidContact::RigidContact(const ContactSurface & surface, std::vector<Index> sl
     }
     normal.normalize();
     tree.faceNormals.push_back(normal);
-    tree.triangles.emplace_back(Point(p[0].x(), p[0].y(), p[0].z()), Point(p[1].x(), p[1].y(), p[1].z()),
-                                Point(p[2].x(), p[2].y(), p[2].z()));
     for (int k = 0; k < 3; ++k)
     {
       const Vector3 e1 = (p[(k + 1) % 3] - p[k]).normalized();
@@ -156,11 +137,9 @@ RigidContact::RigidContact(const ContactSurface & surface, std::vector<Index> sl
       tree.edgeNormals.try_emplace(std::minmax(c[k], c[(k + 1) % 3]), Vector3::Zero()).first->second += normal;
     }
   }
-  tree.tree.insert(tree.triangles.begin(), tree.triangles.end());
-  tree.tree.build();
-  tree.tree.accelerate_distance_queries();
-  Vector3 unused;
-  tree.SignedDistance(surface.vertices.front(), unused); // builds lazy search structures before threads query
+  tree.vertices = surface.vertices;
+  tree.surface =
+    std::make_unique<TriangleSurfaceTree>(tree.vertices, tree.corners, "contact surface '" + surface.name + "'");
 
   for (const Index node : m_SlaveNodes)
   {

@@ -1,11 +1,7 @@
 #include "bmrSurfaceLoads.h"
+#include "bmrClosestPoint.h"
 
 #include <Eigen/Dense>
-
-#include <CGAL/AABB_traits.h>
-#include <CGAL/AABB_tree.h>
-#include <CGAL/AABB_triangle_primitive.h>
-#include <CGAL/Simple_cartesian.h>
 
 #include <algorithm>
 #include <cmath>
@@ -20,13 +16,6 @@ namespace bmr
 namespace
 {
 
-using Kernel = CGAL::Simple_cartesian<double>;
-using Point = Kernel::Point_3;
-using Triangle = Kernel::Triangle_3;
-using TriangleIterator = std::vector<Triangle>::const_iterator;
-using Primitive = CGAL::AABB_triangle_primitive<Kernel, TriangleIterator>;
-using AabbTree = CGAL::AABB_tree<CGAL::AABB_traits<Kernel, Primitive>>;
-
 constexpr std::size_t kListedInWarning = 20; // entries named in one warning before "... and N more"
 
 std::string
@@ -37,58 +26,6 @@ Describe(const Vector3 & v)
   text << "(" << v.x() << ", " << v.y() << ", " << v.z() << ")";
   return text.str();
 }
-
-// Closest points on a triangulated surface (CGAL's AABB tree). Zero-area
-// triangles are left out: they add no points and CGAL's projection onto
-// them is ill-defined.
-class ClosestPointQuery
-{
-public:
-  ClosestPointQuery(const std::vector<Vector3> & vertices, const std::vector<std::array<Index, 3>> & triangles,
-                    const std::string & surfaceName)
-  {
-    for (std::size_t t = 0; t < triangles.size(); ++t)
-    {
-      Vector3 p[3];
-      for (int k = 0; k < 3; ++k)
-      {
-        const Index v = triangles[t][k];
-        if (v < 0 || static_cast<std::size_t>(v) >= vertices.size())
-        {
-          throw Error(surfaceName + ": triangle " + std::to_string(t) + " refers to vertex " + std::to_string(v) +
-                      ", which does not exist (" + std::to_string(vertices.size()) + " vertices)");
-        }
-        p[k] = vertices[v];
-        if (!p[k].allFinite())
-        {
-          throw Error(surfaceName + ": vertex " + std::to_string(v) + " is not finite; fix the surface file");
-        }
-      }
-      if ((p[1] - p[0]).cross(p[2] - p[0]).norm() > 0.0)
-      {
-        m_Triangles.emplace_back(Point(p[0].x(), p[0].y(), p[0].z()), Point(p[1].x(), p[1].y(), p[1].z()),
-                                 Point(p[2].x(), p[2].y(), p[2].z()));
-      }
-    }
-    if (m_Triangles.empty())
-    {
-      throw Error(surfaceName + " has no triangle of non-zero area; give a triangulated surface");
-    }
-    m_Tree.insert(m_Triangles.begin(), m_Triangles.end());
-    m_Tree.build();
-    m_Tree.accelerate_distance_queries();
-  }
-
-  Vector3 Closest(const Vector3 & x) const
-  {
-    const Point c = m_Tree.closest_point(Point(x.x(), x.y(), x.z()));
-    return { c.x(), c.y(), c.z() };
-  }
-
-private:
-  std::vector<Triangle> m_Triangles;
-  AabbTree              m_Tree;
-};
 
 void
 ValidateExposedNodes(const Model & model, const std::vector<Index> & exposedNodes, const char * function)
@@ -176,7 +113,7 @@ DisplacementsFromSurface(const Model &               model,
   ValidateExposedNodes(model, exposedNodes, function);
   ValidateSettings(settings, function);
   const std::string surfaceName = "intraoperative surface '" + intraoperativeSurface.name + "'";
-  const ClosestPointQuery query(intraoperativeSurface.vertices, intraoperativeSurface.triangles, surfaceName);
+  const TriangleSurfaceTree surface(intraoperativeSurface.vertices, intraoperativeSurface.triangles, surfaceName);
 
   LoadReport             local;
   LoadReport &           out = report ? *report : local;
@@ -188,7 +125,7 @@ DisplacementsFromSurface(const Model &               model,
   for (const Index node : exposedNodes)
   {
     const Vector3 & x = model.nodes[node];
-    const Vector3   displacement = query.Closest(x) - x;
+    const Vector3   displacement = surface.Closest(x).point - x;
     const double    distance = displacement.norm();
     if (distance > settings.maxDistance)
     {
@@ -261,7 +198,7 @@ DisplacementsFromSparsePoints(const Model &                model,
   {
     throw Error(std::string(function) + ": the model has no boundary faces (no cells?); cannot place the points");
   }
-  const ClosestPointQuery query(model.nodes, boundary, "model boundary surface");
+  const TriangleSurfaceTree surface(model.nodes, boundary, "model boundary surface");
 
   LoadReport   local;
   LoadReport & out = report ? *report : local;
@@ -272,7 +209,7 @@ DisplacementsFromSparsePoints(const Model &                model,
   rejected.precision(4);
   for (std::size_t i = 0; i < points.size(); ++i)
   {
-    const double distance = (query.Closest(points[i]) - points[i]).norm();
+    const double distance = (surface.Closest(points[i]).point - points[i]).norm();
     if (distance > settings.maxDistance)
     {
       if (out.rejectedPoints < kListedInWarning)

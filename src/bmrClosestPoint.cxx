@@ -1,0 +1,88 @@
+#include "bmrClosestPoint.h"
+
+#include <CGAL/AABB_traits.h>
+#include <CGAL/AABB_tree.h>
+#include <CGAL/AABB_triangle_primitive.h>
+#include <CGAL/Simple_cartesian.h>
+
+namespace bmr
+{
+
+namespace
+{
+using Kernel = CGAL::Simple_cartesian<double>;
+using Point = Kernel::Point_3;
+using Triangle = Kernel::Triangle_3;
+using Primitive = CGAL::AABB_triangle_primitive<Kernel, std::vector<Triangle>::const_iterator>;
+using AabbTraits = CGAL::AABB_traits<Kernel, Primitive>;
+using AabbTree = CGAL::AABB_tree<AabbTraits>;
+
+Point
+ToPoint(const Vector3 & v)
+{
+  return { v.x(), v.y(), v.z() };
+}
+} // namespace
+
+struct TriangleSurfaceTree::Impl
+{
+  std::vector<Triangle> triangles;  // the tree's primitives point into this
+  std::vector<Index>    inputIndex; // input triangle of each primitive
+  AabbTree              tree;
+};
+
+TriangleSurfaceTree::TriangleSurfaceTree(const std::vector<Vector3> &              vertices,
+                                         const std::vector<std::array<Index, 3>> & triangles,
+                                         const std::string &                       surfaceName)
+{
+  auto impl = std::make_unique<Impl>();
+  for (std::size_t t = 0; t < triangles.size(); ++t)
+  {
+    Vector3 p[3];
+    for (int k = 0; k < 3; ++k)
+    {
+      const Index v = triangles[t][k];
+      if (v < 0 || static_cast<std::size_t>(v) >= vertices.size())
+      {
+        throw Error(surfaceName + ": triangle " + std::to_string(t) + " refers to vertex " + std::to_string(v) +
+                    ", which does not exist (" + std::to_string(vertices.size()) + " vertices)");
+      }
+      p[k] = vertices[v];
+      if (!p[k].allFinite())
+      {
+        throw Error(surfaceName + ": vertex " + std::to_string(v) + " is not finite; fix the surface file");
+      }
+    }
+    if ((p[1] - p[0]).cross(p[2] - p[0]).norm() > 0.0)
+    {
+      impl->triangles.emplace_back(ToPoint(p[0]), ToPoint(p[1]), ToPoint(p[2]));
+      impl->inputIndex.push_back(static_cast<Index>(t));
+    }
+  }
+  if (impl->triangles.empty())
+  {
+    throw Error(surfaceName + " has no triangle of non-zero area; give a triangulated surface");
+  }
+  impl->tree.insert(impl->triangles.begin(), impl->triangles.end());
+  impl->tree.build();
+  impl->tree.accelerate_distance_queries();
+  m_Impl = std::move(impl);
+  // CGAL 5.5 builds both structures above; one query makes sure that nothing
+  // lazy is left for concurrent queries to race on in other versions.
+  Closest(vertices[triangles[m_Impl->inputIndex.front()][0]]);
+}
+
+TriangleSurfaceTree::~TriangleSurfaceTree() = default;
+
+TriangleSurfaceTree::Hit
+TriangleSurfaceTree::Closest(const Vector3 & query) const
+{
+  const Point  q = ToPoint(query);
+  const auto   hit = m_Impl->tree.closest_point_and_primitive(q);
+  const auto   primitive = static_cast<std::size_t>(hit.second - m_Impl->triangles.begin());
+  // The kernel's squared distance, as AABB_tree::squared_distance computes it.
+  const double squaredDistance = AabbTraits().squared_distance_object()(q, hit.first);
+  return { Vector3(hit.first.x(), hit.first.y(), hit.first.z()), m_Impl->inputIndex[primitive], squaredDistance };
+}
+
+} // namespace bmr

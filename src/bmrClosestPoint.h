@@ -1,0 +1,51 @@
+// Closest points on a triangulated surface: the core's one CGAL AABB tree
+// (Simple_cartesian<double>), used by rigid contact, surface loads and the
+// brain/skull surfaces. CGAL stays in bmrClosestPoint.cxx (pimpl), so its
+// templates are compiled once. Private to the core.
+#ifndef bmrClosestPoint_h
+#define bmrClosestPoint_h
+
+#include "bmrModel.h"
+
+#include <array>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace bmr
+{
+
+class TriangleSurfaceTree
+{
+public:
+  struct Hit
+  {
+    Vector3 point;           // closest point of the surface (mm)
+    Index   triangle;        // its triangle: an index into the constructor's `triangles`
+    double  squaredDistance; // from the query to `point` (mm^2)
+  };
+
+  /** Builds the tree over `triangles` (vertex index triples into `vertices`,
+   *  mm). Zero-area triangles are left out: they add no points and CGAL's
+   *  projection onto them is ill-defined. Throws bmr::Error, starting with
+   *  `surfaceName`, if a triangle refers to a missing vertex, a vertex it uses
+   *  is not finite, or no triangle has non-zero area. */
+  TriangleSurfaceTree(const std::vector<Vector3> &              vertices,
+                      const std::vector<std::array<Index, 3>> & triangles,
+                      const std::string &                       surfaceName);
+  ~TriangleSurfaceTree();
+  TriangleSurfaceTree(const TriangleSurfaceTree &) = delete;
+  TriangleSurfaceTree & operator=(const TriangleSurfaceTree &) = delete;
+
+  /** Closest point of the surface to `query` (mm). Safe for concurrent
+   *  queries: every search structure is built by the constructor. */
+  Hit Closest(const Vector3 & query) const;
+
+private:
+  struct Impl;
+  std::unique_ptr<const Impl> m_Impl;
+};
+
+} // namespace bmr
+
+#endif
