@@ -377,7 +377,9 @@ struct MeasurementOptions
 
   bool Given() const { return !intraoperativeSurface.empty() || !sparseDisplacements.empty(); }
 
-  PrescribedDisplacement Displacements(const Model & model, const std::vector<Index> & exposed, LoadReport & report) const
+  /** `modelSurface`: the body's surface for a point cloud (no cells); null for a mesh. */
+  PrescribedDisplacement Displacements(const Model & model, const std::vector<Index> & exposed, LoadReport & report,
+                                       const ContactSurface * modelSurface = nullptr) const
   {
     if (!intraoperativeSurface.empty() && !sparseDisplacements.empty())
     {
@@ -390,7 +392,8 @@ struct MeasurementOptions
       return DisplacementsFromSurface(model, exposed, ReadSurface(intraoperativeSurface), settings, &report);
     }
     const SparseDisplacements sparse = ReadSparseDisplacements(sparseDisplacements);
-    return DisplacementsFromSparsePoints(model, exposed, sparse.points, sparse.displacements, settings, &report);
+    return DisplacementsFromSparsePoints(model, exposed, sparse.points, sparse.displacements, settings, &report,
+                                         modelSurface);
   }
 };
 
@@ -547,7 +550,10 @@ RunModel(const ModelOptions & options)
   PrescribedDisplacement load;
   if (options.measurements.Given())
   {
-    load = timer.Run("loads", [&] { return options.measurements.Displacements(model, exposed, loadReport); });
+    load = timer.Run("loads", [&] {
+      return options.measurements.Displacements(model, exposed, loadReport,
+                                                model.cells.empty() ? &surfaces.brain : nullptr);
+    });
     warnings.insert(warnings.end(), loadReport.warnings.begin(), loadReport.warnings.end());
     report["loads"] = LoadReportJson(loadReport);
   }
@@ -586,7 +592,11 @@ RunModel(const ModelOptions & options)
   {
     // A point cloud: each integration point carries its material.
     scene["discretization"] = "meshless";
-    scene["meshless"] = { { "integration_points", "integration-points.vtu" } };
+    // The shape functions the grid's coverage was checked with.
+    const MlsSettings & shapeFunctions = model.meshless.shapeFunctions;
+    scene["meshless"] = { { "integration_points", "integration-points.vtu" },
+                          { "dilatation", shapeFunctions.dilatation },
+                          { "basis", shapeFunctions.basis == MlsBasis::Linear ? "linear" : "modified_quadratic" } };
   }
   else
   {
@@ -596,6 +606,10 @@ RunModel(const ModelOptions & options)
   }
   scene["node_sets"] = { { "skull_base", { { "point_data", "skull_base" } } } };
   scene["fixed"] = json::array({ { { "node_set", "skull_base" } } });
+  if (!exposed.empty())
+  {
+    scene["node_sets"]["exposed"] = { { "point_data", "exposed" } };
+  }
   if (!load.nodes.empty())
   {
     scene["prescribed_displacements"] = json::array({ { { "csv", "exposed-displacements.csv" } } });
@@ -701,6 +715,7 @@ struct StepOptions
   MeasurementOptions measurements;
   double             skullGap = BrainSurfaceSettings{}.skullGap;
   std::string        skullOutput;
+  std::string        modelSurface;
   int                threads = 0;
 };
 
@@ -832,7 +847,13 @@ RunLoads(const StepOptions & options)
   }
   const std::vector<Index>     exposed = options.regions.ExposedNodes(model, surface);
   LoadReport                   report;
-  const PrescribedDisplacement load = options.measurements.Displacements(model, exposed, report);
+  ContactSurface               modelSurface;
+  if (!options.modelSurface.empty())
+  {
+    modelSurface = ReadSurface(options.modelSurface);
+  }
+  const PrescribedDisplacement load =
+    options.measurements.Displacements(model, exposed, report, options.modelSurface.empty() ? nullptr : &modelSurface);
   const fs::path               output(options.output);
   CreateFolder(output.has_parent_path() ? output.parent_path() : fs::path("."));
   WriteTextFileAtomically(output.string(), DisplacementCsv(load));
@@ -886,6 +907,8 @@ AddModelCommands(CLI::App & app)
     ->required();
   step->regions.Add(loads);
   step->measurements.Add(loads);
+  loads->add_option("--model-surface", step->modelSurface,
+                    "Surface of the body, for a meshless point cloud (no cells), e.g. from 'surfaces'");
 
   auto options = std::make_shared<ModelOptions>();
   CLI::App * model = app.add_subcommand(

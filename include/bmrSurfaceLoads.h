@@ -69,7 +69,8 @@ DisplacementsFromSurface(const Model &              model,
  *  affine part instead of failing.
  *
  *  Points farther than settings.maxDistance from the model's boundary surface
- *  (model.BoundaryTriangles()) are rejected with a warning naming the point's
+ *  (model.BoundaryTriangles(), or `modelSurface` when given: a meshless point
+ *  cloud has no cells, and its body's surface is given instead) are rejected with a warning naming the point's
  *  index, position and distance. With 1 to 3 kept points, the spline is not
  *  determined: the mean of their displacements is applied to every exposed
  *  node (a rigid translation) with a warning.
@@ -83,7 +84,8 @@ DisplacementsFromSparsePoints(const Model &                model,
                               const std::vector<Vector3> & points,
                               const std::vector<Vector3> & displacements,
                               const SurfaceLoadSettings &  settings = SurfaceLoadSettings{},
-                              LoadReport *                 report = nullptr);
+                              LoadReport *                 report = nullptr,
+                              const ContactSurface *       modelSurface = nullptr);
 
 struct SparseDisplacements
 {

@@ -87,10 +87,14 @@ def main():
                 for step in step_times:
                     if step in report["seconds"]:
                         step_times[step].append(report["seconds"][step])
-            solve_seconds, status = run([arguments.biomech, "solve", os.path.join(output, "scene.json"), "-d", output,
-                                         "--quiet"], environment)
-            with open(os.path.join(output, "brain-report.json")) as stream:
-                solve = json.load(stream)
+            if kind == "meshless":
+                # Not solved: the meshless Colin27 scene fails (docs/model-building.md, "Limits").
+                solve_seconds, status, solve = float("nan"), -1, {}
+            else:
+                solve_seconds, status = run([arguments.biomech, "solve", os.path.join(output, "scene.json"), "-d",
+                                             output, "--quiet"], environment)
+                with open(os.path.join(output, "brain-report.json")) as stream:
+                    solve = json.load(stream)
             rows.append({"kind": kind, "size": size, "mask": "given" if with_mask else "atlas (Colin27 to itself)",
                          "rounds": rounds, "steps": {k: statistics.median(v) for k, v in step_times.items() if v},
                          "wall": statistics.median(wall), "grid": report["grid"], "solve": solve,
@@ -106,7 +110,7 @@ def main():
                  "`biomech model` on Colin27 (`ch2.nii.gz`, 181 x 217 x 181 voxels of 1 mm) with `ch2bet.nii.gz` "
                  "as the mask (or, last row, a mask from atlas skull stripping), a 30 mm superior craniotomy, and "
                  "the 61 sparse displacements of `examples/data/colin27-superior-craniotomy.csv` (5 mm sag); then "
-                 "`biomech solve` of the scene it writes (dynamic relaxation to 0.001 mm, skull contact).")
+                 "`biomech solve` of the scene it writes (dynamic relaxation to 0.01 mm, skull contact).")
     lines.append("")
     lines.append("Machine: %s, %d cores, load average %.2f before and %.2f after; median of %d rounds "
                  "(the skull-stripping row: 1 round); OMP_WAIT_POLICY=%s." %
@@ -123,6 +127,13 @@ def main():
         budget = sum(steps.get(step, 0.0) for step in ("classify", "grid", "surfaces"))
         solve = row["solve"]
         error = solve.get("estimated_error_mm")
+        if not solve:
+            lines.append("| %s | %g | %s | %s | %+.2f%% | %s | **%.2f s** | %.2f s | not solved (see docs/model-building.md) | | |" % (
+                row["kind"], row["size"], row["mask"], format(row["grid"]["dofs"], ","),
+                100.0 * row["grid"]["volume_error"],
+                " | ".join("%.2f" % steps[step] if step in steps else "-" for step in STEPS),
+                budget, steps.get("total", row["wall"])))
+            continue
         lines.append("| %s | %g | %s | %s | %+.2f%% | %s | **%.2f s** | %.2f s | %.2f s%s | %s | %s |" % (
             row["kind"], row["size"], row["mask"], format(row["grid"]["dofs"], ","),
             100.0 * row["grid"]["volume_error"],

@@ -170,7 +170,8 @@ DisplacementsFromSparsePoints(const Model &                model,
                               const std::vector<Vector3> & points,
                               const std::vector<Vector3> & displacements,
                               const SurfaceLoadSettings &  settings,
-                              LoadReport *                 report)
+                              LoadReport *                 report,
+                              const ContactSurface *       modelSurface)
 {
   const char * function = "DisplacementsFromSparsePoints";
   ValidateExposedNodes(model, exposedNodes, function);
@@ -193,12 +194,14 @@ DisplacementsFromSparsePoints(const Model &                model,
                   " mm has a NaN or infinite value; remove or fix it");
     }
   }
-  const auto boundary = model.BoundaryTriangles();
+  const auto boundary = modelSurface ? modelSurface->triangles : model.BoundaryTriangles();
   if (boundary.empty())
   {
-    throw Error(std::string(function) + ": the model has no boundary faces (no cells?); cannot place the points");
+    throw Error(std::string(function) + ": the model has no boundary faces (a point cloud has no cells): give the "
+                                        "model's surface (e.g. the brain surface) to measure the points' distance to");
   }
-  const TriangleSurfaceTree surface(model.nodes, boundary, "model boundary surface");
+  const TriangleSurfaceTree surface(modelSurface ? modelSurface->vertices : model.nodes, boundary,
+                                    "model boundary surface");
 
   LoadReport   local;
   LoadReport & out = report ? *report : local;

@@ -229,18 +229,31 @@ TEST_F(ModelCommandTest, Colin27GivesASolvableModelLoadedBySparseDisplacements)
 TEST_F(ModelCommandTest, EveryGridKindGivesAParsableScene)
 {
   WriteSyntheticHead();
+  std::ofstream csv(m_Folder / "points.csv");
+  csv << "x,y,z,ux,uy,uz\n0,0,18,0,0,-2\n5,0,17.3,0,0,-2\n0,5,17.3,0,0,-2\n-5,0,17.3,0,0,-2\n0,-5,17.3,0,0,-2\n";
+  csv.close();
   for (const std::string kind : { "hexahedra", "tetrahedra", "mixed", "meshless" })
   {
     const fs::path      output = m_Folder / kind;
     const CommandResult run = Biomech("model " + Quoted(m_Folder / "head.nii.gz") + " --mask " +
                                       Quoted(m_Folder / "mask.nii.gz") + " --grid " + kind +
                                       " --element-size 4 --craniotomy-centre 0 0 18 --craniotomy-radius 10"
+                                      " --sparse-displacements " + Quoted(m_Folder / "points.csv") +
                                       " --gravity 0 0 -9810 --quiet -o " + Quoted(output));
     ASSERT_EQ(run.exitCode, 0) << kind << ": " << run.err;
     const bmr::Scene scene = bmr::ReadScene((output / "scene.json").string());
     EXPECT_EQ(scene.model.discretization == bmr::Discretization::Meshless, kind == "meshless") << kind;
     EXPECT_EQ(fs::exists(output / "integration-points.vtu"), kind == "meshless") << kind;
     EXPECT_EQ(scene.model.bodyAcceleration, bmr::Vector3(0, 0, -9810)) << kind;
+    // A uniform measured displacement loads every exposed node with it (a
+    // point cloud measures the points' distance to the brain surface instead
+    // of its cells' boundary).
+    ASSERT_EQ(scene.model.prescribedDisplacements.size(), 1u) << kind;
+    EXPECT_EQ(scene.model.prescribedDisplacements[0].nodes, scene.model.NodeSet("exposed")) << kind;
+    for (const bmr::Vector3 & u : scene.model.prescribedDisplacements[0].displacements)
+    {
+      EXPECT_LT((u - bmr::Vector3(0, 0, -2)).norm(), 1e-8) << kind;
+    }
     ASSERT_EQ(scene.model.contactSurfaces.size(), 1u) << kind;
     // Materials mix the three classes: CSF (10 Pa) at the centre, parenchyma (3000 Pa) elsewhere.
     double softest = std::numeric_limits<double>::max();
