@@ -456,6 +456,7 @@ struct ModelOptions
   RegionOptions      regions;
   MeasurementOptions measurements;
   double             skullGap = BrainSurfaceSettings{}.skullGap;
+  std::string        skullSurface;
   bool               noContact = false;
   std::vector<double> gravity;
   int                threads = 0;
@@ -520,17 +521,27 @@ RunModel(const ModelOptions & options)
 
   timer.Run("materials", [&] {
     MaterialMappingSettings settings;
-    MapMaterialsFromMemberships(model, classification.memberships, settings, tumour.values.empty() ? nullptr : &tumour);
+    MapMaterialsFromMemberships(model, classification.memberships, settings, tumour.values.empty() ? nullptr : &tumour,
+                                &warnings);
   });
 
   // The skull is the boundary of the body dilated by the gap. For finite
   // elements the body is the model's cells, not the mask: the corners of a
   // staircase hexahedral grid stick out of the mask by up to half a cell and
   // would start inside a skull made from the mask.
-  const BrainSurfaces surfaces = timer.Run("surfaces", [&] {
+  BrainSurfaces surfaces = timer.Run("surfaces", [&] {
     const bool meshlessGrid = model.cells.empty();
     return MakeSurfaces(meshlessGrid ? mask : RasterizeCells(model, mask.geometry), options.skullGap, warnings);
   });
+  if (!options.skullSurface.empty())
+  {
+    // The user's skull (e.g. segmented from CT) replaces the dilated body as the contact master.
+    const std::string name = surfaces.skull.name;
+    surfaces.skull = ReadSurface(options.skullSurface);
+    surfaces.skull.name = name;
+    surfaces.skull.bodySide = ContactSurface::Side::Inside;
+    report["skull_surface"] = options.skullSurface;
+  }
 
   const std::vector<Index> & surfaceNodes = model.NodeSet("surface");
   model.nodeSets["skull_base"] = options.regions.FixedNodes(model, surfaceNodes);
@@ -584,9 +595,10 @@ RunModel(const ModelOptions & options)
   // The scene `biomech solve` runs.
   const bool meshless = model.discretization == Discretization::Meshless;
   json       scene;
-  scene["description"] = "Brain model of " + fs::path(options.image).filename().string() + " made by biomech model (" +
-                         ImageGridKindName(options.grid.Settings(0).kind) + ", " + std::to_string(options.grid.elementSize) +
-                         " mm)";
+  std::ostringstream description;
+  description << "Brain model of " << fs::path(options.image).filename().string() << " made by biomech model ("
+              << ImageGridKindName(options.grid.Settings(0).kind) << ", " << options.grid.elementSize << " mm)";
+  scene["description"] = description.str();
   scene["mesh"] = "model.vtu";
   if (meshless)
   {
@@ -634,7 +646,6 @@ RunModel(const ModelOptions & options)
   scene["solver"] = { { "integrator", "dynamic_relaxation" }, { "tolerance", 0.01 } };
   scene["output"] = { { "vtu", "brain-result.vtu" }, { "report", "brain-report.json" } };
 
-  // Check that the scene parses before writing anything.
   const ModelCounts counts = CountModel(model);
   report["grid"] = { { "kind", ImageGridKindName(options.grid.Settings(0).kind) },
                      { "element_size_mm", options.grid.elementSize },
@@ -653,6 +664,10 @@ RunModel(const ModelOptions & options)
 
   timer.Run("write", [&] {
     CreateFolder(outputDirectory);
+    // An earlier run's scene must not pass for this run's while its files are replaced.
+    std::error_code ignored;
+    fs::remove(outputDirectory / "scene.json", ignored);
+    fs::remove(outputDirectory / "model-report.json", ignored);
     WriteMesh((outputDirectory / "model.vtu").string(), model);
     if (meshless)
     {
@@ -673,6 +688,7 @@ RunModel(const ModelOptions & options)
       WriteImageAtomically(itk::MakeImageFromBiomechanicalVolume<MaskImageType>(mask).GetPointer(),
                            outputDirectory / "brain-mask.nii.gz");
     }
+    // Last: a folder whose writing failed part way has no scene to run.
     WriteTextFileAtomically((outputDirectory / "scene.json").string(), scene.dump(2) + "\n");
   });
   report["seconds"] = timer.Json();
@@ -925,6 +941,8 @@ AddModelCommands(CLI::App & app)
   options->measurements.Add(model);
   model->add_option("--skull-gap", options->skullGap, "Gap between the brain surface and the rigid skull (mm)")
     ->capture_default_str();
+  model->add_option("--skull-surface", options->skullSurface,
+                    "Rigid skull surface (.stl, .obj, .vtp, .vtk) to use instead of the body dilated by --skull-gap");
   model->add_flag("--no-contact", options->noContact, "No brain-skull contact");
   model->add_option("--gravity", options->gravity, "Body acceleration X Y Z (mm/s^2), e.g. 0 0 -9810")->expected(3);
   model->add_option("--threads", options->threads, "Worker threads (0: all)")->check(CLI::Range(0, 4096));

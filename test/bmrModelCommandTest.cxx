@@ -315,6 +315,17 @@ TEST_F(ModelCommandTest, StepsRunOneAtATime)
   {
     EXPECT_NEAR(vertex.norm(), 20.0, 0.6); // the 18 mm ball's boundary lies at 18 mm +- half a voxel, plus 2 mm
   }
+
+  // A user-supplied skull replaces the computed one as the scene's contact surface.
+  const CommandResult model = Biomech("model " + Quoted(m_Folder / "head.nii.gz") + " --mask " +
+                                      Quoted(m_Folder / "mask.nii.gz") + " --skull-surface " +
+                                      Quoted(m_Folder / "skull.stl") + " --gravity 0 0 -9810 --quiet -o " +
+                                      Quoted(m_Folder / "model"));
+  ASSERT_EQ(model.exitCode, 0) << model.err;
+  const bmr::Scene scene = bmr::ReadScene((m_Folder / "model" / "scene.json").string());
+  ASSERT_EQ(scene.model.contactSurfaces.size(), 1u);
+  EXPECT_EQ(scene.model.contactSurfaces[0].triangles.size(), skull.triangles.size());
+  EXPECT_EQ(scene.model.contactSurfaces[0].vertices.size(), skull.vertices.size());
 }
 
 TEST_F(ModelCommandTest, BadInputsExitOneNameTheProblemAndWriteNothing)
