@@ -190,6 +190,10 @@ struct Model
   std::vector<std::array<Index, 3>> BoundaryTriangles() const;
 };
 
+/** "(x, y, z)" with 6 significant digits, for messages that name a position. */
+std::string
+FormatPoint(const Vector3 & point);
+
 /** Signed volume of a cell in the reference configuration (mm^3). Negative for
  *  an inverted cell. Hexahedra: exact trilinear volume. */
 double

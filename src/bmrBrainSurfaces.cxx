@@ -39,15 +39,6 @@ namespace bmr
 namespace
 {
 
-std::string
-Describe(const Vector3 & v)
-{
-  std::ostringstream text;
-  text.precision(6);
-  text << "(" << v.x() << ", " << v.y() << ", " << v.z() << ")";
-  return text.str();
-}
-
 ContactSurface
 ToContactSurface(vtkPolyData * polyData, const std::string & name)
 {
@@ -498,7 +489,7 @@ SurfaceNodesInSphere(const Model & model, const std::vector<Index> & surfaceNode
   ValidateSurfaceNodes(model, surfaceNodes, "SurfaceNodesInSphere");
   if (!centre.allFinite() || !std::isfinite(radius) || !(radius > 0.0))
   {
-    throw Error("region sphere (centre " + Describe(centre) + " mm, radius " + std::to_string(radius) +
+    throw Error("region sphere (centre " + FormatPoint(centre) + " mm, radius " + std::to_string(radius) +
                 " mm): the centre must be finite and the radius positive");
   }
   std::vector<Index> selected;
@@ -515,7 +506,7 @@ SurfaceNodesInSphere(const Model & model, const std::vector<Index> & surfaceNode
   if (selected.empty())
   {
     std::ostringstream message;
-    message << "region sphere (centre " << Describe(centre) << " mm, radius " << radius
+    message << "region sphere (centre " << FormatPoint(centre) << " mm, radius " << radius
             << " mm) selects no surface node: the nearest surface node is " << nearest
             << " mm from its centre. Move the centre onto the brain surface or use a radius of at least "
             << std::ceil(nearest + 1.0) << " mm";
@@ -637,7 +628,7 @@ SkullBaseNodes(const Model & model, const std::vector<Index> & surfaceNodes, con
   const double length = settings.superior.norm();
   if (!(length > 0.0) || !std::isfinite(length))
   {
-    throw Error("skull base region: the superior direction " + Describe(settings.superior) + " must be a non-zero vector");
+    throw Error("skull base region: the superior direction " + FormatPoint(settings.superior) + " must be a non-zero vector");
   }
   const Vector3 up = settings.superior / length;
   double        lowest = std::numeric_limits<double>::infinity();

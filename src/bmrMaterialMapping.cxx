@@ -186,7 +186,7 @@ public:
       text << "integration point " << site - CellCount();
     }
     const Vector3 centre = Centre(site);
-    text << " (centre (" << centre.x() << ", " << centre.y() << ", " << centre.z() << ") mm)";
+    text << " (centre " << FormatPoint(centre) << " mm)";
     return text.str();
   }
 

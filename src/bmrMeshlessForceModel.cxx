@@ -64,8 +64,8 @@ MeshlessForceModel::MeshlessForceModel(const Model & model, ShapeFunctionTable s
     {
       std::ostringstream message;
       const Vector3 &    x = model.nodes[n];
-      message << "meshless model: node " << n << " at (" << x.x() << ", " << x.y() << ", " << x.z()
-              << ") mm lies in the support of no integration point, so it has neither mass nor stiffness. "
+      message << "meshless model: node " << n << " at " << FormatPoint(x)
+              << " mm lies in the support of no integration point, so it has neither mass nor stiffness. "
                  "Use smaller background cells or more integration points per cell, increase the dilatation, "
                  "or remove the node if it lies outside the body.";
       throw Error(message.str());
@@ -230,7 +230,7 @@ MeshlessForceModel::Describe(Index point) const
 {
   std::ostringstream text;
   const Vector3 &    x = m_Positions[point];
-  text << "integration point " << point << " at (" << x.x() << ", " << x.y() << ", " << x.z() << ") mm";
+  text << "integration point " << point << " at " << FormatPoint(x) << " mm";
   return text.str();
 }
 

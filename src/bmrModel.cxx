@@ -482,4 +482,13 @@ Model::BoundaryTriangles() const
   return triangles;
 }
 
+std::string
+FormatPoint(const Vector3 & point)
+{
+  std::ostringstream text;
+  text.precision(6);
+  text << "(" << point.x() << ", " << point.y() << ", " << point.z() << ")";
+  return text.str();
+}
+
 } // namespace bmr

@@ -57,14 +57,6 @@ constexpr int kLeafSize = 16;
 constexpr Index kPointsPerBlock = 256;
 
 std::string
-FormatPoint(const Vector3 & x)
-{
-  char buffer[96];
-  std::snprintf(buffer, sizeof(buffer), "(%.6g, %.6g, %.6g)", x.x(), x.y(), x.z());
-  return buffer;
-}
-
-std::string
 FormatNumber(double value)
 {
   char buffer[32];

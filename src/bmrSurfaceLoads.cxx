@@ -18,15 +18,6 @@ namespace
 
 constexpr std::size_t kListedInWarning = 20; // entries named in one warning before "... and N more"
 
-std::string
-Describe(const Vector3 & v)
-{
-  std::ostringstream text;
-  text.precision(6);
-  text << "(" << v.x() << ", " << v.y() << ", " << v.z() << ")";
-  return text.str();
-}
-
 void
 ValidateExposedNodes(const Model & model, const std::vector<Index> & exposedNodes, const char * function)
 {
@@ -189,8 +180,8 @@ DisplacementsFromSparsePoints(const Model &                model,
   {
     if (!points[i].allFinite() || !displacements[i].allFinite())
     {
-      throw Error(std::string(function) + ": measurement point " + std::to_string(i) + " at " + Describe(points[i]) +
-                  " mm with displacement " + Describe(displacements[i]) +
+      throw Error(std::string(function) + ": measurement point " + std::to_string(i) + " at " + FormatPoint(points[i]) +
+                  " mm with displacement " + FormatPoint(displacements[i]) +
                   " mm has a NaN or infinite value; remove or fix it");
     }
   }
@@ -217,7 +208,7 @@ DisplacementsFromSparsePoints(const Model &                model,
     {
       if (out.rejectedPoints < kListedInWarning)
       {
-        rejected << (out.rejectedPoints > 0 ? ", " : "") << "point " << i << " at " << Describe(points[i]) << " mm ("
+        rejected << (out.rejectedPoints > 0 ? ", " : "") << "point " << i << " at " << FormatPoint(points[i]) << " mm ("
                  << distance << " mm)";
       }
       ++out.rejectedPoints;
@@ -276,7 +267,7 @@ DisplacementsFromSparsePoints(const Model &                model,
     mean /= static_cast<double>(n);
     out.warnings.push_back(std::string(function) + ": only " + std::to_string(n) +
                            " distinct measurement point(s) kept; every exposed node gets their mean displacement " +
-                           Describe(mean) + " mm (a translation). Give 4 or more points to interpolate a field");
+                           FormatPoint(mean) + " mm (a translation). Give 4 or more points to interpolate a field");
     std::fill(load.displacements.begin(), load.displacements.end(), mean);
     return load;
   }
