@@ -525,13 +525,15 @@ RunModel(const ModelOptions & options)
                                 &warnings);
   });
 
-  // The skull is the boundary of the body dilated by the gap. For finite
-  // elements the body is the model's cells, not the mask: the corners of a
-  // staircase hexahedral grid stick out of the mask by up to half a cell and
-  // would start inside a skull made from the mask.
+  // The skull is the boundary of the body dilated by the gap, and the body is
+  // the model's cells (for a point cloud, the tetrahedra its integration points
+  // cover), not the mask: the corners of a staircase hexahedral grid stick out
+  // of the mask by up to half a cell, and a meshless cloud's surface nodes
+  // partly lie outside a skull made from the mask (an integration point
+  // inverted at step 2 under 0.1 g).
   BrainSurfaces surfaces = timer.Run("surfaces", [&] {
-    const bool meshlessGrid = model.cells.empty();
-    return MakeSurfaces(meshlessGrid ? mask : RasterizeCells(model, mask.geometry), options.skullGap, warnings);
+    const Model & body = model.cells.empty() ? grid.meshlessBody : model;
+    return MakeSurfaces(RasterizeCells(body, mask.geometry), options.skullGap, warnings);
   });
   if (!options.skullSurface.empty())
   {

@@ -117,6 +117,10 @@ struct ImageGrid
    *  (tetrahedra). Empty for a meshless grid. */
   std::vector<int> cellLabels;
   GridQuality      quality;
+  /** Meshless only: the tetrahedral mesh whose region the integration points
+   *  cover (its boundary vertices are the cloud's surface nodes). Surfaces
+   *  that must enclose the body, such as the skull, are made from it. */
+  Model            meshlessBody;
 };
 
 /** Builds the grid of the body given by `labels` (0 = outside, > 0 = tissue

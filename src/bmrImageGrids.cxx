@@ -1047,6 +1047,8 @@ MakeMeshlessGrid(const Body & body, const ImageGridSettings & settings, std::vec
                 " Increase meshlessShapeFunctions.dilatation (now " + Number(mlsSettings.dilatation) +
                 ") or use a smaller element size.");
   }
+  // The tetrahedra stay with the grid as the body's description (surfaces, rasterisation).
+  result.meshlessBody = tetrahedra.model;
   return result;
 }
 
