@@ -21,10 +21,16 @@ itk_module(BiomechanicalRegistration
     ITKRegistrationMethodsv4
     ITKOptimizersv4
     ITKMetricsv4
+    ITKImageFeature
+    ITKImageCompose
+    ITKIOTransformBase
   TEST_DEPENDS
     ITKTestKernel
     ITKIONIFTI
     ITKIOMeta
+    ITKIOPNG
+    ITKIOTransformHDF5
+    ITKIOTransformInsightLegacy
   DESCRIPTION
     "${DOCUMENTATION}"
   EXCLUDE_FROM_DEFAULT

@@ -5,10 +5,14 @@
 //   biomech model IMAGE [--mask M] [--craniotomy-centre X Y Z --craniotomy-radius R]
 //                 [--intraoperative-surface S | --sparse-displacements CSV] -o DIR
 //   biomech classify | mask | grid | surfaces | loads   (the model's steps one at a time)
+//   biomech fit-transform | warp | evaluate | bspline-register   (transform, warp, accuracy, baseline)
 //
 // Exit status: 0 success (solve converged), 2 solve finished but did not
 // converge (results written, report says so), 1 any error (nothing written).
+#include "bmrCommandSupport.h"
+
 #include "bmrMeshGenerators.h"
+#include "bmrImageCommands.h"
 #include "bmrModelCommands.h"
 #include "bmrMeshIO.h"
 #include "bmrScene.h"
@@ -110,18 +114,6 @@ RemoveIfExists(const fs::path & path)
   fs::remove(path, ignored);
 }
 
-void
-CreateParentFolder(const fs::path & path)
-{
-  std::error_code error;
-  const fs::path  folder = path.has_parent_path() ? path.parent_path() : fs::path(".");
-  fs::create_directories(folder, error);
-  if (error || !fs::is_directory(folder))
-  {
-    throw bmr::Error("cannot create output folder '" + folder.string() + "': " + error.message());
-  }
-}
-
 int
 RunSolve(const SolveOptions & options)
 {
@@ -137,8 +129,8 @@ RunSolve(const SolveOptions & options)
   // A result left from an earlier run must not pass for this run's result.
   RemoveIfExists(vtuPath);
   RemoveIfExists(reportPath);
-  CreateParentFolder(vtuPath);
-  CreateParentFolder(reportPath);
+  bmr::app::CreateParentFolder(vtuPath);
+  bmr::app::CreateParentFolder(reportPath);
 
   bmr::SolveResult result;
   {
@@ -286,7 +278,10 @@ main(int argc, char ** argv)
     ->capture_default_str();
   makeMesh->add_option("-o,--output", makeMeshOptions.outputPath, "Output mesh (.vtu or .vtk)")->required();
 
-  const std::function<int()> runModelCommand = bmr::app::AddModelCommands(app);
+  const std::vector<std::function<int()>> runOtherCommands = { bmr::app::AddModelCommands(app),
+                                                                bmr::app::AddTransformCommands(app),
+                                                                bmr::app::AddEvaluateCommand(app),
+                                                                bmr::app::AddBSplineRegisterCommand(app) };
 
   try
   {
@@ -313,7 +308,14 @@ main(int argc, char ** argv)
     {
       return RunMakeMesh(makeMeshOptions);
     }
-    return runModelCommand();
+    for (const auto & run : runOtherCommands)
+    {
+      if (const int status = run(); status >= 0)
+      {
+        return status;
+      }
+    }
+    throw bmr::Error("no subcommand ran");
   }
   catch (const std::exception & error)
   {

@@ -4,8 +4,8 @@
 #include "itkAtlasBrainMaskImageFilter.h"
 #include "itkBiomechanicalImageConversion.h"
 #include "itkBrainSurfaceMeshSource.h"
-#include "itkImageFileReader.h"
-#include "itkImageFileWriter.h"
+
+#include "bmrCommandSupport.h"
 
 #include "bmrBrainSurfaces.h"
 #include "bmrFuzzyCMeans.h"
@@ -43,85 +43,6 @@ using MembershipImageType = itk::VectorImage<float, 3>;
 const char * const DefaultAtlas = "/usr/share/mricron/templates/ch2.nii.gz";
 const char * const DefaultAtlasMask = "/usr/share/mricron/templates/ch2bet.nii.gz";
 
-/** Wall time of the steps of a command, for the report and the printed table. */
-class StepTimer
-{
-public:
-  explicit StepTimer(bool verbose)
-    : m_Verbose(verbose)
-  {}
-
-  /** Runs `step`, records its time and, when verbose, says what runs on stderr. */
-  template <typename Step>
-  auto Run(const std::string & name, Step && step)
-  {
-    if (m_Verbose)
-    {
-      std::fprintf(stderr, "  %-14s ...", name.c_str());
-      std::fflush(stderr);
-    }
-    const auto start = std::chrono::steady_clock::now();
-    auto       finish = [&] {
-      const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-      m_Seconds.emplace_back(name, seconds);
-      if (m_Verbose)
-      {
-        std::fprintf(stderr, " %.2f s\n", seconds);
-      }
-    };
-    if constexpr (std::is_void_v<decltype(step())>)
-    {
-      step();
-      finish();
-    }
-    else
-    {
-      auto result = step();
-      finish();
-      return result;
-    }
-  }
-
-  json Json() const
-  {
-    json   times = json::object();
-    double total = 0.0;
-    for (const auto & [name, seconds] : m_Seconds)
-    {
-      times[name] = seconds;
-      total += seconds;
-    }
-    times["total"] = total;
-    return times;
-  }
-
-private:
-  bool                                          m_Verbose;
-  std::vector<std::pair<std::string, double>>   m_Seconds;
-};
-
-template <typename TImage>
-typename TImage::Pointer
-ReadImage(const std::string & path, const std::string & what)
-{
-  std::error_code error;
-  if (!fs::is_regular_file(path, error))
-  {
-    throw Error("cannot read " + what + " '" + path + "': no such file");
-  }
-  auto reader = itk::ImageFileReader<TImage>::New();
-  reader->SetFileName(path);
-  try
-  {
-    reader->Update();
-  }
-  catch (const itk::ExceptionObject & exception)
-  {
-    throw Error("cannot read " + what + " '" + path + "': " + exception.GetDescription());
-  }
-  return reader->GetOutput();
-}
-
 /** A mask file as a core volume: every voxel > 0 is inside (so a brain-extracted
  *  image such as ch2bet.nii.gz works as a mask). Must lie on `grid` when given. */
 LabelVolume
@@ -144,34 +65,6 @@ ReadMaskVolume(const std::string & path, const std::string & what, const ImageGe
   return mask;
 }
 
-/** Writes an ITK image through a temporary file in the same folder and a rename. */
-template <typename TImage>
-void
-WriteImageAtomically(const TImage * image, const fs::path & path)
-{
-  const fs::path temporary = path.parent_path() / (".tmp-" + std::to_string(::getpid()) + "-" + path.filename().string());
-  auto           writer = itk::ImageFileWriter<TImage>::New();
-  writer->SetInput(image);
-  writer->SetFileName(temporary.string());
-  writer->UseCompressionOn();
-  std::error_code ignored;
-  try
-  {
-    writer->Update();
-  }
-  catch (const itk::ExceptionObject & exception)
-  {
-    fs::remove(temporary, ignored);
-    throw Error("cannot write image '" + path.string() + "': " + exception.GetDescription());
-  }
-  fs::rename(temporary, path, ignored);
-  if (ignored)
-  {
-    fs::remove(temporary, ignored);
-    throw Error("cannot write image '" + path.string() + "': renaming the temporary file failed");
-  }
-}
-
 MembershipImageType::Pointer
 MakeMembershipImage(const ScalarVolume & memberships)
 {
@@ -181,17 +74,6 @@ MakeMembershipImage(const ScalarVolume & memberships)
   image->Allocate();
   std::copy(memberships.values.begin(), memberships.values.end(), image->GetBufferPointer());
   return image;
-}
-
-void
-CreateFolder(const fs::path & folder)
-{
-  std::error_code error;
-  fs::create_directories(folder, error);
-  if (error || !fs::is_directory(folder))
-  {
-    throw Error("cannot create output folder '" + folder.string() + "'" + (error ? ": " + error.message() : ""));
-  }
 }
 
 Vector3
