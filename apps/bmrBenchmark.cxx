@@ -16,6 +16,7 @@
 // child modes also serve to reproduce or profile one case:
 //   bmrBenchmark --child brain hex|tet|mtled THREADS SPACING STEPS REPEATS
 //   bmrBenchmark --child indentation hex|tet DIVISIONS THREADS TOLERANCE POISSON [HOURGLASS]
+#include "bmrBenchmarkSupport.h"
 #include "bmrCalculix.h"
 #include "bmrMeshGenerators.h"
 #include "bmrMeshless.h"
@@ -62,6 +63,9 @@ namespace
 
 using bmr::Index;
 using bmr::Vector3;
+using bmr::benchmark::CpuModel;
+using bmr::benchmark::LoadAverage;
+using bmr::benchmark::ReadTextFile;
 using Json = nlohmann::json;
 using Clock = std::chrono::steady_clock;
 
@@ -125,40 +129,6 @@ Sci(double value, int digits = 2)
   std::ostringstream text;
   text << std::scientific << std::setprecision(digits) << value;
   return text.str();
-}
-
-std::string
-ReadTextFile(const std::string & path)
-{
-  std::ifstream stream(path);
-  std::ostringstream text;
-  text << stream.rdbuf();
-  return text.str();
-}
-
-std::string
-CpuModel()
-{
-  std::istringstream cpuinfo(ReadTextFile("/proc/cpuinfo"));
-  std::string        line;
-  while (std::getline(cpuinfo, line))
-  {
-    if (line.rfind("model name", 0) == 0)
-    {
-      const auto colon = line.find(':');
-      return colon == std::string::npos ? line : line.substr(colon + 2);
-    }
-  }
-  return "unknown";
-}
-
-std::string
-LoadAverage()
-{
-  std::istringstream loadavg(ReadTextFile("/proc/loadavg"));
-  std::string        one, five, fifteen;
-  loadavg >> one >> five >> fifteen;
-  return one + " " + five + " " + fifteen;
 }
 
 // ---------------------------------------------------------------------------
@@ -1344,7 +1314,10 @@ Driver(const Options & options, const std::string & self)
   }
   report << md.str();
   std::cout << report.str();
-  WriteAtomically(options.output, report.str());
+  // The image benchmark's section (bmrImageBenchmark) is kept as it is.
+  const std::string imageSection = bmr::benchmark::ImageSection(ReadTextFile(options.output));
+  WriteAtomically(options.output, imageSection.empty() ? report.str()
+                                                       : bmr::benchmark::WithImageSection(report.str(), imageSection));
   log("wrote " + options.output);
   return 0;
 }

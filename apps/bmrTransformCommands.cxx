@@ -45,7 +45,7 @@ struct FitTransformOptions
   std::string fieldOutput;
   std::string report;
   double      tolerance = 0.1;
-  double      minimumSpacing = 2.0;
+  double      minimumSpacing = 1.0;
   bool        rejectOutside = false;
   bool        quiet = false;
 };

@@ -3,12 +3,7 @@
 
 #include "itkDisplacementPointSetToBSplineTransformFilter.h"
 
-#include "itkBSplineControlPointImageFilter.h"
-#include "itkBSplineScatteredDataPointSetToImageFilter.h"
-#include "itkImageRegionConstIterator.h"
-#include "itkImageRegionIterator.h"
 #include "itkMultiThreaderBase.h"
-#include "itkRegionOfInterestImageFilter.h"
 
 #include <algorithm>
 #include <cmath>
@@ -173,7 +168,6 @@ DisplacementPointSetToBSplineTransformFilter<TPointSet>::MakeDomain(const std::v
   {
     first[d] = static_cast<IndexValueType>(low[d]);
     domain.size[d] = static_cast<SizeValueType>(high[d] - low[d]) + 1;
-    domain.offsetInReference[d] = first[d] - region.GetIndex()[d];
   }
   reference->TransformIndexToPhysicalPoint(first, domain.origin);
   return domain;
@@ -184,269 +178,78 @@ auto
 DisplacementPointSetToBSplineTransformFilter<TPointSet>::Fit(const std::vector<PointType> &  points,
                                                              const std::vector<VectorType> & values,
                                                              const Domain &                  domain,
-                                                             BSplineFitReport &              report,
-                                                             float                           progressStart,
-                                                             float progressEnd) -> typename BSplineTransformType::Pointer
+                                                             BSplineFitReport &              report) const ->
+  typename BSplineTransformType::Pointer
 {
-  using FitPointSetType = PointSet<VectorType, Dimension>;
-  using LatticeType = Image<VectorType, Dimension>;
-  using FitterType = BSplineScatteredDataPointSetToImageFilter<FitPointSetType, LatticeType>;
-  using RefinerType = BSplineControlPointImageFilter<LatticeType, LatticeType>;
-  using CoefficientImageType = typename BSplineTransformType::ImageType;
-
-  const std::size_t count = points.size();
-  auto              pointSet = FitPointSetType::New();
-  pointSet->GetPoints()->Reserve(count);
-  pointSet->GetPointData()->Reserve(count);
-  // ITK's scattered-data filter places points by (point - origin) / spacing
-  // along the world axes, ignoring the direction cosines: give it the points
-  // in the domain's own (unrotated) frame. The values stay physical vectors.
-  const auto toDomainFrame = domain.direction.GetInverse();
-  for (std::size_t n = 0; n < count; ++n)
+  // The multilevel approximation runs in the core (bmrBSplineField.h says why not ITK's filter).
+  std::vector<bmr::Vector3> corePoints(points.size());
+  std::vector<bmr::Vector3> coreValues(values.size());
+  for (std::size_t n = 0; n < points.size(); ++n)
   {
-    PointType inFrame = domain.origin;
-    for (unsigned int d = 0; d < Dimension; ++d)
-    {
-      for (unsigned int e = 0; e < Dimension; ++e)
-      {
-        inFrame[d] += toDomainFrame[d][e] * (points[n][e] - domain.origin[e]);
-      }
-    }
-    pointSet->GetPoints()->SetElement(n, inFrame);
+    corePoints[n] = bmr::Vector3(points[n][0], points[n][1], points[n][2]);
+    coreValues[n] = bmr::Vector3(values[n][0], values[n][1], values[n][2]);
   }
-
-  // First mesh: one span along the longest axis, about square spans elsewhere.
-  double extent[Dimension];
-  double longest = 0.0;
+  bmr::ImageGeometry coreDomain;
   for (unsigned int d = 0; d < Dimension; ++d)
   {
-    extent[d] = domain.spacing[d] * static_cast<double>(domain.size[d] - 1);
-    longest = std::max(longest, extent[d]);
+    coreDomain.size[d] = static_cast<int>(domain.size[d]);
+    coreDomain.spacing[d] = domain.spacing[d];
+    coreDomain.origin[d] = domain.origin[d];
+    for (unsigned int e = 0; e < Dimension; ++e)
+    {
+      coreDomain.direction(d, e) = domain.direction[d][e];
+    }
   }
-  unsigned int mesh[Dimension];
-  for (unsigned int d = 0; d < Dimension; ++d)
+  bmr::BSplineFitSettings settings;
+  settings.tolerance = m_Tolerance;
+  settings.minimumSpacing = m_MinimumControlPointSpacing;
+  bmr::BSplineFitResult fit;
+  try
   {
-    mesh[d] = std::max(1u, static_cast<unsigned int>(std::lround(extent[d] / longest)));
+    fit = bmr::FitMultilevelBSpline(corePoints, coreValues, coreDomain, settings);
   }
-  auto finestSpacing = [&](unsigned int scale) {
-    double spacing = longest;
-    for (unsigned int d = 0; d < Dimension; ++d)
-    {
-      spacing = std::min(spacing, extent[d] / static_cast<double>(mesh[d] * scale));
-    }
-    return spacing;
-  };
-
-  std::vector<VectorType>             residual(values);
-  typename LatticeType::Pointer       total;
-  typename BSplineTransformType::Pointer levelTransform = BSplineTransformType::New();
-  auto makeTransform = [](const LatticeType * lattice, BSplineTransformType * transform) {
-    typename BSplineTransformType::CoefficientImageArray coefficients;
-    for (unsigned int c = 0; c < Dimension; ++c)
-    {
-      coefficients[c] = CoefficientImageType::New();
-      coefficients[c]->CopyInformation(lattice);
-      coefficients[c]->SetRegions(lattice->GetLargestPossibleRegion());
-      coefficients[c]->Allocate();
-      ImageRegionConstIterator<LatticeType>     in(lattice, lattice->GetLargestPossibleRegion());
-      ImageRegionIterator<CoefficientImageType> out(coefficients[c], coefficients[c]->GetLargestPossibleRegion());
-      for (; !in.IsAtEnd(); ++in, ++out)
-      {
-        out.Set(in.Get()[c]);
-      }
-    }
-    transform->SetCoefficientImages(coefficients);
-  };
-  // Residual norms of `displacementOf` at every point, in point order (so the
-  // result does not depend on the thread count).
-  std::vector<double> residualNorms(count);
-  auto                measure = [&](BSplineFitReport & measured) {
-    double sumOfSquares = 0.0;
-    measured.maximumResidual = 0.0;
-    for (double norm : residualNorms)
-    {
-      measured.maximumResidual = std::max(measured.maximumResidual, norm);
-      sumOfSquares += norm * norm;
-    }
-    measured.rmsResidual = std::sqrt(sumOfSquares / static_cast<double>(count));
-  };
-
-  // Levels: about log2(longest / minimum spacing), at least one.
-  const unsigned int maximumLevels =
-    1u + static_cast<unsigned int>(std::max(0.0, std::floor(std::log2(finestSpacing(1) / m_MinimumControlPointSpacing))));
-  unsigned int scale = 1;
-  report = BSplineFitReport{};
-  for (unsigned int level = 0;; ++level, scale *= 2)
+  catch (const bmr::Error & error)
   {
-    for (std::size_t n = 0; n < count; ++n)
-    {
-      pointSet->GetPointData()->SetElement(n, residual[n]);
-    }
-    auto fitter = FitterType::New();
-    fitter->SetInput(pointSet);
-    fitter->SetOrigin(domain.origin);
-    fitter->SetSpacing(domain.spacing);
-    fitter->SetSize(domain.size);
-    fitter->SetDirection(domain.direction);
-    fitter->SetSplineOrder(SplineOrder);
-    typename FitterType::ArrayType controlPoints;
-    for (unsigned int d = 0; d < Dimension; ++d)
-    {
-      controlPoints[d] = mesh[d] * scale + SplineOrder;
-    }
-    fitter->SetNumberOfControlPoints(controlPoints);
-    fitter->SetNumberOfLevels(1);
-    fitter->SetGenerateOutputImage(false);
-    fitter->SetNumberOfWorkUnits(m_FittingWorkUnits);
-    fitter->Update();
-    typename LatticeType::Pointer lattice = fitter->GetPhiLattice();
-    lattice->DisconnectPipeline();
-
-    // This level's correction at the points, then the sum of the levels as one lattice.
-    makeTransform(lattice, levelTransform);
-    MultiThreaderBase::New()->ParallelizeArray(
-      0,
-      count,
-      [&](SizeValueType n) {
-        const auto moved = levelTransform->TransformPoint(points[n]);
-        for (unsigned int d = 0; d < Dimension; ++d)
-        {
-          residual[n][d] -= moved[d] - points[n][d];
-        }
-        residualNorms[n] = residual[n].GetNorm();
-      },
-      nullptr);
-    if (total)
-    {
-      auto refiner = RefinerType::New();
-      refiner->SetInput(total);
-      refiner->SetSplineOrder(SplineOrder);
-      typename RefinerType::ArrayType twoLevels;
-      twoLevels.Fill(2);
-      typename LatticeType::Pointer refined = refiner->RefineControlPointLattice(twoLevels);
-      if (refined->GetLargestPossibleRegion().GetSize() != lattice->GetLargestPossibleRegion().GetSize())
-      {
-        itkExceptionMacro("internal error: refined lattice " << refined->GetLargestPossibleRegion().GetSize()
-                                                             << " does not match level lattice "
-                                                             << lattice->GetLargestPossibleRegion().GetSize());
-      }
-      ImageRegionConstIterator<LatticeType> coarse(refined, refined->GetLargestPossibleRegion());
-      ImageRegionIterator<LatticeType>      fine(lattice, lattice->GetLargestPossibleRegion());
-      for (; !fine.IsAtEnd(); ++coarse, ++fine)
-      {
-        fine.Set(fine.Get() + coarse.Get());
-      }
-    }
-    total = lattice;
-
-    report.levels = level + 1;
-    measure(report);
-    this->UpdateProgress(progressStart + (progressEnd - progressStart) * static_cast<float>(level + 1) /
-                                           static_cast<float>(maximumLevels));
-    if (report.maximumResidual <= m_Tolerance || level + 1 >= maximumLevels)
-    {
-      break;
-    }
+    itkExceptionMacro("DisplacementPointSetToBSplineTransformFilter: " << error.what());
   }
+  typename BSplineTransformType::Pointer transform = MakeBSplineTransform(fit.lattice);
 
-  auto transform = BSplineTransformType::New();
-  makeTransform(total, transform);
-
-  // The report comes from the final transform itself, not from the level bookkeeping.
+  // The report comes from the ITK transform itself: what users resample with.
+  std::vector<double> residualNorms(points.size());
   MultiThreaderBase::New()->ParallelizeArray(
     0,
-    count,
+    points.size(),
     [&](SizeValueType n) {
       const auto moved = transform->TransformPoint(points[n]);
-      double     squared = 0.0;
-      for (unsigned int d = 0; d < Dimension; ++d)
-      {
-        const double difference = (moved[d] - points[n][d]) - values[n][d];
-        squared += difference * difference;
-      }
-      residualNorms[n] = std::sqrt(squared);
+      residualNorms[n] = ((moved - points[n]) - values[n]).GetNorm();
     },
     nullptr);
-  measure(report);
+  report = BSplineFitReport{};
+  double sumOfSquares = 0.0;
+  for (double norm : residualNorms)
+  {
+    report.maximumResidual = std::max(report.maximumResidual, norm);
+    sumOfSquares += norm * norm;
+  }
+  report.rmsResidual = std::sqrt(sumOfSquares / static_cast<double>(points.size()));
+  report.levels = static_cast<unsigned int>(fit.levels);
   report.toleranceReached = report.maximumResidual <= m_Tolerance;
-  report.controlPointSpacing.clear();
-  report.meshSize.clear();
-  const auto meshSize = transform->GetTransformDomainMeshSize();
   for (unsigned int d = 0; d < Dimension; ++d)
   {
-    report.meshSize.push_back(static_cast<unsigned int>(meshSize[d]));
-    report.controlPointSpacing.push_back(extent[d] / static_cast<double>(meshSize[d]));
+    report.meshSize.push_back(static_cast<unsigned int>(fit.meshSize[d]));
+    report.controlPointSpacing.push_back(fit.controlPointSpacing[d]);
   }
   return transform;
 }
 
 template <typename TPointSet>
 auto
-DisplacementPointSetToBSplineTransformFilter<TPointSet>::SampleOnReferenceGrid(const BSplineTransformType * transform,
-                                                                             const Domain & domain) const ->
-  typename DisplacementFieldTransformType::Pointer
+DisplacementPointSetToBSplineTransformFilter<TPointSet>::SampleOnReferenceGrid(
+  const BSplineTransformType * transform) const -> typename DisplacementFieldTransformType::Pointer
 {
-  using LatticeType = Image<VectorType, Dimension>;
-  using SamplerType = BSplineControlPointImageFilter<LatticeType, DisplacementFieldType>;
-
-  // The control-point lattice of the transform, as the sampler reads it.
-  const auto coefficients = transform->GetCoefficientImages();
-  auto       lattice = LatticeType::New();
-  lattice->CopyInformation(coefficients[0]);
-  lattice->SetRegions(coefficients[0]->GetLargestPossibleRegion());
-  lattice->Allocate();
-  {
-    ImageRegionIterator<LatticeType> out(lattice, lattice->GetLargestPossibleRegion());
-    std::vector<ImageRegionConstIterator<typename BSplineTransformType::ImageType>> in;
-    for (unsigned int c = 0; c < Dimension; ++c)
-    {
-      in.emplace_back(coefficients[c], coefficients[c]->GetLargestPossibleRegion());
-    }
-    for (; !out.IsAtEnd(); ++out)
-    {
-      VectorType value;
-      for (unsigned int c = 0; c < Dimension; ++c)
-      {
-        value[c] = in[c].Get();
-        ++in[c];
-      }
-      out.Set(value);
-    }
-  }
-
-  // Sampled over the whole fitting domain, then cut to the reference grid.
-  auto sampler = SamplerType::New();
-  sampler->SetInput(lattice);
-  sampler->SetSplineOrder(SplineOrder);
-  sampler->SetOrigin(domain.origin);
-  sampler->SetSpacing(domain.spacing);
-  sampler->SetSize(domain.size);
-  sampler->SetDirection(domain.direction);
-  sampler->Update();
-  typename DisplacementFieldType::Pointer field = sampler->GetOutput();
-
-  const auto referenceRegion = this->GetReferenceImage()->GetLargestPossibleRegion();
-  typename DisplacementFieldType::RegionType cut;
-  for (unsigned int d = 0; d < Dimension; ++d)
-  {
-    cut.SetIndex(d, -domain.offsetInReference[d]);
-    cut.SetSize(d, referenceRegion.GetSize()[d]);
-  }
-  using CropType = RegionOfInterestImageFilter<DisplacementFieldType, DisplacementFieldType>;
-  auto crop = CropType::New();
-  crop->SetInput(field);
-  crop->SetRegionOfInterest(cut);
-  crop->Update();
-  typename DisplacementFieldType::Pointer cropped = crop->GetOutput();
-  cropped->DisconnectPipeline();
-  // The crop starts at index 0; give it the reference image's own region and origin.
-  typename DisplacementFieldType::RegionType region = cropped->GetLargestPossibleRegion();
-  region.SetIndex(referenceRegion.GetIndex());
-  cropped->SetRegions(region);
-  cropped->SetOrigin(this->GetReferenceImage()->GetOrigin());
-
-  auto fieldTransform = DisplacementFieldTransformType::New();
-  fieldTransform->SetDisplacementField(cropped);
+  typename DisplacementFieldType::Pointer field = SampleBSplineTransform(transform, this->GetReferenceImage());
+  auto                                    fieldTransform = DisplacementFieldTransformType::New();
+  fieldTransform->SetDisplacementField(field);
   return fieldTransform;
 }
 
@@ -509,22 +312,23 @@ DisplacementPointSetToBSplineTransformFilter<TPointSet>::GenerateData()
   all.insert(all.end(), deformed.begin(), deformed.end());
   const Domain domain = this->MakeDomain(all);
 
-  const float backwardEnd = m_GenerateForwardTransform ? 0.45f : 0.9f;
-  auto        backward = this->Fit(deformed, negated, domain, m_Report, 0.0f, backwardEnd);
+  auto backward = this->Fit(deformed, negated, domain, m_Report);
+  this->UpdateProgress(m_GenerateForwardTransform ? 0.45f : 0.9f);
   static_cast<BSplineTransformOutputType *>(this->ProcessObject::GetOutput(0))->Set(backward);
 
   m_ForwardReport = BSplineFitReport{};
   typename BSplineTransformType::Pointer forward;
   if (m_GenerateForwardTransform)
   {
-    forward = this->Fit(reference, displacement, domain, m_ForwardReport, 0.45f, 0.9f);
+    forward = this->Fit(reference, displacement, domain, m_ForwardReport);
+    this->UpdateProgress(0.9f);
   }
   static_cast<BSplineTransformOutputType *>(this->ProcessObject::GetOutput(1))->Set(forward);
 
   typename DisplacementFieldTransformType::Pointer field;
   if (m_GenerateDisplacementField)
   {
-    field = this->SampleOnReferenceGrid(backward, domain);
+    field = this->SampleOnReferenceGrid(backward);
   }
   static_cast<DisplacementFieldTransformOutputType *>(this->ProcessObject::GetOutput(2))->Set(field);
   this->UpdateProgress(1.0f);
@@ -540,7 +344,6 @@ DisplacementPointSetToBSplineTransformFilter<TPointSet>::PrintSelf(std::ostream 
   os << indent << "ExtendDomainToPoints: " << m_ExtendDomainToPoints << std::endl;
   os << indent << "GenerateForwardTransform: " << m_GenerateForwardTransform << std::endl;
   os << indent << "GenerateDisplacementField: " << m_GenerateDisplacementField << std::endl;
-  os << indent << "FittingWorkUnits: " << m_FittingWorkUnits << std::endl;
   os << indent << "Report: levels " << m_Report.levels << ", maximum residual " << m_Report.maximumResidual
      << " mm, RMS " << m_Report.rmsResidual << " mm, tolerance reached " << m_Report.toleranceReached << std::endl;
   os << indent << "DomainExtended: " << m_DomainExtended << std::endl;

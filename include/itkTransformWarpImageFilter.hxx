@@ -4,6 +4,7 @@
 #include "itkTransformWarpImageFilter.h"
 
 #include "itkBSplineInterpolateImageFunction.h"
+#include "itkBSplineLatticeConversion.h"
 #include "itkLinearInterpolateImageFunction.h"
 #include "itkNearestNeighborInterpolateImageFunction.h"
 #include "itkResampleImageFilter.h"
@@ -98,14 +99,28 @@ TransformWarpImageFilter<TInputImage, TOutputImage>::GenerateData()
   }
 
   OutputImageType * output = this->GetOutput();
-  const auto *      fieldTransform = dynamic_cast<const DisplacementFieldTransformType *>(m_Transform.GetPointer());
+  using FieldType = typename DisplacementFieldTransformType::DisplacementFieldType;
+  typename FieldType::ConstPointer field;
+  const auto * fieldTransform = dynamic_cast<const DisplacementFieldTransformType *>(m_Transform.GetPointer());
   if (this->IsFieldOnOutputGrid(fieldTransform))
   {
-    using FieldType = typename DisplacementFieldTransformType::DisplacementFieldType;
+    field = fieldTransform->GetDisplacementField();
+  }
+  if constexpr (ImageDimension == 3)
+  {
+    // A cubic B-spline is sampled on the output grid in the core (about 10x
+    // faster than evaluating it voxel by voxel through TransformPoint).
+    if (const auto * spline = dynamic_cast<const BiomechanicalBSplineTransformType *>(m_Transform.GetPointer()))
+    {
+      field = SampleBSplineTransform(spline, output);
+    }
+  }
+  if (field)
+  {
     using WarperType = WarpImageFilter<InputImageType, OutputImageType, FieldType>;
     auto warper = WarperType::New();
     warper->SetInput(this->GetInput());
-    warper->SetDisplacementField(fieldTransform->GetDisplacementField());
+    warper->SetDisplacementField(field);
     warper->SetInterpolator(interpolator);
     warper->SetOutputParametersFromImage(output);
     warper->SetEdgePaddingValue(m_DefaultPixelValue);

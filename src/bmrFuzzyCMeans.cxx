@@ -2,6 +2,7 @@
 // taken from ITK: ITK's Statistics module has k-means but no fuzzy c-means,
 // and the core must not depend on ITK.
 #include "bmrFuzzyCMeans.h"
+#include "bmrThreads.h"
 
 #include <omp.h>
 
@@ -14,12 +15,6 @@ namespace bmr
 {
 namespace
 {
-
-int
-ThreadCount(int threads)
-{
-  return threads > 0 ? threads : omp_get_max_threads();
-}
 
 void
 CheckSettings(const FuzzyCMeansSettings & settings)

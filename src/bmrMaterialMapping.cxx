@@ -1,6 +1,7 @@
 // Material mapping from tissue memberships or labels to cells and meshless
 // integration points (Zhang, Joldes, Wittek, Miller, IJNMBE 2013).
 #include "bmrMaterialMapping.h"
+#include "bmrThreads.h"
 
 #include <nanoflann.hpp>
 #include <omp.h>
@@ -20,12 +21,6 @@ namespace bmr
 {
 namespace
 {
-
-int
-ThreadCount(int threads)
-{
-  return threads > 0 ? threads : omp_get_max_threads();
-}
 
 constexpr int kMaxSamplesPerDirection = 32;
 

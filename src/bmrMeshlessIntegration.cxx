@@ -4,6 +4,7 @@
 // and adaptive subdivision of the background cells guided by the integrals of
 // the MLS shape functions (Joldes, Wittek, Miller 2015).
 #include "bmrMeshless.h"
+#include "bmrThreads.h"
 
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Side_of_triangle_mesh.h>
@@ -37,12 +38,6 @@ constexpr int    kMaxSubdivisionLevels = 6;
 // Points per MovingLeastSquares::Evaluate call in adaptive integration: large
 // enough to amortise the call, small enough to bound the table's memory.
 constexpr Index  kPointsPerEvaluation = 8192;
-
-int
-ThreadCount(int threads)
-{
-  return threads > 0 ? threads : omp_get_max_threads();
-}
 
 /** Kuhn split of a hexahedron (VTK corner numbering) around its diagonal 0-6:
  *  every face is split along the diagonal through its lowest corner, the same

@@ -14,7 +14,9 @@
 #include "itkImageFileReader.h"
 #include "itkImageFileWriter.h"
 #include "itkImageRegionIteratorWithIndex.h"
+#include "itkBSplineLatticeConversion.h"
 #include "itkMultiThreaderBase.h"
+#include "itkResampleImageFilter.h"
 #include "itkTransformWarpImageFilter.h"
 
 #include "bmrMeshGenerators.h"
@@ -384,6 +386,76 @@ TEST(DisplacementPointSetToBSplineTransform, BadInputIsNamed)
   EXPECT_CONTAINS(message, "NaN");
 }
 
+TEST(CubicBSplineLattice, EvaluationAndSamplingMatchITKBSplineTransform)
+{
+  // A random lattice on an oblique grid, as ITK's transform and as the core's lattice.
+  bmr::CubicBSplineLattice lattice;
+  lattice.geometry.size = { 9, 8, 7 };
+  lattice.geometry.spacing = bmr::Vector3(12.0, 10.0, 9.0);
+  lattice.geometry.origin = bmr::Vector3(-40.0, -35.0, -30.0);
+  lattice.geometry.direction = Eigen::AngleAxisd(0.3, bmr::Vector3(1.0, 2.0, 3.0).normalized()).toRotationMatrix();
+  std::mt19937                           random(5);
+  std::uniform_real_distribution<double> uniform(-3.0, 3.0);
+  lattice.coefficients.resize(lattice.geometry.VoxelCount());
+  for (auto & coefficient : lattice.coefficients)
+  {
+    coefficient = bmr::Vector3(uniform(random), uniform(random), uniform(random));
+  }
+  const auto transform = itk::MakeBSplineTransform(lattice);
+  EXPECT_EQ(itk::MakeCubicBSplineLattice(transform).coefficients, lattice.coefficients);
+
+  // Points all over the lattice's box, valid region and outside it.
+  double worst = 0.0;
+  int    inside = 0;
+  for (int n = 0; n < 5000; ++n)
+  {
+    const bmr::Vector3 index(uniform(random) * 1.6 + 4.0, uniform(random) * 1.4 + 3.5, uniform(random) * 1.2 + 3.0);
+    const bmr::Vector3 point = lattice.geometry.IndexToPoint(index);
+    PointType          itkPoint;
+    for (int d = 0; d < 3; ++d)
+    {
+      itkPoint[d] = point[d];
+    }
+    const auto         moved = transform->TransformPoint(itkPoint);
+    const bmr::Vector3 itkDisplacement(moved[0] - point[0], moved[1] - point[1], moved[2] - point[2]);
+    worst = std::max(worst, (lattice.Evaluate(point) - itkDisplacement).norm());
+    inside += itkDisplacement.norm() > 0.0;
+  }
+  EXPECT_LT(worst, 1e-12);
+  EXPECT_GT(inside, 500); // both the valid region and outside it are probed
+  EXPECT_LT(inside, 5000);
+
+  // Sampling on a grid of the lattice's direction (another spacing and origin).
+  auto grid = ImageType::New();
+  ImageType::SizeType gridSize = { { 40, 35, 30 } };
+  grid->SetRegions(gridSize);
+  grid->SetSpacing(std::array<double, 3>{ { 2.5, 2.0, 1.5 } }.data());
+  ImageType::DirectionType direction;
+  for (int d = 0; d < 3; ++d)
+  {
+    for (int e = 0; e < 3; ++e)
+    {
+      direction[d][e] = lattice.geometry.direction(d, e);
+    }
+  }
+  grid->SetDirection(direction);
+  grid->SetOrigin(PointType(lattice.geometry.IndexToPoint(bmr::Vector3(0.5, 0.7, 0.4)).data()));
+  const auto field = itk::SampleBSplineTransform(transform, grid);
+  ASSERT_NE(field, nullptr);
+  double worstSample = 0.0;
+  for (itk::ImageRegionConstIteratorWithIndex<ImageType> it(grid, grid->GetLargestPossibleRegion()); !it.IsAtEnd(); ++it)
+  {
+    PointType y;
+    grid->TransformIndexToPhysicalPoint(it.GetIndex(), y);
+    worstSample = std::max(worstSample, ((transform->TransformPoint(y) - y) - field->GetPixel(it.GetIndex())).GetNorm());
+  }
+  EXPECT_LT(worstSample, 1e-12);
+
+  // Another direction: no sampling (the caller resamples through the transform).
+  grid->SetDirection(ImageType::DirectionType::GetIdentity());
+  EXPECT_EQ(itk::SampleBSplineTransform(transform, grid), nullptr);
+}
+
 // ---------------------------------------------------------------------------
 // Transform IO and the warp
 // ---------------------------------------------------------------------------
@@ -420,6 +492,37 @@ TEST_F(TransformFiles, WrittenTransformReadsBackIdentically)
     EXPECT_CONTAINS(exception.GetDescription(), ".h5");
   }
   EXPECT_FALSE(fs::exists(m_Folder / "backward.xyz"));
+}
+
+TEST(TransformWarp, SampledSplineGivesTheImageOfResampleImageFilter)
+{
+  auto image = MakeReferenceImage<ImageType>();
+  FillImage(image.GetPointer(), AnalyticIntensity);
+  auto fitter = FitterType::New();
+  fitter->SetInput(ScatteredAnalyticPoints(4000, 7));
+  fitter->SetReferenceImage(image);
+  fitter->Update();
+
+  auto warp = itk::TransformWarpImageFilter<ImageType>::New();
+  warp->SetInput(image);
+  warp->SetTransform(fitter->GetTransform());
+  warp->Update();
+  auto resampler = itk::ResampleImageFilter<ImageType, ImageType>::New();
+  resampler->SetInput(image);
+  resampler->SetTransform(fitter->GetTransform());
+  resampler->SetOutputParametersFromImage(image);
+  resampler->Update();
+  double worst = 0.0;
+  double range = 0.0;
+  for (itk::ImageRegionConstIteratorWithIndex<ImageType> it(resampler->GetOutput(), image->GetLargestPossibleRegion());
+       !it.IsAtEnd();
+       ++it)
+  {
+    worst = std::max(worst, std::abs(double(it.Get()) - warp->GetOutput()->GetPixel(it.GetIndex())));
+    range = std::max(range, double(it.Get()));
+  }
+  EXPECT_GT(range, 50.0);
+  EXPECT_LT(worst, 1e-3);
 }
 
 TEST(TransformWarp, NearestNeighbourKeepsLabelsAndFieldPathMatchesSplinePath)

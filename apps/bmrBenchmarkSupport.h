@@ -1,0 +1,85 @@
+// Helpers shared by the benchmark drivers: the machine's description and
+// load, and the marked section of docs/benchmarks.md that the image
+// benchmark (bmrImageBenchmark) owns, so that each driver rewrites only its
+// own part of the report.
+#ifndef bmrBenchmarkSupport_h
+#define bmrBenchmarkSupport_h
+
+#include <fstream>
+#include <sstream>
+#include <string>
+
+namespace bmr
+{
+namespace benchmark
+{
+
+inline std::string
+ReadTextFile(const std::string & path)
+{
+  std::ifstream      stream(path);
+  std::ostringstream text;
+  text << stream.rdbuf();
+  return text.str();
+}
+
+inline std::string
+CpuModel()
+{
+  std::istringstream cpuinfo(ReadTextFile("/proc/cpuinfo"));
+  std::string        line;
+  while (std::getline(cpuinfo, line))
+  {
+    if (line.rfind("model name", 0) == 0)
+    {
+      const auto colon = line.find(':');
+      return colon == std::string::npos ? line : line.substr(colon + 2);
+    }
+  }
+  return "unknown";
+}
+
+inline std::string
+LoadAverage()
+{
+  std::istringstream loadavg(ReadTextFile("/proc/loadavg"));
+  std::string        one, five, fifteen;
+  loadavg >> one >> five >> fifteen;
+  return one + " " + five + " " + fifteen;
+}
+
+/** Markers of the image benchmark's section of docs/benchmarks.md. */
+constexpr const char * ImageSectionBegin = "<!-- image-benchmark: written by bmrImageBenchmark -->";
+constexpr const char * ImageSectionEnd = "<!-- image-benchmark: end -->";
+
+/** The image benchmark's section of `report` (markers included), or "" when it has none. */
+inline std::string
+ImageSection(const std::string & report)
+{
+  const auto begin = report.find(ImageSectionBegin);
+  const auto end = report.find(ImageSectionEnd);
+  if (begin == std::string::npos || end == std::string::npos || end < begin)
+  {
+    return "";
+  }
+  return report.substr(begin, end + std::string(ImageSectionEnd).size() - begin) + "\n";
+}
+
+/** `report` with its image section replaced by `section` (appended when it has none). */
+inline std::string
+WithImageSection(const std::string & report, const std::string & section)
+{
+  const std::string old = ImageSection(report);
+  if (old.empty())
+  {
+    return report + (report.empty() || report.back() == '\n' ? "\n" : "\n\n") + section;
+  }
+  std::string result = report;
+  result.replace(report.find(ImageSectionBegin), old.size(), section);
+  return result;
+}
+
+} // namespace benchmark
+} // namespace bmr
+
+#endif
