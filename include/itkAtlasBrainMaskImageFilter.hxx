@@ -11,10 +11,9 @@
 #include "itkImageRegionConstIterator.h"
 #include "itkImageRegionConstIteratorWithIndex.h"
 #include "itkImageRegionIterator.h"
-#include "itkLBFGSBOptimizerv4.h"
 #include "itkLinearInterpolateImageFunction.h"
-#include "itkMattesMutualInformationImageToImageMetricv4.h"
 #include "itkNearestNeighborInterpolateImageFunction.h"
+#include "itkRegistrationComponents.h"
 #include "itkRegistrationParameterScalesFromPhysicalShift.h"
 #include "itkResampleImageFilter.h"
 #include "itkTransformToDisplacementFieldFilter.h"
@@ -25,67 +24,6 @@
 
 namespace itk
 {
-namespace AtlasBrainMaskImageFilterDetail
-{
-
-/** Mattes mutual information with a fixed number of work units. ITK's metric
- * splits its samples into as many work units as the global default thread
- * count, and with several work units it adds the per-unit joint-histogram
- * derivatives in the order in which the units finish; a fixed count of one
- * makes the metric bitwise repeatable for any thread count (the base class
- * only lets one limit the threads, not the work units). */
-template <typename TImage>
-class FixedWorkUnitsMattesMetric : public MattesMutualInformationImageToImageMetricv4<TImage, TImage>
-{
-public:
-  ITK_DISALLOW_COPY_AND_MOVE(FixedWorkUnitsMattesMetric);
-  using Self = FixedWorkUnitsMattesMetric;
-  using Superclass = MattesMutualInformationImageToImageMetricv4<TImage, TImage>;
-  using Pointer = SmartPointer<Self>;
-  itkNewMacro(Self);
-  itkTypeMacro(FixedWorkUnitsMattesMetric, MattesMutualInformationImageToImageMetricv4);
-
-  void
-  SetFixedNumberOfWorkUnits(ThreadIdType workUnits)
-  {
-    this->m_DenseGetValueAndDerivativeThreader->SetNumberOfWorkUnits(workUnits);
-    this->m_SparseGetValueAndDerivativeThreader->SetNumberOfWorkUnits(workUnits);
-    this->Modified();
-  }
-
-protected:
-  FixedWorkUnitsMattesMetric() = default;
-  ~FixedWorkUnitsMattesMetric() override = default;
-};
-
-/** L-BFGS-B without the warning that LBFGSBOptimizerv4::SetScales prints on
- * every run: ImageRegistrationMethodv4 always hands it unit scales, which is
- * exactly what L-BFGS-B uses anyway. */
-class QuietLBFGSBOptimizerv4 : public LBFGSBOptimizerv4
-{
-public:
-  ITK_DISALLOW_COPY_AND_MOVE(QuietLBFGSBOptimizerv4);
-  using Self = QuietLBFGSBOptimizerv4;
-  using Superclass = LBFGSBOptimizerv4;
-  using Pointer = SmartPointer<Self>;
-  itkNewMacro(Self);
-  itkTypeMacro(QuietLBFGSBOptimizerv4, LBFGSBOptimizerv4);
-
-  void
-  SetScales(const ScalesType &) override
-  {
-    this->m_Scales.SetSize(this->m_Metric->GetNumberOfLocalParameters());
-    this->m_Scales.Fill(1.0);
-    this->m_ScalesAreIdentity = true;
-  }
-
-protected:
-  QuietLBFGSBOptimizerv4() = default;
-  ~QuietLBFGSBOptimizerv4() override = default;
-};
-
-} // namespace AtlasBrainMaskImageFilterDetail
-
 template <typename TInputImage, typename TOutputImage>
 AtlasBrainMaskImageFilter<TInputImage, TOutputImage>::AtlasBrainMaskImageFilter()
 {
@@ -327,7 +265,7 @@ AtlasBrainMaskImageFilter<TInputImage, TOutputImage>::GenerateData()
 {
   using RegistrationType = ImageRegistrationMethodv4<RealImageType, RealImageType, AffineTransformType>;
   using BSplineRegistrationType = ImageRegistrationMethodv4<RealImageType, RealImageType, BSplineTransformType>;
-  using MetricType = AtlasBrainMaskImageFilterDetail::FixedWorkUnitsMattesMetric<RealImageType>;
+  using MetricType = FixedWorkUnitsMattesMetric<RealImageType>;
 
   if (m_AffineLevelSpacings.empty() || m_AffineLevelSpacings.size() != m_AffineSmoothingSigmas.size())
   {
@@ -516,7 +454,7 @@ AtlasBrainMaskImageFilter<TInputImage, TOutputImage>::GenerateData()
     metric->SetUseFixedImageGradientFilter(false);
     metric->SetFixedNumberOfWorkUnits(m_MetricNumberOfWorkUnits);
 
-    auto optimizer = AtlasBrainMaskImageFilterDetail::QuietLBFGSBOptimizerv4::New();
+    auto optimizer = QuietLBFGSBOptimizerv4::New();
     const unsigned int numberOfParameters = m_BSplineTransform->GetNumberOfParameters();
     LBFGSBOptimizerv4::BoundSelectionType unbounded(numberOfParameters);
     LBFGSBOptimizerv4::BoundValueType     bounds(numberOfParameters);
