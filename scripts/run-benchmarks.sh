@@ -18,7 +18,7 @@ build="${BUILD_DIR:-${root}/build-bench}"
 jobs="${JOBS:-2}"
 
 cmake -S "${root}" -B "${build}" -DCMAKE_BUILD_TYPE=Release
-cmake --build "${build}" --target bmrBenchmark biomech -j "${jobs}"
+cmake --build "${build}" --target bmrBenchmark bmrImageBenchmark biomech -j "${jobs}"
 
 command -v ccx >/dev/null 2>&1 || echo "run-benchmarks: ccx (calculix-ccx) not found; the CalculiX-referenced part is skipped" >&2
 
@@ -33,6 +33,8 @@ if [ -f docs/benchmark-error-vs-time.csv ]; then
   # Debian's interpreter: the python3 first on PATH may not see python3-matplotlib.
   /usr/bin/python3 scripts/plot-benchmarks.py docs/benchmark-error-vs-time.csv docs/benchmark-error-vs-time.png
 fi
+# Image stages (fit, warp, B-spline baseline): their own section of docs/benchmarks.md.
+OMP_WAIT_POLICY=PASSIVE "${build}/apps/bmrImageBenchmark" --output docs/benchmarks.md
 # Model building from an MRI (Colin27): docs/model-building-benchmark.md.
 /usr/bin/python3 scripts/benchmark-model-building.py "${build}/apps/biomech"
 echo "run-benchmarks: wrote docs/benchmarks.md and docs/model-building-benchmark.md"
