@@ -5,6 +5,8 @@
 //   biomech model IMAGE [--mask M] [--craniotomy-centre X Y Z --craniotomy-radius R]
 //                 [--intraoperative-surface S | --sparse-displacements CSV] -o DIR
 //   biomech classify | mask | grid | surfaces | loads   (the model's steps one at a time)
+//   biomech register IMAGE --mask M --craniotomy-centre X Y Z --craniotomy-radius R
+//                 (--intraoperative-surface S | --sparse-displacements CSV | --intraoperative-image I) -o DIR
 //   biomech fit-transform | warp | evaluate | bspline-register   (transform, warp, accuracy, baseline)
 //
 // Exit status: 0 success (solve converged), 2 solve finished but did not
@@ -57,56 +59,6 @@ struct MakeMeshOptions
   std::string         outputPath;
 };
 
-/** One updating line on a terminal; silent when stderr is a file or pipe. */
-class TerminalProgress
-{
-public:
-  explicit TerminalProgress(bool enabled)
-    : m_Enabled(enabled)
-  {}
-
-  ~TerminalProgress() { Clear(); }
-
-  void Update(int step, double fraction, double estimatedError)
-  {
-    if (!m_Enabled)
-    {
-      return;
-    }
-    const auto now = std::chrono::steady_clock::now();
-    if (m_Shown && now - m_LastUpdate < std::chrono::milliseconds(200))
-    {
-      return;
-    }
-    m_LastUpdate = now;
-    m_Shown = true;
-    if (fraction >= 0.0)
-    {
-      std::fprintf(stderr, "\r  step %d  %5.1f %% of end time\033[K", step, 100.0 * fraction);
-    }
-    else
-    {
-      std::fprintf(stderr, "\r  step %d  estimated error %.3g mm\033[K", step, estimatedError);
-    }
-    std::fflush(stderr);
-  }
-
-  void Clear()
-  {
-    if (m_Enabled && m_Shown)
-    {
-      std::fprintf(stderr, "\r\033[K");
-      std::fflush(stderr);
-      m_Shown = false;
-    }
-  }
-
-private:
-  bool                                  m_Enabled;
-  bool                                  m_Shown = false;
-  std::chrono::steady_clock::time_point m_LastUpdate;
-};
-
 void
 RemoveIfExists(const fs::path & path)
 {
@@ -134,7 +86,7 @@ RunSolve(const SolveOptions & options)
 
   bmr::SolveResult result;
   {
-    TerminalProgress progress(!options.quiet && ::isatty(STDERR_FILENO) != 0);
+    bmr::app::TerminalProgress progress(!options.quiet && ::isatty(STDERR_FILENO) != 0);
     bmr::Solver      solver(scene.model, scene.settings);
     try
     {

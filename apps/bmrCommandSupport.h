@@ -6,9 +6,10 @@
 #define bmrCommandSupport_h
 
 // ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.
-#include "itkImageFileReader.h"
+#include "itkBiomechanicalImageIO.h"
 #include "itkImageFileWriter.h"
 
+#include "bmrBrainShiftRegistration.h"
 #include "bmrModel.h"
 
 #include <nlohmann/json.hpp>
@@ -27,61 +28,77 @@ namespace bmr
 namespace app
 {
 
-/** Wall time of the steps of a command, for the report and the printed table. */
-class StepTimer
+/** Wall time of the steps of a command, for the report; when verbose, says on
+ *  stderr what runs and how long it took. */
+class StepTimer : public StageTimer
 {
 public:
   explicit StepTimer(bool verbose)
-    : m_Verbose(verbose)
+    : StageTimer(verbose ? StageCallback(PrintStage) : StageCallback())
   {}
 
-  /** Runs `step`, records its time and, when verbose, says what runs on stderr. */
-  template <typename Step>
-  auto Run(const std::string & name, Step && step)
+  static void PrintStage(const std::string & name, double seconds)
   {
-    if (m_Verbose)
+    if (seconds < 0.0)
     {
       std::fprintf(stderr, "  %-14s ...", name.c_str());
-      std::fflush(stderr);
-    }
-    const auto start = std::chrono::steady_clock::now();
-    auto       finish = [&] {
-      const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-      m_Seconds.emplace_back(name, seconds);
-      if (m_Verbose)
-      {
-        std::fprintf(stderr, " %.2f s\n", seconds);
-      }
-    };
-    if constexpr (std::is_void_v<decltype(step())>)
-    {
-      step();
-      finish();
     }
     else
     {
-      auto result = step();
-      finish();
-      return result;
+      std::fprintf(stderr, " %.2f s\n", seconds);
     }
+    std::fflush(stderr);
+  }
+};
+
+/** One updating line on a terminal; silent when stderr is a file or pipe. */
+class TerminalProgress
+{
+public:
+  explicit TerminalProgress(bool enabled)
+    : m_Enabled(enabled)
+  {}
+
+  ~TerminalProgress() { Clear(); }
+
+  void Update(int step, double fraction, double estimatedError)
+  {
+    if (!m_Enabled)
+    {
+      return;
+    }
+    const auto now = std::chrono::steady_clock::now();
+    if (m_Shown && now - m_LastUpdate < std::chrono::milliseconds(200))
+    {
+      return;
+    }
+    m_LastUpdate = now;
+    m_Shown = true;
+    if (fraction >= 0.0)
+    {
+      std::fprintf(stderr, "\r  step %d  %5.1f %% of end time\033[K", step, 100.0 * fraction);
+    }
+    else
+    {
+      std::fprintf(stderr, "\r  step %d  estimated error %.3g mm\033[K", step, estimatedError);
+    }
+    std::fflush(stderr);
   }
 
-  nlohmann::json Json() const
+  void Clear()
   {
-    nlohmann::json times = nlohmann::json::object();
-    double         total = 0.0;
-    for (const auto & [name, seconds] : m_Seconds)
+    if (m_Enabled && m_Shown)
     {
-      times[name] = seconds;
-      total += seconds;
+      std::fprintf(stderr, "\r\033[K");
+      std::fflush(stderr);
+      m_Shown = false;
     }
-    times["total"] = total;
-    return times;
   }
 
 private:
-  bool                                        m_Verbose;
-  std::vector<std::pair<std::string, double>> m_Seconds;
+  bool                                  m_Enabled;
+  bool                                  m_Shown = false;
+  std::chrono::steady_clock::time_point m_LastUpdate;
 };
 
 /** Reads an image; a missing or unreadable file is an Error naming `what` and the path. */
@@ -89,66 +106,37 @@ template <typename TImage>
 typename TImage::Pointer
 ReadImage(const std::string & path, const std::string & what)
 {
-  std::error_code error;
-  if (!std::filesystem::is_regular_file(path, error))
-  {
-    throw Error("cannot read " + what + " '" + path + "': no such file");
-  }
-  auto reader = itk::ImageFileReader<TImage>::New();
-  reader->SetFileName(path);
-  try
-  {
-    reader->Update();
-  }
-  catch (const itk::ExceptionObject & exception)
-  {
-    throw Error("cannot read " + what + " '" + path + "': " + exception.GetDescription());
-  }
-  return reader->GetOutput();
+  return itk::ReadBiomechanicalImage<TImage>(path, what);
 }
 
-/** A temporary name in the folder of `path`, for writing and then renaming. */
-inline std::filesystem::path
-TemporaryPathFor(const std::filesystem::path & path)
+/** A mask file as an image of 0 and 1: every voxel > 0 is inside (so a
+ *  brain-extracted image such as ch2bet.nii.gz works as a mask). */
+inline RegistrationLabelImage::Pointer
+ReadMaskImage(const std::string & path, const std::string & what)
 {
-  return path.parent_path() / (".tmp-" + std::to_string(::getpid()) + "-" + path.filename().string());
+  const RegistrationImage::Pointer image = ReadImage<RegistrationImage>(path, what);
+  auto                             mask = RegistrationLabelImage::New();
+  mask->CopyInformation(image);
+  mask->SetRegions(image->GetBufferedRegion());
+  mask->Allocate();
+  const float *   values = image->GetBufferPointer();
+  unsigned char * inside = mask->GetBufferPointer();
+  for (std::size_t voxel = 0, count = image->GetBufferedRegion().GetNumberOfPixels(); voxel < count; ++voxel)
+  {
+    inside[voxel] = values[voxel] > 0.0f ? 1 : 0;
+  }
+  return mask;
 }
 
-/** Renames a finished temporary file onto `path`; removes it and throws when that fails. */
-inline void
-MoveIntoPlace(const std::filesystem::path & temporary, const std::filesystem::path & path)
-{
-  std::error_code error;
-  std::filesystem::rename(temporary, path, error);
-  if (error)
-  {
-    std::error_code ignored;
-    std::filesystem::remove(temporary, ignored);
-    throw Error("cannot write '" + path.string() + "': renaming the temporary file failed: " + error.message());
-  }
-}
+using itk::MoveIntoPlace;
+using itk::TemporaryPathFor;
 
 /** Writes an ITK image through a temporary file in the same folder and a rename. */
 template <typename TImage>
 void
 WriteImageAtomically(const TImage * image, const std::filesystem::path & path)
 {
-  const std::filesystem::path temporary = TemporaryPathFor(path);
-  auto                        writer = itk::ImageFileWriter<TImage>::New();
-  writer->SetInput(image);
-  writer->SetFileName(temporary.string());
-  writer->UseCompressionOn();
-  try
-  {
-    writer->Update();
-  }
-  catch (const itk::ExceptionObject & exception)
-  {
-    std::error_code ignored;
-    std::filesystem::remove(temporary, ignored);
-    throw Error("cannot write image '" + path.string() + "': " + exception.GetDescription());
-  }
-  MoveIntoPlace(temporary, path);
+  itk::WriteBiomechanicalImage(image, path);
 }
 
 /** Creates `folder` (and its parents); throws naming it when that fails. */

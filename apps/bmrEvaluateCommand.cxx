@@ -72,27 +72,13 @@ PlainMessage(const itk::ExceptionObject & exception)
   return message;
 }
 
-/** Grey range of the overlays: the fixed image's minimum and 99.5th percentile
- *  (a few very bright voxels would otherwise leave the anatomy dark). */
-std::pair<double, double>
-GreyRange(const ImageType * image)
-{
-  const float *      begin = image->GetBufferPointer();
-  std::vector<float> values(begin, begin + image->GetBufferedRegion().GetNumberOfPixels());
-  const auto         top = values.begin() + static_cast<std::ptrdiff_t>(0.995 * static_cast<double>(values.size() - 1));
-  std::nth_element(values.begin(), top, values.end());
-  const double maximum = *top;
-  const double minimum = *std::min_element(values.begin(), top + 1);
-  return { minimum, maximum };
-}
-
 /** One PNG per slice (across `axis`) that has edges; returns the number written. */
 std::size_t
 WriteOverlays(const FilterType & filter, const ImageType * fixed, unsigned int axis, bool twoDimensional,
               const fs::path & folder)
 {
   CreateFolder(folder);
-  const auto [grey0, grey1] = GreyRange(fixed);
+  const auto [grey0, grey1] = OverlayGreyRange(fixed);
   const std::vector<itk::IndexValueType> slices =
     itk::EdgeOverlaySlices(filter.GetFixedEdges(), filter.GetMovingEdges(), axis);
   for (const itk::IndexValueType slice : slices)

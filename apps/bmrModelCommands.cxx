@@ -1,9 +1,10 @@
 #include "bmrModelCommands.h"
 
 // ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.
-#include "itkAtlasBrainMaskImageFilter.h"
+#include "itkBSplineTransform.h"
+#include "itkBiomechanicalTransformIO.h"
+#include "itkImageFileWriter.h"
 #include "itkBiomechanicalImageConversion.h"
-#include "itkBrainSurfaceMeshSource.h"
 
 #include "bmrCommandSupport.h"
 
@@ -23,6 +24,7 @@
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
+#include <optional>
 #include <sstream>
 #include <unistd.h>
 
@@ -40,29 +42,11 @@ using ImageType = itk::Image<float, 3>;
 using MaskImageType = itk::Image<unsigned char, 3>;
 using MembershipImageType = itk::VectorImage<float, 3>;
 
-const char * const DefaultAtlas = "/usr/share/mricron/templates/ch2.nii.gz";
-const char * const DefaultAtlasMask = "/usr/share/mricron/templates/ch2bet.nii.gz";
-
-/** A mask file as a core volume: every voxel > 0 is inside (so a brain-extracted
- *  image such as ch2bet.nii.gz works as a mask). Must lie on `grid` when given. */
+/** A mask file as a core volume (voxels > 0 inside); must lie on `grid` when given. */
 LabelVolume
 ReadMaskVolume(const std::string & path, const std::string & what, const ImageGeometry * grid)
 {
-  const ImageType::Pointer image = ReadImage<ImageType>(path, what);
-  LabelVolume              mask;
-  mask.geometry = itk::MakeBiomechanicalGeometry(image.GetPointer());
-  const ScalarVolume values = itk::MakeBiomechanicalVolume<float>(image.GetPointer());
-  mask.values.resize(values.values.size());
-  for (std::size_t voxel = 0; voxel < values.values.size(); ++voxel)
-  {
-    mask.values[voxel] = values.values[voxel] > 0.0f ? 1 : 0;
-  }
-  if (grid != nullptr && !mask.geometry.SameGridAs(*grid))
-  {
-    throw Error(what + " '" + path + "' is not on the image grid: it has " + mask.geometry.Describe() +
-                ", the image has " + grid->Describe() + "; resample it onto the image (nearest neighbour) first");
-  }
-  return mask;
+  return MaskVolume(ReadMaskImage(path, what), what + " '" + path + "'", grid);
 }
 
 MembershipImageType::Pointer
@@ -132,34 +116,21 @@ struct ClassifierOptions
 
 struct AtlasOptions
 {
-  std::string atlas = DefaultAtlas;
-  std::string atlasMask = DefaultAtlasMask;
-  bool        affineOnly = false;
+  AtlasSettings settings;
+  bool          affineOnly = false;
 
   void Add(CLI::App * command)
   {
-    command->add_option("--atlas", atlas, "Atlas T1 image for skull stripping")->capture_default_str();
-    command->add_option("--atlas-mask", atlasMask, "Atlas brain mask (voxels > 0 are brain)")->capture_default_str();
+    command->add_option("--atlas", settings.image, "Atlas T1 image for skull stripping")->capture_default_str();
+    command->add_option("--atlas-mask", settings.mask, "Atlas brain mask (voxels > 0 are brain)")->capture_default_str();
     command->add_flag("--affine-only", affineOnly, "Skip the B-spline stage of the atlas registration");
   }
 
-  /** The brain mask of `image` by atlas registration (itk::AtlasBrainMaskImageFilter). */
-  MaskImageType::Pointer BrainMask(const ImageType::Pointer & image) const
+  AtlasSettings Settings() const
   {
-    auto filter = itk::AtlasBrainMaskImageFilter<ImageType>::New();
-    filter->SetInput(image);
-    filter->SetAtlasImage(ReadImage<ImageType>(atlas, "atlas"));
-    filter->SetAtlasMaskImage(ReadImage<ImageType>(atlasMask, "atlas mask"));
-    filter->SetUseBSplineStage(!affineOnly);
-    try
-    {
-      filter->Update();
-    }
-    catch (const itk::ExceptionObject & exception)
-    {
-      throw Error(std::string("skull stripping failed: ") + exception.GetDescription());
-    }
-    return filter->GetOutput();
+    AtlasSettings result = settings;
+    result.bsplineStage = !affineOnly;
+    return result;
   }
 };
 
@@ -232,11 +203,28 @@ struct RegionOptions
     return SurfaceNodesInSphere(model, surface, ThreeValues(craniotomyCentre, "--craniotomy-centre"), craniotomyRadius);
   }
 
-  std::vector<Index> FixedNodes(const Model & model, const std::vector<Index> & surface) const
+  /** The craniotomy and the skull base of the one-call model builder. */
+  void Apply(BrainModelSettings & settings) const
   {
-    SkullBaseSettings settings;
-    settings.height = skullBaseHeight;
-    return SkullBaseNodes(model, surface, settings);
+    if (!craniotomyCentre.empty() && !craniotomyMask.empty())
+    {
+      throw Error("give the craniotomy either as a sphere (--craniotomy-centre, --craniotomy-radius) or as "
+                  "--craniotomy-mask, not both");
+    }
+    if (!craniotomyCentre.empty())
+    {
+      if (craniotomyRadius <= 0.0)
+      {
+        throw Error("--craniotomy-centre needs --craniotomy-radius > 0 (mm)");
+      }
+      settings.craniotomyCentre = ThreeValues(craniotomyCentre, "--craniotomy-centre");
+      settings.craniotomyRadius = craniotomyRadius;
+    }
+    if (!craniotomyMask.empty())
+    {
+      settings.craniotomyMask = ReadMaskImage(craniotomyMask, "craniotomy mask");
+    }
+    settings.skullBase.height = skullBaseHeight;
   }
 };
 
@@ -258,6 +246,30 @@ struct MeasurementOptions
   }
 
   bool Given() const { return !intraoperativeSurface.empty() || !sparseDisplacements.empty(); }
+
+  /** The measurements for the one-call model builder; empty when none was given. */
+  std::optional<IntraoperativeData> Data() const
+  {
+    if (!Given())
+    {
+      return std::nullopt;
+    }
+    if (!intraoperativeSurface.empty() && !sparseDisplacements.empty())
+    {
+      throw Error("give either --intraoperative-surface or --sparse-displacements, not both");
+    }
+    IntraoperativeData data;
+    data.maxDistance = maxDistance;
+    if (!intraoperativeSurface.empty())
+    {
+      data.surface = ReadSurface(intraoperativeSurface);
+    }
+    else
+    {
+      data.sparse = ReadSparseDisplacements(sparseDisplacements);
+    }
+    return data;
+  }
 
   /** `modelSurface`: the body's surface for a point cloud (no cells); null for a mesh. */
   PrescribedDisplacement Displacements(const Model & model, const std::vector<Index> & exposed, LoadReport & report,
@@ -302,26 +314,6 @@ DisplacementCsv(const PrescribedDisplacement & load)
   return text.str();
 }
 
-/** The brain and skull surfaces of a mask image (signed distance, isosurfaces). */
-BrainSurfaces
-MakeSurfaces(const LabelVolume & mask, double skullGap, std::vector<std::string> & warnings)
-{
-  auto source = itk::BrainSurfaceMeshSource<MaskImageType>::New();
-  auto image = itk::MakeImageFromBiomechanicalVolume<MaskImageType>(mask);
-  source->SetInput(image);
-  source->SetSkullGap(skullGap);
-  try
-  {
-    source->Update();
-  }
-  catch (const itk::ExceptionObject & exception)
-  {
-    throw Error(exception.GetDescription());
-  }
-  warnings.insert(warnings.end(), source->GetWarnings().begin(), source->GetWarnings().end());
-  return BrainSurfaces{ source->GetBrainSurface(), source->GetSkullSurface() };
-}
-
 // ---------------------------------------------------------------------------
 // The model pipeline: MRI (+ mask, tumour, craniotomy, measurements) -> scene.
 // ---------------------------------------------------------------------------
@@ -351,129 +343,65 @@ RunModel(const ModelOptions & options)
   const fs::path outputDirectory(options.outputDirectory);
   StepTimer      timer(!options.quiet);
   json           report;
-  std::vector<std::string> warnings;
   report["image"] = options.image;
 
   // Everything is computed before anything is written, so a failure leaves no partial model.
   const ImageType::Pointer image = timer.Run("read", [&] { return ReadImage<ImageType>(options.image, "image"); });
-  const ScalarVolume       intensities = itk::MakeBiomechanicalVolume<float>(image.GetPointer());
-
-  LabelVolume mask;
+  MaskImageType::Pointer   brainMask;
   if (!options.mask.empty())
   {
-    mask = ReadMaskVolume(options.mask, "brain mask", &intensities.geometry);
+    brainMask = ReadMaskImage(options.mask, "brain mask");
     report["mask"] = options.mask;
   }
   else
   {
-    mask = timer.Run("skull-strip", [&] {
-      return itk::MakeBiomechanicalVolume<std::uint8_t>(options.atlas.BrainMask(image).GetPointer());
-    });
-    report["mask"] = "atlas: " + options.atlas.atlas;
+    report["mask"] = "atlas: " + options.atlas.settings.image;
   }
-
-  LabelVolume tumour;
+  MaskImageType::Pointer tumourMask;
   if (!options.tumourMask.empty())
   {
-    tumour = ReadMaskVolume(options.tumourMask, "tumour mask", &intensities.geometry);
+    tumourMask = ReadMaskImage(options.tumourMask, "tumour mask");
   }
-
-  const TissueClassification classification = timer.Run("classify", [&] {
-    return ClassifyTissue(intensities, &mask, options.classifier.Settings(), {}, &warnings);
-  });
-  report["classification"] = { { "classes", options.classifier.classes },
-                               { "centroids", classification.fit.centroids },
-                               { "iterations", classification.fit.iterations },
-                               { "converged", classification.fit.converged } };
-
-  // The tumour is a second label, so that tetrahedral meshes conform to its boundary.
-  LabelVolume labels = mask;
-  if (!tumour.values.empty())
-  {
-    for (std::size_t voxel = 0; voxel < labels.values.size(); ++voxel)
-    {
-      if (tumour.values[voxel] != 0)
-      {
-        labels.values[voxel] = 2;
-      }
-    }
-  }
-  ImageGrid grid = timer.Run("grid", [&] { return MakeGridFromLabels(labels, options.grid.Settings(options.threads), &warnings); });
-  Model &   model = grid.model;
-
-  timer.Run("materials", [&] {
-    MaterialMappingSettings settings;
-    MapMaterialsFromMemberships(model, classification.memberships, settings, tumour.values.empty() ? nullptr : &tumour,
-                                &warnings);
-  });
-
-  // The skull is the boundary of the body dilated by the gap, and the body is
-  // the model's cells (for a point cloud, the tetrahedra its integration points
-  // cover), not the mask: the corners of a staircase hexahedral grid stick out
-  // of the mask by up to half a cell, and a meshless cloud's surface nodes
-  // partly lie outside a skull made from the mask (an integration point
-  // inverted at step 2 under 0.1 g).
-  BrainSurfaces surfaces = timer.Run("surfaces", [&] {
-    const Model & body = model.cells.empty() ? grid.meshlessBody : model;
-    return MakeSurfaces(RasterizeCells(body, mask.geometry), options.skullGap, warnings);
-  });
+  ContactSurface skullSurface;
   if (!options.skullSurface.empty())
   {
-    // The user's skull (e.g. segmented from CT) replaces the dilated body as the contact master.
-    const std::string name = surfaces.skull.name;
-    surfaces.skull = ReadSurface(options.skullSurface);
-    surfaces.skull.name = name;
-    surfaces.skull.bodySide = ContactSurface::Side::Inside;
+    skullSurface = ReadSurface(options.skullSurface);
     report["skull_surface"] = options.skullSurface;
   }
 
-  const std::vector<Index> & surfaceNodes = model.NodeSet("surface");
-  model.nodeSets["skull_base"] = options.regions.FixedNodes(model, surfaceNodes);
-  std::vector<Index> exposed;
-  if (options.regions.HasCraniotomy())
-  {
-    exposed = options.regions.ExposedNodes(model, surfaceNodes);
-    model.nodeSets["exposed"] = exposed;
-  }
-  else if (options.measurements.Given())
+  BrainModelSettings settings;
+  settings.classifier = options.classifier.Settings();
+  settings.atlas = options.atlas.Settings();
+  settings.grid = options.grid.Settings(options.threads);
+  settings.skullGap = options.skullGap;
+  if (options.measurements.Given() && !options.regions.HasCraniotomy())
   {
     throw Error("intraoperative measurements need the craniotomy region they belong to: give --craniotomy-centre "
                 "and --craniotomy-radius, or --craniotomy-mask");
   }
-
-  LoadReport             loadReport;
-  PrescribedDisplacement load;
-  if (options.measurements.Given())
+  options.regions.Apply(settings);
+  settings.contact = !options.noContact;
+  if (!options.gravity.empty())
   {
-    load = timer.Run("loads", [&] {
-      return options.measurements.Displacements(model, exposed, loadReport,
-                                                model.cells.empty() ? &surfaces.brain : nullptr);
-    });
-    warnings.insert(warnings.end(), loadReport.warnings.begin(), loadReport.warnings.end());
-    report["loads"] = LoadReportJson(loadReport);
+    settings.gravity = ThreeValues(options.gravity, "--gravity");
   }
-
-  // Contact: every surface node that is neither fixed nor loaded may touch the skull.
-  if (!options.noContact)
+  settings.threads = options.threads;
+  const std::optional<IntraoperativeData> measurements = options.measurements.Data();
+  const BrainModel brain = BuildBrainModel(image, brainMask, tumourMask, skullSurface,
+                                           measurements ? &*measurements : nullptr, settings, timer);
+  const Model &                  model = brain.model;
+  const std::vector<Index> &     exposed = brain.exposedNodes;
+  const PrescribedDisplacement & load = brain.load;
+  const BrainSurfaces &          surfaces = brain.surfaces;
+  const std::vector<Index> &     surfaceNodes = model.NodeSet("surface");
+  std::vector<std::string>       warnings = brain.warnings;
+  report["classification"] = { { "classes", options.classifier.classes },
+                               { "centroids", brain.classification.fit.centroids },
+                               { "iterations", brain.classification.fit.iterations },
+                               { "converged", brain.classification.fit.converged } };
+  if (measurements)
   {
-    std::vector<char> constrained(model.nodes.size(), 0);
-    for (const Index node : model.nodeSets["skull_base"])
-    {
-      constrained[node] = 1;
-    }
-    for (const Index node : load.nodes)
-    {
-      constrained[node] = 1;
-    }
-    std::vector<Index> contactNodes;
-    for (const Index node : surfaceNodes)
-    {
-      if (!constrained[node])
-      {
-        contactNodes.push_back(node);
-      }
-    }
-    model.nodeSets["contact"] = contactNodes;
+    report["loads"] = LoadReportJson(brain.loadReport);
   }
 
   // The scene `biomech solve` runs.
@@ -515,7 +443,7 @@ RunModel(const ModelOptions & options)
     const Vector3 gravity = ThreeValues(options.gravity, "--gravity");
     scene["gravity"] = { gravity.x(), gravity.y(), gravity.z() };
   }
-  if (!options.noContact && !model.nodeSets["contact"].empty())
+  if (!model.contactSurfaces.empty())
   {
     scene["node_sets"]["contact"] = { { "point_data", "contact" } };
     scene["contact"] = json::array(
@@ -537,12 +465,12 @@ RunModel(const ModelOptions & options)
                      { "cells", counts.cells },
                      { "dofs", counts.dofs },
                      { "integration_points", counts.integrationPoints },
-                     { "volume_error", grid.quality.volumeError },
-                     { "min_scaled_jacobian", grid.quality.minScaledJacobian },
-                     { "min_dihedral_angle_deg", grid.quality.minDihedralAngleDeg } };
+                     { "volume_error", brain.gridQuality.volumeError },
+                     { "min_scaled_jacobian", brain.gridQuality.minScaledJacobian },
+                     { "min_dihedral_angle_deg", brain.gridQuality.minDihedralAngleDeg } };
   report["regions"] = { { "surface_nodes", surfaceNodes.size() },
                         { "exposed_nodes", exposed.size() },
-                        { "skull_base_nodes", model.nodeSets["skull_base"].size() } };
+                        { "skull_base_nodes", model.NodeSet("skull_base").size() } };
   report["skull_gap_mm"] = options.skullGap;
   report["warnings"] = warnings;
 
@@ -563,13 +491,13 @@ RunModel(const ModelOptions & options)
     {
       WriteTextFileAtomically((outputDirectory / "exposed-displacements.csv").string(), DisplacementCsv(load));
     }
-    WriteImageAtomically(MakeMembershipImage(classification.memberships).GetPointer(),
+    WriteImageAtomically(MakeMembershipImage(brain.classification.memberships).GetPointer(),
                          outputDirectory / "memberships.nii.gz");
-    WriteImageAtomically(itk::MakeImageFromBiomechanicalVolume<MaskImageType>(classification.labels).GetPointer(),
+    WriteImageAtomically(itk::MakeImageFromBiomechanicalVolume<MaskImageType>(brain.classification.labels).GetPointer(),
                          outputDirectory / "tissue-labels.nii.gz");
     if (options.mask.empty())
     {
-      WriteImageAtomically(itk::MakeImageFromBiomechanicalVolume<MaskImageType>(mask).GetPointer(),
+      WriteImageAtomically(itk::MakeImageFromBiomechanicalVolume<MaskImageType>(brain.brainMask).GetPointer(),
                            outputDirectory / "brain-mask.nii.gz");
     }
     // Last: a folder whose writing failed part way has no scene to run.
@@ -588,10 +516,184 @@ RunModel(const ModelOptions & options)
     {
       std::cout << ", " << counts.integrationPoints << " integration points";
     }
-    std::cout << "\n  volume error      " << 100.0 * grid.quality.volumeError << " % of the mask\n"
-              << "  exposed nodes     " << exposed.size() << ", fixed " << model.nodeSets["skull_base"].size() << "\n"
+    std::cout << "\n  volume error      " << 100.0 * brain.gridQuality.volumeError << " % of the mask\n"
+              << "  exposed nodes     " << exposed.size() << ", fixed " << model.NodeSet("skull_base").size() << "\n"
               << "  time              " << report["seconds"]["total"].get<double>() << " s\n"
               << "  scene             " << (outputDirectory / "scene.json").string() << "\n";
+  }
+  return 0;
+}
+
+// ---------------------------------------------------------------------------
+// The registration: model, solve, transform, warp, evaluation in one call.
+// ---------------------------------------------------------------------------
+
+struct RegisterOptions
+{
+  std::string              image;
+  std::string              mask;
+  std::string              tumourMask;
+  std::string              skullSurface;
+  std::vector<std::string> labelMaps;
+  std::string              intraoperativeImage;
+  std::string              intraoperativeMask;
+  std::string              outputDirectory = "registration";
+  AtlasOptions             atlas;
+  ClassifierOptions        classifier;
+  GridOptions              grid;
+  RegionOptions            regions;
+  MeasurementOptions       measurements;
+  double                   skullGap = BrainSurfaceSettings{}.skullGap;
+  bool                     noContact = false;
+  std::vector<double>      gravity;
+  BrainShiftRegistrationSettings defaults;
+  double                   tolerance = defaults.solver.tolerance;
+  double                   fitTolerance = defaults.fitTolerance;
+  double                   minimumControlPointSpacing = defaults.minimumControlPointSpacing;
+  int                      overlays = 5;
+  int                      threads = 0;
+  bool                     quiet = false;
+};
+
+/** "labels.nii.gz" -> "labels-warped.nii.gz". */
+std::string
+WarpedName(const std::string & path)
+{
+  std::string name = fs::path(path).filename().string();
+  for (const char * extension : { ".nii.gz", ".nii", ".nrrd", ".mha", ".mhd" })
+  {
+    const std::string suffix(extension);
+    if (name.size() > suffix.size() && name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0)
+    {
+      return name.substr(0, name.size() - suffix.size()) + "-warped.nii.gz";
+    }
+  }
+  return name + "-warped.nii.gz";
+}
+
+int
+RunRegister(const RegisterOptions & options)
+{
+  const fs::path outputDirectory(options.outputDirectory);
+  const bool     terminal = !options.quiet && ::isatty(STDERR_FILENO) != 0;
+
+  BrainShiftRegistrationInputs inputs;
+  inputs.preoperativeImage = ReadImage<ImageType>(options.image, "preoperative image");
+  if (!options.mask.empty())
+  {
+    inputs.brainMask = ReadMaskImage(options.mask, "brain mask");
+  }
+  if (!options.tumourMask.empty())
+  {
+    inputs.tumourMask = ReadMaskImage(options.tumourMask, "tumour mask");
+  }
+  if (!options.skullSurface.empty())
+  {
+    inputs.skullSurface = ReadSurface(options.skullSurface);
+  }
+  for (const std::string & path : options.labelMaps)
+  {
+    inputs.labelMaps.push_back(ReadImage<MaskImageType>(path, "label map"));
+  }
+  if (!options.regions.HasCraniotomy())
+  {
+    throw Error("give the craniotomy: --craniotomy-centre X Y Z with --craniotomy-radius R, or --craniotomy-mask");
+  }
+  if (const auto data = options.measurements.Data())
+  {
+    inputs.intraoperative = *data;
+  }
+  inputs.intraoperative.maxDistance = options.measurements.maxDistance;
+  if (!options.intraoperativeImage.empty())
+  {
+    inputs.intraoperative.image = ReadImage<ImageType>(options.intraoperativeImage, "intraoperative image");
+  }
+  if (!options.intraoperativeMask.empty())
+  {
+    if (options.intraoperativeImage.empty())
+    {
+      throw Error("--intraoperative-mask belongs to --intraoperative-image; give the image as well");
+    }
+    inputs.intraoperative.imageBrainMask = ReadMaskImage(options.intraoperativeMask, "intraoperative brain mask");
+  }
+
+  BrainShiftRegistrationSettings settings;
+  settings.model.classifier = options.classifier.Settings();
+  settings.model.atlas = options.atlas.Settings();
+  settings.model.grid = options.grid.Settings(options.threads);
+  settings.model.skullGap = options.skullGap;
+  options.regions.Apply(settings.model);
+  settings.model.contact = !options.noContact;
+  if (!options.gravity.empty())
+  {
+    settings.model.gravity = ThreeValues(options.gravity, "--gravity");
+  }
+  settings.model.threads = options.threads;
+  settings.solver.tolerance = options.tolerance;
+  settings.fitTolerance = options.fitTolerance;
+  settings.minimumControlPointSpacing = options.minimumControlPointSpacing;
+
+  BrainShiftRegistrationResult result;
+  {
+    TerminalProgress progress(terminal);
+    result = RegisterBrainShift(
+      inputs, settings,
+      terminal ? StageCallback([&progress](const std::string & stage, double seconds) {
+        progress.Clear();
+        StepTimer::PrintStage(stage, seconds);
+      })
+               : StageCallback(),
+      [&progress](int step, double fraction, double estimatedError) { progress.Update(step, fraction, estimatedError); });
+  }
+
+  // Outputs: the report is written last, so a folder without it holds no finished result.
+  const fs::path reportPath = outputDirectory / "registration-report.json";
+  CreateFolder(outputDirectory);
+  std::error_code ignored;
+  fs::remove(reportPath, ignored);
+  json report = RegistrationReportJson(result, settings);
+  report["preoperative_image"] = options.image;
+  json files = json::object();
+  const auto write = [&](const std::string & key, const fs::path & path, const auto & writeFile) {
+    writeFile(path);
+    files[key] = path.string();
+  };
+  write("warped_image", outputDirectory / "warped.nii.gz",
+        [&](const fs::path & path) { WriteImageAtomically(result.warpedImage.GetPointer(), path); });
+  write("transform", outputDirectory / "transform.h5",
+        [&](const fs::path & path) { itk::WriteBiomechanicalTransform(result.transform, path.string()); });
+  write("model_result", outputDirectory / "model-result.vtu",
+        [&](const fs::path & path) { WriteResultVtu(path.string(), result.model.model, result.solve); });
+  for (std::size_t k = 0; k < result.warpedLabelMaps.size(); ++k)
+  {
+    write("warped_labels_" + std::to_string(k), outputDirectory / WarpedName(options.labelMaps[k]),
+          [&](const fs::path & path) { WriteImageAtomically(result.warpedLabelMaps[k].GetPointer(), path); });
+  }
+  if (result.Evaluated())
+  {
+    write("registered_on_intraoperative_grid", outputDirectory / "registered-on-intraoperative-grid.nii.gz",
+          [&](const fs::path & path) { WriteImageAtomically(result.registeredOnIntraoperativeGrid.GetPointer(), path); });
+    const RegistrationImage * intraoperative = inputs.intraoperative.image.GetPointer();
+    files["overlays"] = {
+      { "unregistered", WriteEdgeOverlays(result.unregistered, intraoperative, (outputDirectory / "overlays").string(),
+                                          "unregistered", options.overlays) },
+      { "registered", WriteEdgeOverlays(result.registered, intraoperative, (outputDirectory / "overlays").string(),
+                                        "registered", options.overlays) }
+    };
+  }
+  report["files"] = files;
+  WriteTextFileAtomically(reportPath.string(), report.dump(2) + "\n");
+
+  PrintWarnings(result.warnings);
+  if (!options.quiet)
+  {
+    std::cout << FormatRegistrationTable(result) << "  output            " << outputDirectory.string() << "\n";
+  }
+  if (!result.solve.converged)
+  {
+    std::cerr << "biomech: the solve did NOT converge (" << result.solve.message
+              << "); results written, the report says converged: false\n";
+    return 2;
   }
   return 0;
 }
@@ -651,7 +753,7 @@ RunClassify(const StepOptions & options)
 int
 RunMask(const StepOptions & options)
 {
-  const MaskImageType::Pointer mask = options.atlas.BrainMask(ReadImage<ImageType>(options.input, "image"));
+  const MaskImageType::Pointer mask = AtlasBrainMask(ReadImage<ImageType>(options.input, "image"), options.atlas.Settings());
   const fs::path               output(options.output);
   CreateFolder(output.has_parent_path() ? output.parent_path() : fs::path("."));
   WriteImageAtomically(mask.GetPointer(), output);
@@ -700,7 +802,7 @@ RunSurfaces(const StepOptions & options)
 {
   const LabelVolume   mask = ReadMaskVolume(options.input, "brain mask", nullptr);
   std::vector<std::string> warnings;
-  const BrainSurfaces      surfaces = MakeSurfaces(mask, options.skullGap, warnings);
+  const BrainSurfaces      surfaces = BrainSurfacesOfMask(mask, options.skullGap, warnings);
   PrintWarnings(warnings);
   for (const fs::path path : { fs::path(options.output), fs::path(options.skullOutput) })
   {
@@ -832,7 +934,54 @@ AddModelCommands(CLI::App & app)
   model->add_option("--threads", options->threads, "Worker threads (0: all)")->check(CLI::Range(0, 4096));
   model->add_flag("--quiet,-q", options->quiet, "Print nothing but warnings and errors");
 
+  auto registration = std::make_shared<RegisterOptions>();
+  CLI::App * registerCommand = app.add_subcommand(
+    "register", "Brain-shift registration in one call: model, solve, transform, warped image (+ labels), evaluation, "
+                "report. Exit 0 converged, 2 not converged (results written), 1 error");
+  registerCommand->add_option("image", registration->image, "Preoperative T1 MRI (.nii.gz, .nrrd, .mha, ...)")
+    ->required();
+  registerCommand->add_option("--mask", registration->mask,
+                              "Brain mask on the image grid (voxels > 0); default: atlas skull stripping");
+  registerCommand->add_option("--tumour-mask", registration->tumourMask, "Tumour mask on the image grid (voxels > 0)");
+  registerCommand->add_option("--skull-surface", registration->skullSurface,
+                              "Rigid skull surface (.stl, .obj, .vtp, .vtk) instead of the body dilated by --skull-gap");
+  registerCommand->add_option("--labels", registration->labelMaps,
+                              "Label maps on the image grid to warp (nearest neighbour); repeat for several");
+  registration->measurements.Add(registerCommand);
+  registerCommand->add_option("--intraoperative-image", registration->intraoperativeImage,
+                              "Intraoperative image: evaluation (edge-based Hausdorff), and the exposed surface when "
+                              "no surface or sparse displacements are given");
+  registerCommand->add_option("--intraoperative-mask", registration->intraoperativeMask,
+                              "Brain mask of the intraoperative image (default: atlas skull stripping when its "
+                              "surface is needed; the registered preoperative mask for the evaluation)");
+  registration->regions.Add(registerCommand);
+  registration->grid.Add(registerCommand);
+  registration->classifier.Add(registerCommand);
+  registration->atlas.Add(registerCommand);
+  registerCommand->add_option("--skull-gap", registration->skullGap, "Gap between brain surface and rigid skull (mm)")
+    ->capture_default_str();
+  registerCommand->add_flag("--no-contact", registration->noContact, "No brain-skull contact");
+  registerCommand->add_option("--gravity", registration->gravity, "Body acceleration X Y Z (mm/s^2)")->expected(3);
+  registerCommand->add_option("--solver-tolerance", registration->tolerance,
+                              "Dynamic relaxation: estimated distance to the solution at which it stops (mm)")
+    ->capture_default_str();
+  registerCommand->add_option("--fit-tolerance", registration->fitTolerance,
+                              "Transform fit: largest residual at the nodes (mm)")
+    ->capture_default_str();
+  registerCommand->add_option("--min-control-point-spacing", registration->minimumControlPointSpacing,
+                              "Transform fit: finest control-point spacing (mm)")
+    ->capture_default_str();
+  registerCommand->add_option("--overlays", registration->overlays, "Edge-overlay PNGs per evaluation (0: none)")
+    ->capture_default_str();
+  registerCommand->add_option("-o,--output-dir", registration->outputDirectory, "Output folder")->capture_default_str();
+  registerCommand->add_option("--threads", registration->threads, "Worker threads (0: all)")->check(CLI::Range(0, 4096));
+  registerCommand->add_flag("--quiet,-q", registration->quiet, "Print nothing but warnings and errors");
+
   return [=]() -> int {
+    if (registerCommand->parsed())
+    {
+      return RunRegister(*registration);
+    }
     if (model->parsed())
     {
       return RunModel(*options);

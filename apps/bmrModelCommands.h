@@ -1,7 +1,8 @@
 // The model-building subcommands of `biomech` (classify, mask, grid,
 // surfaces, loads, model): from a preoperative MRI to a scene that `biomech
-// solve` runs. Kept in their own translation unit, so that the ITK filters'
-// templates compile once and in parallel with the rest of the tool.
+// solve` runs; and `register`, the whole registration in one call. They share
+// their options; the ITK filters they run are compiled once in the pipeline
+// library (bmrBrainShiftRegistration.h).
 #ifndef bmrModelCommands_h
 #define bmrModelCommands_h
 

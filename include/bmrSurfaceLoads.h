@@ -51,6 +51,14 @@ struct LoadReport
  *  surface and is lost (the error is the tangential part, plus the chord error
  *  of the triangulation).
  *
+ *  With `preoperativeSurface` (the smooth preoperative brain surface the
+ *  model was made from), surface-to-surface correspondence: each node is
+ *  first projected onto it (p), and the displacement is the closest point of
+ *  the intraoperative surface to p minus p. A staircase hexahedral surface
+ *  deviates from the brain surface by up to half a cell; node-to-surface
+ *  correspondence would turn that offset into a displacement (about 1-2 mm
+ *  at 5 mm cells even where nothing moved).
+ *
  *  Errors (bmr::Error): no exposed nodes, a node id out of range, an empty
  *  surface or a non-finite vertex, and every node rejected. */
 PrescribedDisplacement
@@ -58,7 +66,8 @@ DisplacementsFromSurface(const Model &              model,
                          const std::vector<Index> & exposedNodes,
                          const ContactSurface &     intraoperativeSurface,
                          const SurfaceLoadSettings & settings = SurfaceLoadSettings{},
-                         LoadReport *               report = nullptr);
+                         LoadReport *               report = nullptr,
+                         const ContactSurface *     preoperativeSurface = nullptr);
 
 /** (b) Interpolates displacement vectors measured at `points` (reference,
  *  i.e. preoperative, positions, mm) to every exposed node:

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <cstdlib>
 #include <fstream>
+#include <memory>
 #include <sstream>
 
 namespace bmr
@@ -98,13 +99,21 @@ DisplacementsFromSurface(const Model &               model,
                          const std::vector<Index> &  exposedNodes,
                          const ContactSurface &      intraoperativeSurface,
                          const SurfaceLoadSettings & settings,
-                         LoadReport *                report)
+                         LoadReport *                report,
+                         const ContactSurface *      preoperativeSurface)
 {
   const char * function = "DisplacementsFromSurface";
   ValidateExposedNodes(model, exposedNodes, function);
   ValidateSettings(settings, function);
   const std::string surfaceName = "intraoperative surface '" + intraoperativeSurface.name + "'";
   const TriangleSurfaceTree surface(intraoperativeSurface.vertices, intraoperativeSurface.triangles, surfaceName);
+  std::unique_ptr<TriangleSurfaceTree> preoperative;
+  if (preoperativeSurface != nullptr)
+  {
+    preoperative = std::make_unique<TriangleSurfaceTree>(
+      preoperativeSurface->vertices, preoperativeSurface->triangles,
+      "preoperative surface '" + preoperativeSurface->name + "'");
+  }
 
   LoadReport             local;
   LoadReport &           out = report ? *report : local;
@@ -115,8 +124,8 @@ DisplacementsFromSurface(const Model &               model,
   rejected.precision(4);
   for (const Index node : exposedNodes)
   {
-    const Vector3 & x = model.nodes[node];
-    const Vector3   displacement = surface.Closest(x).point - x;
+    const Vector3 x = preoperative ? preoperative->Closest(model.nodes[node]).point : model.nodes[node];
+    const Vector3 displacement = surface.Closest(x).point - x;
     const double    distance = displacement.norm();
     if (distance > settings.maxDistance)
     {

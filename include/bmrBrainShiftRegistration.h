@@ -1,0 +1,296 @@
+// The whole brain-shift registration in one call: preoperative MRI (+ brain
+// mask, tumour mask, skull surface) and intraoperative data (a displaced
+// surface, sparse displacements, or an intraoperative image) -> patient
+// model -> TLED solve -> B-spline transform -> warped preoperative image and
+// label maps -> edge-based evaluation and a report.
+//
+// It composes the module's ITK filters and core on fixed image types (float
+// intensities, unsigned char masks and labels) and is compiled once into the
+// BiomechanicalRegistrationPipeline library, so that the command-line tool,
+// the tests and the Python binding do not each instantiate every filter's
+// templates. examples/BrainShiftRegistrationExample.cxx builds the same
+// pipeline from the filters step by step.
+//
+// Units: mm (ITK physical space, LPS), Pa, kg/m^3, s.
+#ifndef bmrBrainShiftRegistration_h
+#define bmrBrainShiftRegistration_h
+
+// ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.
+#include "itkBSplineTransform.h"
+#include "itkImage.h"
+
+#include "bmrBrainSurfaces.h"
+#include "bmrFuzzyCMeans.h"
+#include "bmrImageGrids.h"
+#include "bmrMaterialMapping.h"
+#include "bmrSolver.h"
+#include "bmrSurfaceLoads.h"
+
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <functional>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace bmr
+{
+
+using RegistrationImage = itk::Image<float, 3>;
+using RegistrationLabelImage = itk::Image<unsigned char, 3>;
+/** Backward (resampling) map: intraoperative point -> preoperative point. */
+using RegistrationTransform = itk::BSplineTransform<double, 3, 3>;
+
+/** Stage events for progress displays: `seconds` < 0 when a stage starts,
+ *  its wall time when it ends. */
+using StageCallback = std::function<void(const std::string & stage, double seconds)>;
+
+/** Wall time of named stages, in order; tells a StageCallback about each. */
+class StageTimer
+{
+public:
+  explicit StageTimer(StageCallback callback = {})
+    : m_Callback(std::move(callback))
+  {}
+
+  template <typename Stage>
+  auto Run(const std::string & name, Stage && stage)
+  {
+    Start(name);
+    const auto start = Clock::now();
+    struct Finish
+    {
+      StageTimer *             timer;
+      const std::string &      name;
+      Clock::time_point        start;
+      ~Finish() { timer->Finish(name, start); }
+    } finish{ this, name, start };
+    return stage();
+  }
+
+  /** Seconds per stage in order, and "total". */
+  nlohmann::json Json() const;
+  const std::vector<std::pair<std::string, double>> & Stages() const { return m_Seconds; }
+  /** Seconds of the named stage (0 when it did not run). */
+  double Seconds(const std::string & name) const;
+
+private:
+  using Clock = std::chrono::steady_clock;
+  void Start(const std::string & name);
+  void Finish(const std::string & name, Clock::time_point start);
+
+  StageCallback                               m_Callback;
+  std::vector<std::pair<std::string, double>> m_Seconds;
+};
+
+// ---------------------------------------------------------------------------
+// The patient model (shared with `biomech model`).
+// ---------------------------------------------------------------------------
+
+/** Atlas skull stripping (itk::AtlasBrainMaskImageFilter): Colin27 from Debian's mricron-data by default. */
+struct AtlasSettings
+{
+  std::string image = "/usr/share/mricron/templates/ch2.nii.gz";
+  std::string mask = "/usr/share/mricron/templates/ch2bet.nii.gz"; // voxels > 0 are brain
+  bool        bsplineStage = true;                                  // false: affine only
+};
+
+/** Brain mask (1 inside) of a T1 image by atlas registration. Throws bmr::Error. */
+RegistrationLabelImage::Pointer
+AtlasBrainMask(const RegistrationImage * image, const AtlasSettings & settings = {});
+
+/** Brain surface (level 0) and rigid skull (level skullGap) of a mask
+ *  (itk::BrainSurfaceMeshSource); its warnings are appended to `warnings`. */
+BrainSurfaces
+BrainSurfacesOfMask(const LabelVolume & mask, double skullGap, std::vector<std::string> & warnings);
+
+/** A mask image as a core volume (voxels > 0 are 1). When `grid` is given the
+ *  mask must lie on it; otherwise an Error names `what` and both grids. */
+LabelVolume
+MaskVolume(const RegistrationLabelImage * image, const std::string & what, const ImageGeometry * grid = nullptr);
+
+struct BrainModelSettings
+{
+  /** Fuzzy c-means; 3 classes on a T1 image (CSF, grey, white: with 2, the
+   *  darker class would be grey matter and get the CSF material). */
+  FuzzyCMeansSettings classifier = [] {
+    FuzzyCMeansSettings settings;
+    settings.classes = 3;
+    return settings;
+  }();
+  /** Materials per class (ascending centroid) and of the tumour. */
+  MaterialMappingSettings materials;
+  /** Hexahedra of 5 mm by default. */
+  ImageGridSettings grid;
+  /** Skull stripping when no brain mask is given. */
+  AtlasSettings atlas;
+  /** Gap between brain and the rigid skull made from the model (mm). */
+  double skullGap = BrainSurfaceSettings{}.skullGap;
+  /** Fixed skull base / brain stem band. */
+  SkullBaseSettings skullBase;
+  /** The craniotomy: a sphere (radius > 0) or a mask on any grid (voxels > 0). */
+  Vector3                             craniotomyCentre = Vector3::Zero();
+  double                              craniotomyRadius = 0.0;
+  RegistrationLabelImage::ConstPointer craniotomyMask;
+  /** Brain-skull contact of every surface node that is neither fixed nor loaded. */
+  bool contact = true;
+  /** Body acceleration (mm/s^2); zero: none (registration loads by displacements only). */
+  Vector3 gravity = Vector3::Zero();
+  /** Threads of the grid and material mapping; 0: OpenMP's default. */
+  int threads = 0;
+};
+
+/** Intraoperative data. The exposed surface's motion comes from `surface`
+ *  or `sparse` (not both); when neither is given, from `image`: the boundary
+ *  of `imageBrainMask`, or of a mask from atlas skull stripping of `image`.
+ *  `image`, when given, is also the fixed image of the evaluation. */
+struct IntraoperativeData
+{
+  ContactSurface                       surface; // displaced exposed (or whole) brain surface, mm
+  SparseDisplacements                  sparse;  // preoperative points and their displacements, mm
+  RegistrationImage::ConstPointer      image;
+  RegistrationLabelImage::ConstPointer imageBrainMask;
+  /** Measurements farther than this from the model surface are left out (mm). */
+  double maxDistance = SurfaceLoadSettings{}.maxDistance;
+};
+
+struct BrainModel
+{
+  Model                    model;    // fixed skull base, prescribed exposed-surface displacements, contact
+  BrainSurfaces            surfaces; // preoperative brain surface and the skull (contact master)
+  TissueClassification     classification;
+  LabelVolume              brainMask;
+  GridQuality              gridQuality;
+  std::vector<Index>       exposedNodes;
+  PrescribedDisplacement   load;
+  LoadReport               loadReport;
+  std::vector<std::string> warnings;
+};
+
+/** Builds the model of `image` inside `brainMask` (null: atlas skull stripping
+ *  with Colin27 from mricron-data), with `tumourMask` (may be null) as a stiff
+ *  region, the skull from the model dilated by settings.skullGap (or
+ *  `skullSurface` when it has triangles), and, when `intraoperative` is not
+ *  null, the exposed nodes loaded from it. Masks must lie on the image grid.
+ *  Throws bmr::Error naming the bad input. */
+BrainModel
+BuildBrainModel(const RegistrationImage *      image,
+                const RegistrationLabelImage * brainMask,
+                const RegistrationLabelImage * tumourMask,
+                const ContactSurface &         skullSurface,
+                const IntraoperativeData *     intraoperative,
+                const BrainModelSettings &     settings,
+                StageTimer &                   timer);
+
+// ---------------------------------------------------------------------------
+// The registration.
+// ---------------------------------------------------------------------------
+
+struct BrainShiftRegistrationSettings
+{
+  BrainModelSettings model;
+  /** Dynamic relaxation to 0.01 mm (far below the 0.1 mm a registration needs). */
+  SolverSettings solver = [] {
+    SolverSettings settings;
+    settings.tolerance = 0.01;
+    return settings;
+  }();
+  /** Transform fit: largest residual at the nodes, and the finest control-point spacing (mm). */
+  double fitTolerance = 0.1;
+  double minimumControlPointSpacing = 1.0;
+  /** Evaluation: axial slices (axis 2) or whole volume (-1), and the registered-edge distance (mm). */
+  int    evaluationSliceAxis = 2;
+  double evaluationDistanceThreshold = 1.7;
+};
+
+struct BrainShiftRegistrationInputs
+{
+  RegistrationImage::ConstPointer      preoperativeImage;
+  RegistrationLabelImage::ConstPointer brainMask;  // null: atlas skull stripping
+  RegistrationLabelImage::ConstPointer tumourMask; // optional
+  ContactSurface                       skullSurface; // optional (no triangles: made from the model)
+  /** Label maps on the preoperative grid, warped with nearest-neighbour interpolation. */
+  std::vector<RegistrationLabelImage::ConstPointer> labelMaps;
+  IntraoperativeData                   intraoperative;
+};
+
+/** Edge-based Hausdorff evaluation of one registration (itk::EdgeHausdorffDistanceImageFilter). */
+struct EdgeEvaluation
+{
+  bool                valid = false;
+  std::string         message;
+  std::vector<double> symmetric; // mm at percentiles 1..100
+  double              fractionWithinThreshold = 0.0;
+  std::size_t         fixedEdges = 0, movingEdges = 0;
+  /** Edge images (1 on edges) for overlays, on the intraoperative grid. */
+  RegistrationLabelImage::Pointer fixedEdgeImage, movingEdgeImage;
+  double Percentile(int k) const { return valid ? symmetric.at(static_cast<std::size_t>(k - 1)) : 0.0; }
+};
+
+struct BrainShiftRegistrationResult
+{
+  BrainModel                     model;
+  SolveResult                    solve;
+  RegistrationTransform::Pointer transform;      // backward map
+  double                         fitMaxResidual = 0.0, fitRmsResidual = 0.0; // mm, at the nodes
+  int                            fitLevels = 0;
+  bool                           fitToleranceReached = false;
+  RegistrationImage::Pointer     warpedImage;    // preoperative grid
+  std::vector<RegistrationLabelImage::Pointer> warpedLabelMaps;
+  /** With an intraoperative image: the preoperative image before and after
+   *  registration, resampled onto the intraoperative grid, and their evaluations. */
+  RegistrationImage::Pointer      unregisteredOnIntraoperativeGrid, registeredOnIntraoperativeGrid;
+  RegistrationLabelImage::Pointer evaluationMask;
+  EdgeEvaluation                  unregistered, registered;
+  StageTimer                      timer;
+  std::vector<std::string>        warnings;
+
+  bool Evaluated() const { return registeredOnIntraoperativeGrid.IsNotNull(); }
+};
+
+/** Runs the pipeline. A solve that does not converge is not an exception:
+ *  the result says so (solve.converged false, solve.message), and the caller
+ *  decides (the `register` subcommand exits 2). A solve that fails (inverted
+ *  element) and bad input throw bmr::Error naming the problem. */
+BrainShiftRegistrationResult
+RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
+                   const BrainShiftRegistrationSettings & settings,
+                   const StageCallback &                  stageCallback = {},
+                   const ProgressCallback &               solverProgress = {});
+
+/** Edge-based Hausdorff between `fixed` and `moving` (same grid) inside `mask` (may be null). */
+EdgeEvaluation
+EvaluateEdges(const RegistrationImage *      fixed,
+              const RegistrationImage *      moving,
+              const RegistrationLabelImage * mask,
+              int                            sliceAxis = 2,
+              double                         distanceThreshold = 1.7);
+
+/** Grey range of edge overlays: the image's minimum and 99.5th percentile
+ *  (a few very bright voxels would otherwise leave the anatomy dark). */
+std::pair<double, double>
+OverlayGreyRange(const RegistrationImage * image);
+
+/** Axial edge-overlay PNGs of an evaluation (fixed edges red, moving blue,
+ *  both green, over `background` in grey): `count` slices evenly spread over
+ *  those with edges, written as FOLDER/PREFIX-SLICE.png. Returns the paths. */
+std::vector<std::string>
+WriteEdgeOverlays(const EdgeEvaluation &    evaluation,
+                  const RegistrationImage * background,
+                  const std::string &       folder,
+                  const std::string &       prefix,
+                  int                       count = 5);
+
+/** Report: stage times, model size, solver convergence and estimated error,
+ *  fit residual, evaluation (keys in docs/registration.md). */
+nlohmann::json
+RegistrationReportJson(const BrainShiftRegistrationResult & result, const BrainShiftRegistrationSettings & settings);
+
+/** A short human-readable table of the same; says NOT CONVERGED loudly. */
+std::string
+FormatRegistrationTable(const BrainShiftRegistrationResult & result);
+
+} // namespace bmr
+
+#endif

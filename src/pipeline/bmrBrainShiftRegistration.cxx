@@ -1,0 +1,744 @@
+#include "bmrBrainShiftRegistration.h"
+
+// ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.
+#include "itkAtlasBrainMaskImageFilter.h"
+#include "itkBiomechanicalImageConversion.h"
+#include "itkBiomechanicalImageIO.h"
+#include "itkBrainSurfaceMeshSource.h"
+#include "itkDisplacementPointSetToBSplineTransformFilter.h"
+#include "itkEdgeHausdorffDistanceImageFilter.h"
+#include "itkIdentityTransform.h"
+#include "itkTransformWarpImageFilter.h"
+
+#include "bmrScene.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <cmath>
+#include <iomanip>
+#include <sstream>
+
+namespace bmr
+{
+
+// ---------------------------------------------------------------------------
+// StageTimer
+// ---------------------------------------------------------------------------
+
+void
+StageTimer::Start(const std::string & name)
+{
+  if (m_Callback)
+  {
+    m_Callback(name, -1.0);
+  }
+}
+
+void
+StageTimer::Finish(const std::string & name, Clock::time_point start)
+{
+  const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
+  m_Seconds.emplace_back(name, seconds);
+  if (m_Callback)
+  {
+    m_Callback(name, seconds);
+  }
+}
+
+nlohmann::json
+StageTimer::Json() const
+{
+  nlohmann::json times = nlohmann::json::object();
+  double         total = 0.0;
+  for (const auto & [name, seconds] : m_Seconds)
+  {
+    times[name] = times.contains(name) ? times[name].get<double>() + seconds : seconds;
+    total += seconds;
+  }
+  times["total"] = total;
+  return times;
+}
+
+double
+StageTimer::Seconds(const std::string & name) const
+{
+  double seconds = 0.0;
+  for (const auto & stage : m_Seconds)
+  {
+    if (stage.first == name)
+    {
+      seconds += stage.second;
+    }
+  }
+  return seconds;
+}
+
+namespace
+{
+
+/** Checks that the intraoperative data name one source of the exposed surface's motion. */
+void
+CheckIntraoperativeData(const IntraoperativeData & data)
+{
+  const bool surface = !data.surface.triangles.empty();
+  const bool sparse = !data.sparse.points.empty();
+  if (surface && sparse)
+  {
+    throw Error("give one source of intraoperative displacements: a surface or sparse displacements, not both");
+  }
+  if (!surface && !sparse && data.image.IsNull())
+  {
+    throw Error("no intraoperative data: give an intraoperative surface, sparse displacements or an "
+                "intraoperative image");
+  }
+  if (data.sparse.points.size() != data.sparse.displacements.size())
+  {
+    throw Error("the sparse intraoperative data have " + std::to_string(data.sparse.points.size()) + " points but " +
+                std::to_string(data.sparse.displacements.size()) + " displacements; give one displacement per point");
+  }
+}
+
+/** Displacements of the exposed nodes from whichever intraoperative data was given. */
+PrescribedDisplacement
+LoadFromIntraoperativeData(const Model &              model,
+                           const std::vector<Index> & exposed,
+                           const BrainSurfaces &      surfaces,
+                           const IntraoperativeData & data,
+                           const AtlasSettings &      atlas,
+                           StageTimer &               timer,
+                           LoadReport &               report,
+                           std::vector<std::string> & warnings)
+{
+  SurfaceLoadSettings settings;
+  settings.maxDistance = data.maxDistance;
+  // A point cloud has no cells; the sparse interpolation then measures distances to the body's surface.
+  const ContactSurface * modelSurface = model.cells.empty() ? &surfaces.brain : nullptr;
+  if (!data.sparse.points.empty())
+  {
+    return DisplacementsFromSparsePoints(model, exposed, data.sparse.points, data.sparse.displacements, settings,
+                                         &report, modelSurface);
+  }
+  ContactSurface intraoperativeSurface = data.surface;
+  if (intraoperativeSurface.triangles.empty())
+  {
+    // The exposed surface is taken from the intraoperative image: the boundary of its brain mask.
+    const RegistrationLabelImage::Pointer mask = data.imageBrainMask.IsNotNull()
+                                                   ? RegistrationLabelImage::Pointer()
+                                                   : timer.Run("intraop-mask", [&] { return AtlasBrainMask(data.image, atlas); });
+    const LabelVolume maskVolume =
+      MaskVolume(data.imageBrainMask.IsNotNull() ? data.imageBrainMask.GetPointer() : mask.GetPointer(),
+                 "intraoperative brain mask", nullptr);
+    intraoperativeSurface = timer.Run("intraop-surface", [&] {
+      return BrainSurfacesOfMask(maskVolume, BrainSurfaceSettings{}.skullGap, warnings).brain;
+    });
+    intraoperativeSurface.name = "brain surface of the intraoperative image";
+  }
+  // Surface to surface: the staircase of a hexahedral grid is not brain motion.
+  return DisplacementsFromSurface(model, exposed, intraoperativeSurface, settings, &report, &surfaces.brain);
+}
+
+} // namespace
+
+LabelVolume
+MaskVolume(const RegistrationLabelImage * image, const std::string & what, const ImageGeometry * grid)
+{
+  LabelVolume mask = itk::MakeBiomechanicalVolume<std::uint8_t>(image);
+  for (auto & value : mask.values)
+  {
+    value = value > 0 ? 1 : 0;
+  }
+  if (grid != nullptr && !mask.geometry.SameGridAs(*grid))
+  {
+    throw Error("the " + what + " is not on the image grid: it has " + mask.geometry.Describe() +
+                ", the image has " + grid->Describe() + "; resample it onto the image (nearest neighbour) first");
+  }
+  return mask;
+}
+
+RegistrationLabelImage::Pointer
+AtlasBrainMask(const RegistrationImage * image, const AtlasSettings & settings)
+{
+  auto filter = itk::AtlasBrainMaskImageFilter<RegistrationImage>::New();
+  filter->SetInput(image);
+  filter->SetAtlasImage(itk::ReadBiomechanicalImage<RegistrationImage>(settings.image, "atlas"));
+  filter->SetAtlasMaskImage(itk::ReadBiomechanicalImage<RegistrationImage>(settings.mask, "atlas mask"));
+  filter->SetUseBSplineStage(settings.bsplineStage);
+  try
+  {
+    filter->Update();
+  }
+  catch (const itk::ExceptionObject & exception)
+  {
+    throw Error(std::string("skull stripping failed: ") + exception.GetDescription());
+  }
+  return filter->GetOutput();
+}
+
+BrainSurfaces
+BrainSurfacesOfMask(const LabelVolume & mask, double skullGap, std::vector<std::string> & warnings)
+{
+  auto source = itk::BrainSurfaceMeshSource<RegistrationLabelImage>::New();
+  source->SetInput(itk::MakeImageFromBiomechanicalVolume<RegistrationLabelImage>(mask));
+  source->SetSkullGap(skullGap);
+  try
+  {
+    source->Update();
+  }
+  catch (const itk::ExceptionObject & exception)
+  {
+    throw Error(exception.GetDescription());
+  }
+  warnings.insert(warnings.end(), source->GetWarnings().begin(), source->GetWarnings().end());
+  return BrainSurfaces{ source->GetBrainSurface(), source->GetSkullSurface() };
+}
+
+// ---------------------------------------------------------------------------
+// The model.
+// ---------------------------------------------------------------------------
+
+BrainModel
+BuildBrainModel(const RegistrationImage *      image,
+                const RegistrationLabelImage * brainMask,
+                const RegistrationLabelImage * tumourMask,
+                const ContactSurface &         skullSurface,
+                const IntraoperativeData *     intraoperative,
+                const BrainModelSettings &     settings,
+                StageTimer &                   timer)
+{
+  if (image == nullptr)
+  {
+    throw Error("no preoperative image: give the preoperative MRI");
+  }
+  if (intraoperative != nullptr)
+  {
+    CheckIntraoperativeData(*intraoperative);
+  }
+  const bool hasCraniotomy = settings.craniotomyRadius > 0.0 || settings.craniotomyMask.IsNotNull();
+  if (intraoperative != nullptr && !hasCraniotomy)
+  {
+    throw Error("intraoperative measurements need the craniotomy region they belong to: give its centre and "
+                "radius (> 0 mm) or a craniotomy mask");
+  }
+  if (settings.craniotomyRadius > 0.0 && settings.craniotomyMask.IsNotNull())
+  {
+    throw Error("give the craniotomy either as a sphere (centre, radius) or as a mask, not both");
+  }
+
+  BrainModel result;
+  auto &     warnings = result.warnings;
+  const ScalarVolume intensities = itk::MakeBiomechanicalVolume<float>(image);
+
+  if (brainMask != nullptr)
+  {
+    result.brainMask = MaskVolume(brainMask, "brain mask", &intensities.geometry);
+  }
+  else
+  {
+    result.brainMask = timer.Run("skull-strip", [&] {
+      return MaskVolume(AtlasBrainMask(image, settings.atlas).GetPointer(), "brain mask", &intensities.geometry);
+    });
+  }
+  LabelVolume tumour;
+  if (tumourMask != nullptr)
+  {
+    tumour = MaskVolume(tumourMask, "tumour mask", &intensities.geometry);
+  }
+
+  result.classification = timer.Run("classify", [&] {
+    return ClassifyTissue(intensities, &result.brainMask, settings.classifier, {}, &warnings);
+  });
+
+  // The tumour is a second label, so that tetrahedral meshes conform to its boundary.
+  LabelVolume labels = result.brainMask;
+  if (!tumour.values.empty())
+  {
+    for (std::size_t voxel = 0; voxel < labels.values.size(); ++voxel)
+    {
+      if (tumour.values[voxel] != 0 && labels.values[voxel] != 0)
+      {
+        labels.values[voxel] = 2;
+      }
+    }
+  }
+  ImageGridSettings gridSettings = settings.grid;
+  gridSettings.threads = settings.threads;
+  ImageGrid grid = timer.Run("grid", [&] { return MakeGridFromLabels(labels, gridSettings, &warnings); });
+  result.gridQuality = grid.quality;
+  Model & model = result.model;
+  model = std::move(grid.model);
+
+  timer.Run("materials", [&] {
+    MaterialMappingSettings materials = settings.materials;
+    materials.sampling.threads = settings.threads;
+    MapMaterialsFromMemberships(model, result.classification.memberships, materials,
+                                tumour.values.empty() ? nullptr : &tumour, &warnings);
+  });
+
+  // The skull is the boundary of the body dilated by the gap, and the body is
+  // the model's cells (for a point cloud, the tetrahedra its integration
+  // points cover), not the mask: the corners of a staircase hexahedral grid
+  // stick out of the mask by up to half a cell.
+  result.surfaces = timer.Run("surfaces", [&] {
+    const Model & body = model.cells.empty() ? grid.meshlessBody : model;
+    return BrainSurfacesOfMask(RasterizeCells(body, result.brainMask.geometry), settings.skullGap, warnings);
+  });
+  if (!skullSurface.triangles.empty())
+  {
+    // The user's skull (e.g. segmented from CT) replaces the dilated body as the contact master.
+    result.surfaces.skull = skullSurface;
+    result.surfaces.skull.name = "skull";
+    result.surfaces.skull.bodySide = ContactSurface::Side::Inside;
+  }
+
+  const std::vector<Index> & surfaceNodes = model.NodeSet("surface");
+  model.nodeSets["skull_base"] = SkullBaseNodes(model, surfaceNodes, settings.skullBase);
+  model.fixedConstraints = { FixedConstraint{ "skull_base", { true, true, true } } };
+  if (settings.craniotomyMask.IsNotNull())
+  {
+    const LabelVolume region = MaskVolume(settings.craniotomyMask, "craniotomy mask", nullptr);
+    result.exposedNodes = SurfaceNodesInMask(model, surfaceNodes, region);
+  }
+  else if (settings.craniotomyRadius > 0.0)
+  {
+    result.exposedNodes = SurfaceNodesInSphere(model, surfaceNodes, settings.craniotomyCentre, settings.craniotomyRadius);
+  }
+  if (!result.exposedNodes.empty())
+  {
+    model.nodeSets["exposed"] = result.exposedNodes;
+  }
+
+  if (intraoperative != nullptr)
+  {
+    result.load = timer.Run("loads", [&] {
+      return LoadFromIntraoperativeData(model, result.exposedNodes, result.surfaces, *intraoperative, settings.atlas, timer,
+                                        result.loadReport, warnings);
+    });
+    warnings.insert(warnings.end(), result.loadReport.warnings.begin(), result.loadReport.warnings.end());
+    model.prescribedDisplacements = { result.load };
+  }
+  model.bodyAcceleration = settings.gravity;
+
+  // Contact: every surface node that is neither fixed nor loaded may touch the skull.
+  if (settings.contact)
+  {
+    std::vector<char> constrained(model.nodes.size(), 0);
+    for (const Index node : model.nodeSets["skull_base"])
+    {
+      constrained[node] = 1;
+    }
+    for (const Index node : result.load.nodes)
+    {
+      constrained[node] = 1;
+    }
+    std::vector<Index> contactNodes;
+    for (const Index node : surfaceNodes)
+    {
+      if (!constrained[node])
+      {
+        contactNodes.push_back(node);
+      }
+    }
+    model.nodeSets["contact"] = contactNodes;
+    if (!contactNodes.empty())
+    {
+      ContactSurface skull = result.surfaces.skull;
+      skull.slaveNodeSet = "contact";
+      model.contactSurfaces = { skull };
+    }
+  }
+  if (result.load.nodes.empty() && settings.gravity.isZero())
+  {
+    warnings.push_back("the model has no load (no intraoperative measurements and no gravity): its solution is zero");
+  }
+  return result;
+}
+
+// ---------------------------------------------------------------------------
+// Evaluation.
+// ---------------------------------------------------------------------------
+
+EdgeEvaluation
+EvaluateEdges(const RegistrationImage *      fixed,
+              const RegistrationImage *      moving,
+              const RegistrationLabelImage * mask,
+              int                            sliceAxis,
+              double                         distanceThreshold)
+{
+  auto filter = itk::EdgeHausdorffDistanceImageFilter<RegistrationImage, RegistrationLabelImage>::New();
+  filter->SetFixedImage(fixed);
+  filter->SetMovingImage(moving);
+  if (mask != nullptr)
+  {
+    filter->SetMaskImage(mask);
+  }
+  filter->SetSliceAxis(sliceAxis);
+  filter->SetDistanceThreshold(distanceThreshold);
+  try
+  {
+    filter->Update();
+  }
+  catch (const itk::ExceptionObject & exception)
+  {
+    throw Error(std::string("edge-based evaluation failed: ") + exception.GetDescription());
+  }
+  const itk::EdgeHausdorffResult & edges = filter->GetResult();
+  EdgeEvaluation                   evaluation;
+  evaluation.valid = edges.valid;
+  evaluation.message = edges.message;
+  evaluation.symmetric = edges.symmetric;
+  evaluation.fractionWithinThreshold = edges.fractionWithinThreshold;
+  evaluation.fixedEdges = edges.fixedEdgePixels;
+  evaluation.movingEdges = edges.movingEdgePixels;
+  evaluation.fixedEdgeImage = const_cast<RegistrationLabelImage *>(filter->GetFixedEdges());
+  evaluation.movingEdgeImage = const_cast<RegistrationLabelImage *>(filter->GetMovingEdges());
+  return evaluation;
+}
+
+namespace
+{
+
+template <typename TImage>
+typename TImage::Pointer
+Warp(const TImage *                                      image,
+     const itk::Transform<double, 3, 3> *                transform,
+     const itk::ImageBase<3> *                           reference,
+     itk::WarpInterpolation                              interpolation)
+{
+  auto warp = itk::TransformWarpImageFilter<TImage>::New();
+  warp->SetInput(image);
+  warp->SetTransform(transform);
+  if (reference != nullptr)
+  {
+    warp->SetReferenceImage(reference);
+  }
+  warp->SetInterpolation(interpolation);
+  try
+  {
+    warp->Update();
+  }
+  catch (const itk::ExceptionObject & exception)
+  {
+    throw Error(std::string("warping failed: ") + exception.GetDescription());
+  }
+  typename TImage::Pointer output = warp->GetOutput();
+  output->DisconnectPipeline();
+  return output;
+}
+
+} // namespace
+
+// ---------------------------------------------------------------------------
+// The registration.
+// ---------------------------------------------------------------------------
+
+BrainShiftRegistrationResult
+RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
+                   const BrainShiftRegistrationSettings & settings,
+                   const StageCallback &                  stageCallback,
+                   const ProgressCallback &               solverProgress)
+{
+  if (inputs.preoperativeImage.IsNull())
+  {
+    throw Error("no preoperative image: give the preoperative MRI");
+  }
+  for (std::size_t k = 0; k < inputs.labelMaps.size(); ++k)
+  {
+    if (inputs.labelMaps[k].IsNull())
+    {
+      throw Error("label map " + std::to_string(k) + " is empty: give a label image on the preoperative grid");
+    }
+  }
+  BrainShiftRegistrationResult result;
+  result.timer = StageTimer(stageCallback);
+  StageTimer & timer = result.timer;
+
+  result.model = BuildBrainModel(inputs.preoperativeImage, inputs.brainMask, inputs.tumourMask, inputs.skullSurface,
+                                 &inputs.intraoperative, settings.model, timer);
+  result.warnings = result.model.warnings;
+  const Model & model = result.model.model;
+
+  result.solve = timer.Run("solve", [&] {
+    SolverSettings solverSettings = settings.solver;
+    if (solverSettings.threads == 0)
+    {
+      solverSettings.threads = settings.model.threads;
+    }
+    try
+    {
+      Solver solver(model, solverSettings);
+      return solver.Solve(solverProgress);
+    }
+    catch (const SolveError & error)
+    {
+      throw Error(std::string("the solve failed") +
+                  (error.Element() >= 0 ? " (element " + std::to_string(error.Element()) + ")" : std::string()) +
+                  ": " + error.what());
+    }
+  });
+  if (!result.solve.converged)
+  {
+    result.warnings.push_back("the solve did not converge: " + result.solve.message +
+                              "; the transform and the warped image come from the last state");
+  }
+
+  using PointSetType = itk::DisplacementPointSetType<3>;
+  using FitterType = itk::DisplacementPointSetToBSplineTransformFilter<PointSetType>;
+  timer.Run("fit", [&] {
+    auto fitter = FitterType::New();
+    fitter->SetInput(itk::MakeDisplacementPointSet<PointSetType>(model.nodes, result.solve.displacements));
+    fitter->SetReferenceImage(inputs.preoperativeImage);
+    fitter->SetTolerance(settings.fitTolerance);
+    fitter->SetMinimumControlPointSpacing(settings.minimumControlPointSpacing);
+    try
+    {
+      fitter->Update();
+    }
+    catch (const itk::ExceptionObject & exception)
+    {
+      throw Error(std::string("fitting the transform failed: ") + exception.GetDescription());
+    }
+    result.transform = const_cast<RegistrationTransform *>(fitter->GetTransform());
+    const itk::BSplineFitReport & report = fitter->GetReport();
+    result.fitMaxResidual = report.maximumResidual;
+    result.fitRmsResidual = report.rmsResidual;
+    result.fitLevels = static_cast<int>(report.levels);
+    result.fitToleranceReached = report.toleranceReached;
+  });
+  if (!result.fitToleranceReached)
+  {
+    std::ostringstream warning;
+    warning << "the transform fit did not reach " << settings.fitTolerance << " mm at the nodes (largest residual "
+            << result.fitMaxResidual << " mm at " << settings.minimumControlPointSpacing << " mm control points)";
+    result.warnings.push_back(warning.str());
+  }
+
+  result.warpedImage = timer.Run("warp", [&] {
+    return Warp<RegistrationImage>(inputs.preoperativeImage, result.transform, nullptr, itk::WarpInterpolation::Linear);
+  });
+  if (!inputs.labelMaps.empty())
+  {
+    timer.Run("warp-labels", [&] {
+      for (const auto & labels : inputs.labelMaps)
+      {
+        result.warpedLabelMaps.push_back(Warp<RegistrationLabelImage>(labels, result.transform, nullptr,
+                                                                      itk::WarpInterpolation::NearestNeighbor));
+      }
+    });
+  }
+
+  const RegistrationImage * intraoperativeImage = inputs.intraoperative.image.GetPointer();
+  if (intraoperativeImage != nullptr)
+  {
+    timer.Run("evaluate", [&] {
+      auto identity = itk::IdentityTransform<double, 3>::New();
+      result.unregisteredOnIntraoperativeGrid = Warp<RegistrationImage>(
+        inputs.preoperativeImage, identity, intraoperativeImage, itk::WarpInterpolation::Linear);
+      result.registeredOnIntraoperativeGrid = Warp<RegistrationImage>(
+        inputs.preoperativeImage, result.transform, intraoperativeImage, itk::WarpInterpolation::Linear);
+      // The brain of the intraoperative image: its own mask, or the registered preoperative mask.
+      if (inputs.intraoperative.imageBrainMask.IsNotNull())
+      {
+        result.evaluationMask = const_cast<RegistrationLabelImage *>(inputs.intraoperative.imageBrainMask.GetPointer());
+      }
+      else
+      {
+        const auto preoperativeMask = itk::MakeImageFromBiomechanicalVolume<RegistrationLabelImage>(result.model.brainMask);
+        result.evaluationMask = Warp<RegistrationLabelImage>(preoperativeMask, result.transform, intraoperativeImage,
+                                                             itk::WarpInterpolation::NearestNeighbor);
+      }
+      result.unregistered = EvaluateEdges(intraoperativeImage, result.unregisteredOnIntraoperativeGrid,
+                                          result.evaluationMask, settings.evaluationSliceAxis,
+                                          settings.evaluationDistanceThreshold);
+      result.registered = EvaluateEdges(intraoperativeImage, result.registeredOnIntraoperativeGrid,
+                                        result.evaluationMask, settings.evaluationSliceAxis,
+                                        settings.evaluationDistanceThreshold);
+    });
+  }
+  return result;
+}
+
+std::pair<double, double>
+OverlayGreyRange(const RegistrationImage * image)
+{
+  const float *      begin = image->GetBufferPointer();
+  std::vector<float> values(begin, begin + image->GetBufferedRegion().GetNumberOfPixels());
+  const auto         top = values.begin() + static_cast<std::ptrdiff_t>(0.995 * static_cast<double>(values.size() - 1));
+  std::nth_element(values.begin(), top, values.end());
+  const double maximum = *top;
+  const double minimum = *std::min_element(values.begin(), top + 1);
+  return { minimum, maximum };
+}
+
+std::vector<std::string>
+WriteEdgeOverlays(const EdgeEvaluation &    evaluation,
+                  const RegistrationImage * background,
+                  const std::string &       folder,
+                  const std::string &       prefix,
+                  int                       count)
+{
+  std::vector<std::string> paths;
+  if (!evaluation.valid || evaluation.fixedEdgeImage.IsNull() || count <= 0)
+  {
+    return paths;
+  }
+  constexpr unsigned int axial = 2;
+  const auto slices = itk::EdgeOverlaySlices(evaluation.fixedEdgeImage.GetPointer(),
+                                             evaluation.movingEdgeImage.GetPointer(), axial);
+  if (slices.empty())
+  {
+    return paths;
+  }
+  const auto [grey0, grey1] = OverlayGreyRange(background);
+  std::filesystem::create_directories(folder);
+  for (int k = 0; k < count && k < static_cast<int>(slices.size()); ++k)
+  {
+    // Evenly spread, away from the first and last slices with edges (the brain's caps).
+    const std::size_t position = (2 * static_cast<std::size_t>(k) + 1) * slices.size() / (2 * static_cast<std::size_t>(count));
+    const itk::IndexValueType slice = slices[std::min(position, slices.size() - 1)];
+    const auto overlay = itk::MakeEdgeOverlaySlice(evaluation.fixedEdgeImage.GetPointer(),
+                                                   evaluation.movingEdgeImage.GetPointer(), background, axial, slice,
+                                                   grey0, grey1);
+    char name[32];
+    std::snprintf(name, sizeof(name), "-%04ld.png", static_cast<long>(slice));
+    const std::string path = (std::filesystem::path(folder) / (prefix + name)).string();
+    itk::WriteBiomechanicalImage(overlay.GetPointer(), path);
+    paths.push_back(path);
+  }
+  return paths;
+}
+
+// ---------------------------------------------------------------------------
+// Reports.
+// ---------------------------------------------------------------------------
+
+namespace
+{
+
+nlohmann::json
+EvaluationJson(const EdgeEvaluation & evaluation, double threshold)
+{
+  if (!evaluation.valid)
+  {
+    return { { "valid", false }, { "message", evaluation.message } };
+  }
+  return { { "valid", true },
+           { "hausdorff_mm", { { "p50", evaluation.Percentile(50) },
+                               { "p75", evaluation.Percentile(75) },
+                               { "p90", evaluation.Percentile(90) },
+                               { "p95", evaluation.Percentile(95) },
+                               { "p100", evaluation.Percentile(100) } } },
+           { "fraction_within_threshold", evaluation.fractionWithinThreshold },
+           { "threshold_mm", threshold },
+           { "fixed_edges", evaluation.fixedEdges },
+           { "moving_edges", evaluation.movingEdges },
+           { "symmetric_curve_mm", evaluation.symmetric } };
+}
+
+std::string
+SolveState(const SolveResult & solve)
+{
+  return solve.converged ? "converged" : "NOT CONVERGED (" + solve.message + ")";
+}
+
+} // namespace
+
+nlohmann::json
+RegistrationReportJson(const BrainShiftRegistrationResult & result, const BrainShiftRegistrationSettings & settings)
+{
+  const ModelCounts counts = CountModel(result.model.model);
+  nlohmann::json    report;
+  report["seconds"] = result.timer.Json();
+  report["model"] = { { "grid", ImageGridKindName(settings.model.grid.kind) },
+                      { "element_size_mm", settings.model.grid.elementSize },
+                      { "nodes", counts.nodes },
+                      { "cells", counts.cells },
+                      { "dofs", counts.dofs },
+                      { "integration_points", counts.integrationPoints },
+                      { "materials", counts.materials },
+                      { "volume_error", result.model.gridQuality.volumeError },
+                      { "exposed_nodes", result.model.exposedNodes.size() },
+                      { "loaded_nodes", result.model.load.nodes.size() },
+                      { "fixed_nodes", result.model.model.nodeSets.count("skull_base")
+                                         ? result.model.model.nodeSets.at("skull_base").size()
+                                         : 0 },
+                      { "contact", !result.model.model.contactSurfaces.empty() },
+                      { "classes", settings.model.classifier.classes } };
+  const LoadReport & load = result.model.loadReport;
+  report["loads"] = { { "used", load.usedPoints },
+                      { "rejected", load.rejectedPoints },
+                      { "max_correspondence_distance_mm", load.maxCorrespondenceDistance },
+                      { "rms_correspondence_distance_mm", load.rmsCorrespondenceDistance } };
+  const SolveResult & solve = result.solve;
+  report["solve"] = { { "converged", solve.converged },
+                      { "message", solve.message },
+                      { "steps", solve.steps },
+                      { "estimated_error_mm", solve.estimatedError },
+                      { "tolerance_mm", settings.solver.tolerance },
+                      { "restarts", solve.restarts },
+                      { "max_displacement_mm", solve.maxDisplacement },
+                      { "contact_nodes", solve.contactNodes },
+                      { "max_penetration_mm", solve.maxPenetration },
+                      { "active_components", solve.activeComponents } };
+  report["fit"] = { { "max_residual_mm", result.fitMaxResidual },
+                    { "rms_residual_mm", result.fitRmsResidual },
+                    { "levels", result.fitLevels },
+                    { "tolerance_mm", settings.fitTolerance },
+                    { "tolerance_reached", result.fitToleranceReached } };
+  if (result.Evaluated())
+  {
+    report["evaluation"] = {
+      { "unregistered", EvaluationJson(result.unregistered, settings.evaluationDistanceThreshold) },
+      { "registered", EvaluationJson(result.registered, settings.evaluationDistanceThreshold) },
+      { "slice_axis", settings.evaluationSliceAxis }
+    };
+  }
+  report["warnings"] = result.warnings;
+  return report;
+}
+
+std::string
+FormatRegistrationTable(const BrainShiftRegistrationResult & result)
+{
+  const ModelCounts  counts = CountModel(result.model.model);
+  std::ostringstream text;
+  text << std::fixed << std::setprecision(2);
+  text << "brain-shift registration\n";
+  text << "  model             " << counts.nodes << " nodes, " << counts.cells << " cells, " << counts.dofs << " DOF";
+  if (counts.integrationPoints > 0)
+  {
+    text << ", " << counts.integrationPoints << " integration points";
+  }
+  text << "\n  loads             " << result.model.load.nodes.size() << " of " << result.model.exposedNodes.size()
+       << " exposed nodes, correspondence up to " << result.model.loadReport.maxCorrespondenceDistance << " mm\n";
+  text << "  solve             " << SolveState(result.solve) << ", " << result.solve.steps << " steps, estimated error "
+       << std::setprecision(4) << result.solve.estimatedError << std::setprecision(2) << " mm, max displacement "
+       << result.solve.maxDisplacement << " mm\n";
+  text << "  transform fit     max residual " << std::setprecision(3) << result.fitMaxResidual << " mm, rms "
+       << result.fitRmsResidual << std::setprecision(2) << " mm, " << result.fitLevels << " levels\n";
+  if (result.Evaluated())
+  {
+    const auto line = [&text](const char * name, const EdgeEvaluation & evaluation) {
+      text << "  " << name;
+      if (!evaluation.valid)
+      {
+        text << "not evaluated: " << evaluation.message << "\n";
+        return;
+      }
+      text << "Hausdorff p50 " << evaluation.Percentile(50) << "  p90 " << evaluation.Percentile(90) << "  p95 "
+           << evaluation.Percentile(95) << " mm, edges within 1.7 mm " << 100.0 * evaluation.fractionWithinThreshold
+           << " %\n";
+    };
+    line("unregistered      ", result.unregistered);
+    line("registered        ", result.registered);
+  }
+  text << "  time              ";
+  for (const auto & [stage, seconds] : result.timer.Stages())
+  {
+    text << stage << " " << seconds << "  ";
+  }
+  text << "| total " << result.timer.Json()["total"].get<double>() << " s\n";
+  return text.str();
+}
+
+} // namespace bmr
