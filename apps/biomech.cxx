@@ -8,6 +8,7 @@
 //   biomech register IMAGE --mask M --craniotomy-centre X Y Z --craniotomy-radius R
 //                 (--intraoperative-surface S | --sparse-displacements CSV | --intraoperative-image I) -o DIR
 //   biomech fit-transform | warp | evaluate | bspline-register   (transform, warp, accuracy, baseline)
+//   biomech demo [-o DIR]   (registration against a known answer, with the B-spline baseline)
 //
 // Exit status: 0 success (solve converged), 2 solve finished but did not
 // converge (results written, report says so), 1 any error (nothing written).
@@ -233,7 +234,8 @@ main(int argc, char ** argv)
   const std::vector<std::function<int()>> runOtherCommands = { bmr::app::AddModelCommands(app),
                                                                 bmr::app::AddTransformCommands(app),
                                                                 bmr::app::AddEvaluateCommand(app),
-                                                                bmr::app::AddBSplineRegisterCommand(app) };
+                                                                bmr::app::AddBSplineRegisterCommand(app),
+                                                                bmr::app::AddDemoCommand(app) };
 
   try
   {

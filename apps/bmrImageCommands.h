@@ -5,6 +5,7 @@
 //   fit-transform, warp   (bmrTransformCommands.cxx)
 //   evaluate              (bmrEvaluateCommand.cxx)
 //   bspline-register      (bmrBSplineRegisterCommand.cxx)
+//   demo                  (bmrDemoCommand.cxx: registration against a known answer)
 #ifndef bmrImageCommands_h
 #define bmrImageCommands_h
 
@@ -25,6 +26,8 @@ std::function<int()>
 AddEvaluateCommand(CLI::App & app);
 std::function<int()>
 AddBSplineRegisterCommand(CLI::App & app);
+std::function<int()>
+AddDemoCommand(CLI::App & app);
 
 } // namespace app
 } // namespace bmr

@@ -1,0 +1,366 @@
+// `biomech demo`: brain-shift registration against a known answer. Makes a
+// ground-truth brain shift of Colin27 with an independent, finer model
+// (bmrSyntheticBrainShift.h), registers from the displaced exposed surface
+// only, runs the B-spline intensity baseline on the same pair, and reports
+// time, displacement error against the ground truth and edge-based
+// Hausdorff distances for: no registration, biomechanical, B-spline.
+#include "bmrImageCommands.h"
+
+// ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.
+#include "itkBSplineTransform.h"
+#include "itkBiomechanicalTransformIO.h"
+#include "itkImageFileWriter.h"
+
+#include "bmrCommandSupport.h"
+
+#include "bmrMeshIO.h"
+#include "bmrSyntheticBrainShift.h"
+
+#include <nlohmann/json.hpp>
+
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <sstream>
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+namespace bmr
+{
+namespace app
+{
+namespace
+{
+
+struct DemoOptions
+{
+  std::string                 image = "/usr/share/mricron/templates/ch2.nii.gz";
+  std::string                 mask = "/usr/share/mricron/templates/ch2bet.nii.gz";
+  std::string                 outputDirectory = "out/demo";
+  SyntheticBrainShiftSettings truth;
+  std::vector<double>         craniotomyCentre;
+  std::vector<double>         tumourCentre;
+  std::string                 truthGrid = "hexahedra";
+  std::vector<std::string>    variants{ "hexahedra:5" };
+  bool                        noBaseline = false;
+  std::vector<unsigned int>   baselineShrinkFactors{ 4, 2, 1 };
+  unsigned int                baselineIterations = 0;
+  int                         overlays = 3;
+  bool                        quiet = false;
+};
+
+/** One registration method's numbers. */
+struct MethodResult
+{
+  std::string       name;
+  double            seconds = 0.0;
+  json              stages = json::object();
+  DisplacementError error;
+  EdgeEvaluation    edges;
+  json              details = json::object();
+};
+
+json
+MethodJson(const MethodResult & method)
+{
+  json result = { { "name", method.name },
+                  { "seconds", method.seconds },
+                  { "stages", method.stages },
+                  { "displacement_error_mm",
+                    { { "mean", method.error.mean }, { "p95", method.error.p95 }, { "max", method.error.max },
+                      { "samples", method.error.samples } } },
+                  { "details", method.details } };
+  if (method.edges.valid)
+  {
+    result["hausdorff_mm"] = { { "p50", method.edges.Percentile(50) },
+                               { "p90", method.edges.Percentile(90) },
+                               { "p95", method.edges.Percentile(95) },
+                               { "p100", method.edges.Percentile(100) } };
+    result["fraction_within_1_7_mm"] = method.edges.fractionWithinThreshold;
+    result["hausdorff_curve_mm"] = method.edges.symmetric;
+  }
+  else
+  {
+    result["hausdorff_mm"] = nullptr;
+    result["evaluation_message"] = method.edges.message;
+  }
+  return result;
+}
+
+void
+PrintTable(const std::vector<MethodResult> & methods)
+{
+  std::printf("\n%-26s %9s | %27s | %27s | %9s\n", "", "time", "displacement error (mm)", "edge Hausdorff (mm)",
+              "edges");
+  std::printf("%-26s %9s | %8s %8s %9s | %8s %8s %9s | %9s\n", "method", "s", "mean", "p95", "max", "p50", "p90",
+              "p95", "<1.7 mm");
+  for (const MethodResult & method : methods)
+  {
+    std::printf("%-26s %9.2f | %8.2f %8.2f %9.2f | %8.2f %8.2f %9.2f | %8.1f%%\n", method.name.c_str(),
+                method.seconds, method.error.mean, method.error.p95, method.error.max, method.edges.Percentile(50),
+                method.edges.Percentile(90), method.edges.Percentile(95), 100.0 * method.edges.fractionWithinThreshold);
+  }
+}
+
+std::string
+FormatNumber(double value)
+{
+  std::ostringstream text;
+  text << value;
+  return text.str();
+}
+
+/** "hexahedra:5" -> grid settings. */
+ImageGridSettings
+ParseVariant(const std::string & variant)
+{
+  const auto colon = variant.find(':');
+  if (colon == std::string::npos)
+  {
+    throw Error("--variant '" + variant + "': write it as KIND:SIZE, e.g. hexahedra:5 or meshless:7");
+  }
+  ImageGridSettings settings;
+  settings.kind = ParseImageGridKind(variant.substr(0, colon));
+  try
+  {
+    settings.elementSize = std::stod(variant.substr(colon + 1));
+  }
+  catch (const std::exception &)
+  {
+    throw Error("--variant '" + variant + "': the size after ':' must be a number (mm)");
+  }
+  return settings;
+}
+
+int
+RunDemo(DemoOptions options)
+{
+  const fs::path output(options.outputDirectory);
+  const bool     terminal = !options.quiet && ::isatty(STDERR_FILENO) != 0;
+  const StageCallback stages = terminal ? StageCallback(StepTimer::PrintStage) : StageCallback();
+
+  if (!options.craniotomyCentre.empty())
+  {
+    options.truth.craniotomyCentre = Vector3(options.craniotomyCentre.at(0), options.craniotomyCentre.at(1),
+                                             options.craniotomyCentre.at(2));
+  }
+  if (!options.tumourCentre.empty())
+  {
+    options.truth.tumourCentre = Vector3(options.tumourCentre.at(0), options.tumourCentre.at(1), options.tumourCentre.at(2));
+  }
+  options.truth.grid.kind = ParseImageGridKind(options.truthGrid);
+  std::vector<ImageGridSettings> variants;
+  for (const std::string & variant : options.variants)
+  {
+    variants.push_back(ParseVariant(variant));
+  }
+
+  const RegistrationImage::Pointer      preoperative = ReadImage<RegistrationImage>(options.image, "preoperative image");
+  const RegistrationLabelImage::Pointer brainMask = ReadMaskImage(options.mask, "brain mask");
+
+  if (!options.quiet)
+  {
+    std::cerr << "ground truth: " << ImageGridKindName(options.truth.grid.kind) << " " << options.truth.grid.elementSize
+              << " mm, " << options.truth.targetShift << " mm sag of the exposed surface, gravity "
+              << options.truth.gravity << " g\n";
+  }
+  const SyntheticBrainShift truth = MakeSyntheticBrainShift(preoperative, brainMask, options.truth, stages);
+  const RegistrationImage *      intraoperative = truth.intraoperativeImage;
+  const RegistrationLabelImage * intraoperativeMask = truth.intraoperativeBrainMask;
+
+  CreateFolder(output);
+  std::error_code ignored;
+  fs::remove(output / "demo-report.json", ignored);
+  WriteImageAtomically(intraoperative, output / "intraoperative.nii.gz");
+  WriteImageAtomically(intraoperativeMask, output / "intraoperative-brain-mask.nii.gz");
+  WriteSurface((output / "exposed-surface.vtp").string(), truth.exposedSurface);
+  {
+    std::ostringstream csv;
+    csv << "x,y,z,ux,uy,uz\n";
+    for (std::size_t k = 0; k < truth.trackedPoints.points.size(); ++k)
+    {
+      const Vector3 & x = truth.trackedPoints.points[k];
+      const Vector3 & u = truth.trackedPoints.displacements[k];
+      csv << x.x() << "," << x.y() << "," << x.z() << "," << u.x() << "," << u.y() << "," << u.z() << "\n";
+    }
+    WriteTextFileAtomically((output / "tracked-points.csv").string(), csv.str());
+  }
+  itk::WriteBiomechanicalTransform(truth.truthTransform, (output / "ground-truth-transform.h5").string());
+  const fs::path overlays = output / "overlays";
+
+  std::vector<MethodResult> methods;
+  const DisplacementError   noRegistrationError =
+    MeasureDisplacementError(nullptr, truth.truthTransform, truth.intraoperativeBrainOnPreoperativeGrid);
+
+  for (std::size_t k = 0; k < variants.size(); ++k)
+  {
+    const ImageGridSettings & grid = variants[k];
+    if (!options.quiet)
+    {
+      std::cerr << "biomechanical registration: " << ImageGridKindName(grid.kind) << " " << grid.elementSize << " mm\n";
+    }
+    BrainShiftRegistrationInputs inputs;
+    inputs.preoperativeImage = preoperative;
+    inputs.brainMask = brainMask;
+    inputs.tumourMask = truth.tumourMask;
+    inputs.intraoperative.sparse = truth.trackedPoints;
+    inputs.intraoperative.image = intraoperative;
+    inputs.intraoperative.imageBrainMask = intraoperativeMask;
+    BrainShiftRegistrationSettings settings;
+    settings.model.grid = grid;
+    settings.model.threads = options.truth.threads;
+    settings.model.craniotomyCentre = options.truth.craniotomyCentre;
+    settings.model.craniotomyRadius = options.truth.craniotomyRadius;
+    settings.model.materials.tumour.youngsModulus = options.truth.tumourStiffness * ParenchymaMaterial().youngsModulus;
+    const BrainShiftRegistrationResult result = RegisterBrainShift(inputs, settings, stages);
+    if (k == 0)
+    {
+      MethodResult none;
+      none.name = "no registration";
+      none.error = noRegistrationError;
+      none.edges = result.unregistered;
+      methods.push_back(none);
+      WriteEdgeOverlays(result.unregistered, intraoperative, overlays.string(), "none", options.overlays);
+    }
+    MethodResult method;
+    method.name = "biomechanical " + std::string(ImageGridKindName(grid.kind)) + " " +
+                  FormatNumber(grid.elementSize) + " mm";
+    method.stages = result.timer.Json();
+    // The registration's time: everything but the evaluation, which needs the intraoperative image.
+    method.seconds = method.stages["total"].get<double>() - result.timer.Seconds("evaluate");
+    method.error = MeasureDisplacementError(result.transform, truth.truthTransform,
+                                            truth.intraoperativeBrainOnPreoperativeGrid);
+    method.edges = result.registered;
+    method.details = RegistrationReportJson(result, settings);
+    method.details.erase("evaluation");
+    methods.push_back(method);
+    const std::string tag = std::string(ImageGridKindName(grid.kind)) + "-" + FormatNumber(grid.elementSize);
+    WriteImageAtomically(result.warpedImage.GetPointer(), output / ("warped-biomechanical-" + tag + ".nii.gz"));
+    itk::WriteBiomechanicalTransform(result.transform, (output / ("transform-biomechanical-" + tag + ".h5")).string());
+    WriteEdgeOverlays(result.registered, intraoperative, overlays.string(), "biomechanical-" + tag, options.overlays);
+  }
+
+  if (!options.noBaseline)
+  {
+    if (!options.quiet)
+    {
+      std::cerr << "B-spline intensity registration (baseline)\n";
+    }
+    BaselineSettings settings;
+    settings.shrinkFactors = options.baselineShrinkFactors;
+    settings.smoothingSigmas.clear();
+    for (const unsigned int factor : options.baselineShrinkFactors)
+    {
+      settings.smoothingSigmas.push_back(factor > 1 ? factor / 2.0 : 0.0);
+    }
+    settings.iterations = options.baselineIterations;
+    const BaselineRegistration baseline = RegisterWithBSplineBaseline(intraoperative, preoperative, intraoperativeMask, settings);
+    MethodResult method;
+    method.name = "B-spline intensity";
+    method.seconds = baseline.seconds;
+    method.stages = { { "register", baseline.seconds } };
+    method.error = MeasureDisplacementError(baseline.transform, truth.truthTransform,
+                                            truth.intraoperativeBrainOnPreoperativeGrid);
+    method.edges = EvaluateEdges(intraoperative, baseline.warpedOnFixedGrid, intraoperativeMask);
+    methods.push_back(method);
+    WriteImageAtomically(baseline.warpedOnFixedGrid.GetPointer(), output / "warped-bspline-on-intraoperative-grid.nii.gz");
+    itk::WriteBiomechanicalTransform(baseline.transform, (output / "transform-bspline.h5").string());
+    WriteEdgeOverlays(method.edges, intraoperative, overlays.string(), "bspline", options.overlays);
+  }
+
+  json report;
+  report["preoperative_image"] = options.image;
+  report["brain_mask"] = options.mask;
+  report["ground_truth"] = {
+    { "grid", ImageGridKindName(options.truth.grid.kind) },
+    { "element_size_mm", options.truth.grid.elementSize },
+    { "nodes", truth.model.model.nodes.size() },
+    { "cells", truth.model.model.cells.size() },
+    { "craniotomy_centre_mm", { options.truth.craniotomyCentre.x(), options.truth.craniotomyCentre.y(),
+                                options.truth.craniotomyCentre.z() } },
+    { "craniotomy_radius_mm", options.truth.craniotomyRadius },
+    { "target_shift_mm", options.truth.targetShift },
+    { "shift_mm", truth.shift },
+    { "gravity_mm_s2", { truth.gravity.x(), truth.gravity.y(), truth.gravity.z() } },
+    { "gravity_g", truth.gravity.norm() / 9810.0 },
+    { "solve_steps", truth.solve.steps },
+    { "solve_estimated_error_mm", truth.solve.estimatedError },
+    { "fit_max_residual_mm", truth.truthFitMaxResidual },
+    { "poisson_ratio", options.truth.poissonRatio },
+    { "csf_youngs_modulus_pa", options.truth.csfYoungsModulus },
+    { "tumour_radius_mm", options.truth.tumourRadius },
+    { "tumour_stiffness", options.truth.tumourStiffness },
+    { "intraoperative_spacing_mm", { options.truth.intraoperativeSpacing.x(), options.truth.intraoperativeSpacing.y(),
+                                     options.truth.intraoperativeSpacing.z() } },
+    { "noise", options.truth.noise },
+    { "seconds", truth.timer.Json() } };
+  report["methods"] = json::array();
+  for (const MethodResult & method : methods)
+  {
+    report["methods"].push_back(MethodJson(method));
+  }
+  WriteTextFileAtomically((output / "demo-report.json").string(), report.dump(2) + "\n");
+
+  if (!options.quiet)
+  {
+    std::printf("ground truth: %s %.1f mm (%zu nodes), shift %.2f mm, gravity %.2f g, %d steps, %.1f s\n",
+                ImageGridKindName(options.truth.grid.kind), options.truth.grid.elementSize,
+                truth.model.model.nodes.size(), truth.shift, truth.gravity.norm() / 9810.0, truth.solve.steps,
+                truth.timer.Json()["total"].get<double>());
+    PrintTable(methods);
+    std::printf("\nwrote %s (report demo-report.json, images, transforms, overlays/)\n", output.string().c_str());
+  }
+  return 0;
+}
+
+} // namespace
+
+std::function<int()>
+AddDemoCommand(CLI::App & app)
+{
+  auto options = std::make_shared<DemoOptions>();
+  CLI::App * demo = app.add_subcommand(
+    "demo", "Brain-shift registration against a known answer: ground truth from a finer, independent model, "
+            "biomechanical registration from the displaced exposed surface, B-spline baseline, report");
+  demo->add_option("--image", options->image, "Preoperative T1 image")->capture_default_str();
+  demo->add_option("--mask", options->mask, "Its brain mask (voxels > 0)")->capture_default_str();
+  demo->add_option("-o,--output-dir", options->outputDirectory, "Output folder")->capture_default_str();
+  demo->add_option("--craniotomy-centre", options->craniotomyCentre, "Craniotomy centre X Y Z (mm); default -11 43 84")
+    ->expected(3);
+  demo->add_option("--craniotomy-radius", options->truth.craniotomyRadius, "Craniotomy radius (mm)")
+    ->capture_default_str();
+  demo->add_option("--shift", options->truth.targetShift, "Largest displacement of the exposed surface (mm)")
+    ->capture_default_str();
+  demo->add_option("--gravity", options->truth.gravity, "Gravity on the brain (g), towards the brain's centroid")
+    ->capture_default_str();
+  demo->add_option("--poisson-ratio", options->truth.poissonRatio, "Poisson's ratio of parenchyma and tumour")
+    ->capture_default_str();
+  demo->add_option("--csf-modulus", options->truth.csfYoungsModulus, "Young's modulus of the CSF class (Pa)")
+    ->capture_default_str();
+  demo->add_option("--tumour-centre", options->tumourCentre, "Synthetic spherical tumour centre X Y Z (mm)")->expected(3);
+  demo->add_option("--tumour-radius", options->truth.tumourRadius, "Tumour radius (mm); 0: none")->capture_default_str();
+  demo->add_option("--tumour-stiffness", options->truth.tumourStiffness, "Tumour Young's modulus / parenchyma's")
+    ->capture_default_str();
+  demo->add_option("--truth-grid", options->truthGrid, "Ground-truth grid: hexahedra, tetrahedra, mixed")
+    ->capture_default_str();
+  demo->add_option("--truth-element-size", options->truth.grid.elementSize, "Ground-truth element size (mm)")
+    ->capture_default_str();
+  demo->add_option("--noise", options->truth.noise, "Noise of the intraoperative image (fraction of the bright level)")
+    ->capture_default_str();
+  demo->add_option("--variant", options->variants,
+                   "Registration grid KIND:SIZE (hexahedra, tetrahedra, mixed, meshless); repeat for several")
+    ->capture_default_str();
+  demo->add_flag("--no-baseline", options->noBaseline, "Skip the B-spline intensity registration");
+  demo->add_option("--baseline-shrink-factors", options->baselineShrinkFactors, "Baseline pyramid")
+    ->capture_default_str();
+  demo->add_option("--baseline-iterations", options->baselineIterations, "Baseline iterations per level (0: default)")
+    ->capture_default_str();
+  demo->add_option("--overlays", options->overlays, "Edge-overlay PNGs per method")->capture_default_str();
+  demo->add_option("--threads", options->truth.threads, "Worker threads (0: all)");
+  demo->add_flag("--quiet,-q", options->quiet, "Print nothing but warnings and errors");
+  return [=]() -> int { return demo->parsed() ? RunDemo(*options) : -1; };
+}
+
+} // namespace app
+} // namespace bmr

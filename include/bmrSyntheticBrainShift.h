@@ -1,0 +1,145 @@
+// A brain shift with a known answer, for the README demo, the validation
+// study and the tests: a craniotomy, the brain sinking under gravity after
+// CSF loss with contact against the skull, solved with an independent, finer
+// model (by default hexahedra of 4 mm on a grid not nested in the
+// registration's 5 mm one, loaded by gravity and skull contact instead of
+// surface displacements; see docs/validation.md for why not tetrahedra); from it an "intraoperative" image (the
+// preoperative image warped, resampled to a typical intraoperative
+// resolution, with noise) and the displaced exposed brain surface, the only
+// thing the registration is given. Also: the displacement error of any
+// transform against the ground truth, and the intensity-based B-spline
+// registration baseline on the same pair.
+//
+// Units: mm, Pa, kg/m^3, s.
+#ifndef bmrSyntheticBrainShift_h
+#define bmrSyntheticBrainShift_h
+
+#include "bmrBrainShiftRegistration.h"
+
+namespace bmr
+{
+
+struct SyntheticBrainShiftSettings
+{
+  /** Craniotomy: the exposed surface (sphere). "Down" points from the
+   *  craniotomy towards the brain's centroid (the head lies with the opening up). */
+  Vector3 craniotomyCentre = Vector3(-11.0, 43.0, 84.0);
+  double  craniotomyRadius = 30.0;
+  /** The shift: the exposed surface sinks by targetShift (1 - (r/R)^2) mm
+   *  along "down" (r: distance from the craniotomy centre, R its radius),
+   *  the CSF-loss sag; the rest of the brain carries gravity (in g, along
+   *  "down") and rests on the skull. Gravity alone cannot make the sag: it
+   *  folds the soft CSF cells first (4 mm hexahedra folded at 0.84 g before
+   *  the exposed surface had sunk 10 mm). */
+  double targetShift = 10.0;
+  double gravity = 0.3; // g
+  /** The displaced surface reaches this far beyond the craniotomy (mm). */
+  double scanMargin = 10.0;
+  /** Spacing of the tracked surface points (mm). */
+  double trackedPointSpacing = 5.0;
+
+  /** The ground-truth model: a finer grid than the registration's default. */
+  ImageGridSettings grid = [] {
+    ImageGridSettings settings;
+    settings.kind = ImageGridKind::Hexahedra;
+    settings.elementSize = 4.0;
+    return settings;
+  }();
+  double solverTolerance = 0.01; // mm
+
+  /** Materials: Poisson's ratio of parenchyma (and tumour), Young's modulus
+   *  of the CSF class (ventricles; 10 Pa by default, "very soft" below). */
+  double poissonRatio = ParenchymaMaterial().poissonRatio;
+  double csfYoungsModulus = CsfMaterial().youngsModulus;
+  /** The CSF has drained (that is why the brain sinks): its class carries
+   *  almost no weight. With its full weight, 10 Pa CSF cells cannot carry
+   *  themselves under gravity and fold (3 mm hexahedra diverge at 0.3 g). */
+  double csfDensity = 1.0; // kg/m^3
+  /** A synthetic spherical tumour (radius 0: none), stiffness x parenchyma. */
+  Vector3 tumourCentre = Vector3::Zero();
+  double  tumourRadius = 0.0;
+  double  tumourStiffness = 2.0;
+
+  /** The intraoperative image: voxel spacing (mm) and Gaussian noise
+   *  (standard deviation as a fraction of the 99.5th intensity percentile). */
+  Vector3       intraoperativeSpacing = Vector3(0.86, 0.86, 2.5);
+  double        noise = 0.02;
+  std::uint32_t seed = 1;
+
+  int threads = 0;
+};
+
+struct SyntheticBrainShift
+{
+  BrainModel  model;          // the ground-truth model (gravity, contact, no prescribed motion)
+  SolveResult solve;          // its converged solution
+  Vector3     gravity = Vector3::Zero(); // mm/s^2
+  double      shift = 0.0;    // mm, largest displacement of the exposed nodes
+  /** Backward map of the ground truth (intraoperative point -> preoperative point),
+   *  fitted to its nodes within 0.05 mm. */
+  RegistrationTransform::Pointer truthTransform;
+  double                         truthFitMaxResidual = 0.0;
+  RegistrationImage::Pointer      intraoperativeImage;     // intraoperative grid, with noise
+  RegistrationLabelImage::Pointer intraoperativeBrainMask; // intraoperative grid
+  /** The intraoperative brain on the preoperative grid: where displacement errors are measured. */
+  RegistrationLabelImage::Pointer intraoperativeBrainOnPreoperativeGrid;
+  /** The displaced exposed brain surface: the preoperative brain surface
+   *  within craniotomyRadius + scanMargin, moved by the ground truth. */
+  ContactSurface                  exposedSurface;
+  /** Tracked points of the exposed surface (one per trackedPointSpacing cube,
+   *  within the craniotomy) with their ground-truth displacements. */
+  SparseDisplacements             trackedPoints;
+  RegistrationLabelImage::Pointer tumourMask; // preoperative grid; null without a tumour
+  StageTimer                      timer;
+};
+
+/** Makes the ground truth. The preoperative image and brain mask must share a
+ *  grid. Throws bmr::Error when the solve fails or does not converge. */
+SyntheticBrainShift
+MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
+                        const RegistrationLabelImage *      brainMask,
+                        const SyntheticBrainShiftSettings & settings,
+                        const StageCallback &               stageCallback = {});
+
+/** Displacement error |T(x) - T_truth(x)| (mm) of a backward map T (null: no
+ *  registration, the identity) over the voxels of `region` (> 0), sampled
+ *  on every `stride`-th voxel along each axis. */
+struct DisplacementError
+{
+  double      mean = 0.0, p95 = 0.0, max = 0.0;
+  std::size_t samples = 0;
+};
+
+DisplacementError
+MeasureDisplacementError(const itk::Transform<double, 3, 3> * transform,
+                         const itk::Transform<double, 3, 3> * truth,
+                         const RegistrationLabelImage *       region,
+                         int                                  stride = 2);
+
+/** The intensity-based baseline (itk::BSplineIntensityRegistrationFilter with
+ *  its defaults: translation, then B-spline 80 -> 40 -> 20 mm, Mattes mutual
+ *  information, L-BFGS-B): `fixed` is the intraoperative image, `moving` the
+ *  preoperative one; `fixedMask` may be null. */
+struct BaselineRegistration
+{
+  RegistrationTransform::Pointer transform;       // fixed point -> moving point (a backward map)
+  RegistrationImage::Pointer     warpedOnFixedGrid;
+  double                         seconds = 0.0;
+};
+
+struct BaselineSettings
+{
+  std::vector<unsigned int> shrinkFactors{ 4, 2, 1 };
+  std::vector<double>       smoothingSigmas{ 2.0, 1.0, 0.0 };
+  unsigned int              iterations = 0; // per level; 0: the filter's default
+};
+
+BaselineRegistration
+RegisterWithBSplineBaseline(const RegistrationImage *      fixed,
+                            const RegistrationImage *      moving,
+                            const RegistrationLabelImage * fixedMask,
+                            const BaselineSettings &       settings = {});
+
+} // namespace bmr
+
+#endif
