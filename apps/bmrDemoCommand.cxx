@@ -43,6 +43,8 @@ struct DemoOptions
   std::vector<double>         tumourCentre;
   std::string                 truthGrid = "hexahedra";
   std::vector<std::string>    variants{ "hexahedra:5" };
+  std::string                 load = "points";
+  double                      registrationGravity = 0.0; // g
   bool                        noBaseline = false;
   std::vector<unsigned int>   baselineShrinkFactors{ 4, 2, 1 };
   unsigned int                baselineIterations = 0;
@@ -204,7 +206,14 @@ RunDemo(DemoOptions options)
     inputs.preoperativeImage = preoperative;
     inputs.brainMask = brainMask;
     inputs.tumourMask = truth.tumourMask;
-    inputs.intraoperative.sparse = truth.trackedPoints;
+    if (options.load == "surface")
+    {
+      inputs.intraoperative.surface = truth.exposedSurface;
+    }
+    else
+    {
+      inputs.intraoperative.sparse = truth.trackedPoints;
+    }
     inputs.intraoperative.image = intraoperative;
     inputs.intraoperative.imageBrainMask = intraoperativeMask;
     BrainShiftRegistrationSettings settings;
@@ -212,6 +221,8 @@ RunDemo(DemoOptions options)
     settings.model.threads = options.truth.threads;
     settings.model.craniotomyCentre = options.truth.craniotomyCentre;
     settings.model.craniotomyRadius = options.truth.craniotomyRadius;
+    // The head's position gives gravity's direction in the operating room; its effective size is a model choice.
+    settings.model.gravity = options.registrationGravity * 9810.0 * truth.down;
     settings.model.materials.tumour.youngsModulus = options.truth.tumourStiffness * ParenchymaMaterial().youngsModulus;
     const BrainShiftRegistrationResult result = RegisterBrainShift(inputs, settings, stages);
     if (k == 0)
@@ -225,7 +236,8 @@ RunDemo(DemoOptions options)
     }
     MethodResult method;
     method.name = "biomechanical " + std::string(ImageGridKindName(grid.kind)) + " " +
-                  FormatNumber(grid.elementSize) + " mm";
+                  FormatNumber(grid.elementSize) + " mm" +
+                  (options.registrationGravity > 0.0 ? " + " + FormatNumber(options.registrationGravity) + " g" : "");
     method.stages = result.timer.Json();
     // The registration's time: everything but the evaluation, which needs the intraoperative image.
     method.seconds = method.stages["total"].get<double>() - result.timer.Seconds("evaluate");
@@ -350,6 +362,13 @@ AddDemoCommand(CLI::App & app)
     ->capture_default_str();
   demo->add_option("--variant", options->variants,
                    "Registration grid KIND:SIZE (hexahedra, tetrahedra, mixed, meshless); repeat for several")
+    ->capture_default_str();
+  demo->add_option("--load", options->load,
+                   "What the registration is given: the displaced exposed surface, or its tracked points")
+    ->check(CLI::IsMember({ "surface", "points" }))
+    ->capture_default_str();
+  demo->add_option("--registration-gravity", options->registrationGravity,
+                   "Gravity in the registration's model (g, along the ground truth's direction); 0: surface only")
     ->capture_default_str();
   demo->add_flag("--no-baseline", options->noBaseline, "Skip the B-spline intensity registration");
   demo->add_option("--baseline-shrink-factors", options->baselineShrinkFactors, "Baseline pyramid")

@@ -51,14 +51,6 @@ struct LoadReport
  *  surface and is lost (the error is the tangential part, plus the chord error
  *  of the triangulation).
  *
- *  With `preoperativeSurface` (the smooth preoperative brain surface the
- *  model was made from), surface-to-surface correspondence: each node is
- *  first projected onto it (p), and the displacement is the closest point of
- *  the intraoperative surface to p minus p. A staircase hexahedral surface
- *  deviates from the brain surface by up to half a cell; node-to-surface
- *  correspondence would turn that offset into a displacement (about 1-2 mm
- *  at 5 mm cells even where nothing moved).
- *
  *  Errors (bmr::Error): no exposed nodes, a node id out of range, an empty
  *  surface or a non-finite vertex, and every node rejected. */
 PrescribedDisplacement
@@ -66,8 +58,7 @@ DisplacementsFromSurface(const Model &              model,
                          const std::vector<Index> & exposedNodes,
                          const ContactSurface &     intraoperativeSurface,
                          const SurfaceLoadSettings & settings = SurfaceLoadSettings{},
-                         LoadReport *               report = nullptr,
-                         const ContactSurface *     preoperativeSurface = nullptr);
+                         LoadReport *               report = nullptr);
 
 /** (b) Interpolates displacement vectors measured at `points` (reference,
  *  i.e. preoperative, positions, mm) to every exposed node:
@@ -95,6 +86,38 @@ DisplacementsFromSparsePoints(const Model &                model,
                               const SurfaceLoadSettings &  settings = SurfaceLoadSettings{},
                               LoadReport *                 report = nullptr,
                               const ContactSurface *       modelSurface = nullptr);
+
+/** (c) Surface to surface, for a displaced surface that covers the exposed
+ *  region (a scan): the vertices of the smooth `preoperativeSurface` (the
+ *  brain surface the model was made from) that lie within `reach` mm of an
+ *  exposed node are viewed along the exposed region's mean normal, as a
+ *  scanner looking into the craniotomy sees them: per lateral cell of
+ *  `spacing` mm, the highest vertex whose normal is within 60 degrees of
+ *  the view. Each is matched to its closest point on the
+ *  `intraoperativeSurface`, and the displacements are interpolated to the
+ *  exposed nodes as in (b).
+ *
+ *  Why not (a): the nodes of a staircase hexahedral surface lie up to half a
+ *  cell off the brain surface, and nodes on the walls of a sulcus or of the
+ *  interhemispheric fissure inside the opening have their closest
+ *  intraoperative point sideways or on the displaced crowns above them; both
+ *  turn into spurious displacements of several mm (a 5 mm hexahedral
+ *  Colin27 model folded under them). Hidden vertices are left out for the
+ *  same reason. Matches
+ *  farther than settings.maxDistance are rejected with a warning.
+ *
+ *  Errors (bmr::Error): those of (b), an empty surface, and no vertex of the
+ *  preoperative surface near the exposed nodes. */
+PrescribedDisplacement
+DisplacementsBetweenSurfaces(const Model &               model,
+                             const std::vector<Index> &  exposedNodes,
+                             const ContactSurface &      preoperativeSurface,
+                             const ContactSurface &      intraoperativeSurface,
+                             double                      reach,
+                             double                      spacing,
+                             const SurfaceLoadSettings & settings = SurfaceLoadSettings{},
+                             LoadReport *                report = nullptr,
+                             const ContactSurface *      modelSurface = nullptr);
 
 struct SparseDisplacements
 {

@@ -74,6 +74,7 @@ struct SyntheticBrainShift
   BrainModel  model;          // the ground-truth model (gravity, contact, no prescribed motion)
   SolveResult solve;          // its converged solution
   Vector3     gravity = Vector3::Zero(); // mm/s^2
+  Vector3     down = Vector3::Zero();    // unit vector from the craniotomy towards the brain's centroid
   double      shift = 0.0;    // mm, largest displacement of the exposed nodes
   /** Backward map of the ground truth (intraoperative point -> preoperative point),
    *  fitted to its nodes within 0.05 mm. */

@@ -8,7 +8,8 @@
 #include <cstdint>
 #include <cstdlib>
 #include <fstream>
-#include <memory>
+#include <map>
+#include <set>
 #include <sstream>
 
 namespace bmr
@@ -99,21 +100,13 @@ DisplacementsFromSurface(const Model &               model,
                          const std::vector<Index> &  exposedNodes,
                          const ContactSurface &      intraoperativeSurface,
                          const SurfaceLoadSettings & settings,
-                         LoadReport *                report,
-                         const ContactSurface *      preoperativeSurface)
+                         LoadReport *                report)
 {
   const char * function = "DisplacementsFromSurface";
   ValidateExposedNodes(model, exposedNodes, function);
   ValidateSettings(settings, function);
   const std::string surfaceName = "intraoperative surface '" + intraoperativeSurface.name + "'";
   const TriangleSurfaceTree surface(intraoperativeSurface.vertices, intraoperativeSurface.triangles, surfaceName);
-  std::unique_ptr<TriangleSurfaceTree> preoperative;
-  if (preoperativeSurface != nullptr)
-  {
-    preoperative = std::make_unique<TriangleSurfaceTree>(
-      preoperativeSurface->vertices, preoperativeSurface->triangles,
-      "preoperative surface '" + preoperativeSurface->name + "'");
-  }
 
   LoadReport             local;
   LoadReport &           out = report ? *report : local;
@@ -124,8 +117,8 @@ DisplacementsFromSurface(const Model &               model,
   rejected.precision(4);
   for (const Index node : exposedNodes)
   {
-    const Vector3 x = preoperative ? preoperative->Closest(model.nodes[node]).point : model.nodes[node];
-    const Vector3 displacement = surface.Closest(x).point - x;
+    const Vector3 & x = model.nodes[node];
+    const Vector3   displacement = surface.Closest(x).point - x;
     const double    distance = displacement.norm();
     if (distance > settings.maxDistance)
     {
@@ -339,6 +332,163 @@ DisplacementsFromSparsePoints(const Model &                model,
       u += (x - q[i]).norm() * coefficients.row(static_cast<Eigen::Index>(i)).transpose();
     }
     load.displacements[e] = u;
+  }
+  return load;
+}
+
+PrescribedDisplacement
+DisplacementsBetweenSurfaces(const Model &               model,
+                             const std::vector<Index> &  exposedNodes,
+                             const ContactSurface &      preoperativeSurface,
+                             const ContactSurface &      intraoperativeSurface,
+                             double                      reach,
+                             double                      spacing,
+                             const SurfaceLoadSettings & settings,
+                             LoadReport *                report,
+                             const ContactSurface *      modelSurface)
+{
+  const char * function = "DisplacementsBetweenSurfaces";
+  ValidateExposedNodes(model, exposedNodes, function);
+  ValidateSettings(settings, function);
+  if (!(reach > 0.0) || !(spacing > 0.0))
+  {
+    throw Error(std::string(function) + ": reach and spacing must be > 0 mm");
+  }
+  const std::string surfaceName = "intraoperative surface '" + intraoperativeSurface.name + "'";
+  const TriangleSurfaceTree surface(intraoperativeSurface.vertices, intraoperativeSurface.triangles, surfaceName);
+
+  // Area-weighted vertex normals of the preoperative surface.
+  const std::vector<Vector3> & vertices = preoperativeSurface.vertices;
+  std::vector<Vector3>         normals(vertices.size(), Vector3::Zero());
+  for (const auto & triangle : preoperativeSurface.triangles)
+  {
+    const Vector3 normal =
+      (vertices[triangle[1]] - vertices[triangle[0]]).cross(vertices[triangle[2]] - vertices[triangle[0]]);
+    for (const Index vertex : triangle)
+    {
+      normals[vertex] += normal;
+    }
+  }
+  // The vertices near the exposed nodes, and the direction the opening faces.
+  std::vector<Index> near;
+  Vector3            facing = Vector3::Zero();
+  for (std::size_t v = 0; v < vertices.size(); ++v)
+  {
+    for (const Index node : exposedNodes)
+    {
+      if ((vertices[v] - model.nodes[node]).squaredNorm() <= reach * reach)
+      {
+        near.push_back(static_cast<Index>(v));
+        facing += normals[v];
+        break;
+      }
+    }
+  }
+  if (near.empty() || facing.norm() == 0.0)
+  {
+    throw Error(std::string(function) + ": no vertex of the preoperative surface '" + preoperativeSurface.name +
+                "' lies within " + std::to_string(reach) + " mm of the exposed nodes; give the surface the model was "
+                "made from");
+  }
+  facing.normalize();
+  // What a scanner looking into the opening sees: per lateral cell of `spacing`
+  // (across `facing`), the vertex facing it that lies highest along it.
+  // Deeper vertices (sulci, the fissure) are hidden, and their closest
+  // intraoperative points would belong to the displaced crowns above them.
+  const Vector3 across1 = facing.unitOrthogonal();
+  const Vector3 across2 = facing.cross(across1);
+  std::map<std::pair<long, long>, Index> highest;
+  for (const Index v : near)
+  {
+    const double length = normals[v].norm();
+    if (length == 0.0 || normals[v].dot(facing) < 0.5 * length)
+    {
+      continue; // a sulcus wall or the far side
+    }
+    const Vector3 &            x = vertices[v];
+    const std::pair<long, long> cell{ std::lround(std::floor(x.dot(across1) / spacing)),
+                                      std::lround(std::floor(x.dot(across2) / spacing)) };
+    const auto [entry, inserted] = highest.emplace(cell, v);
+    if (!inserted && x.dot(facing) > vertices[entry->second].dot(facing))
+    {
+      entry->second = v;
+    }
+  }
+  std::vector<Vector3> scanned, matched;
+  for (const auto & [cell, v] : highest)
+  {
+    scanned.push_back(vertices[v]);
+    matched.push_back(surface.Closest(vertices[v]).point - vertices[v]);
+  }
+  // Closest points jump where the motion is larger than the features (the rim
+  // of a sulcus or of the fissure: the match lands on the other side). A
+  // match that differs from the median of its neighbours by more than
+  // max(1 mm, 20 %) is an outlier and left out.
+  std::vector<Vector3> points, displacements;
+  std::size_t          outliers = 0;
+  for (std::size_t k = 0; k < scanned.size(); ++k)
+  {
+    std::array<std::vector<double>, 3> neighbours;
+    for (std::size_t j = 0; j < scanned.size(); ++j)
+    {
+      if ((scanned[j] - scanned[k]).norm() <= 2.5 * spacing)
+      {
+        for (int axis = 0; axis < 3; ++axis)
+        {
+          neighbours[axis].push_back(matched[j][axis]);
+        }
+      }
+    }
+    Vector3 median;
+    for (int axis = 0; axis < 3; ++axis)
+    {
+      auto & values = neighbours[axis];
+      std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
+      median[axis] = values[values.size() / 2];
+    }
+    if ((matched[k] - median).norm() > std::max(1.0, 0.2 * median.norm()))
+    {
+      ++outliers;
+      continue;
+    }
+    points.push_back(scanned[k]);
+    displacements.push_back(matched[k]);
+  }
+  // Matches that are too far are rejected by (b)'s distance check on the points' displacement.
+  std::vector<Vector3> keptPoints, keptDisplacements;
+  std::size_t          rejected = 0;
+  for (std::size_t k = 0; k < points.size(); ++k)
+  {
+    if (displacements[k].norm() > settings.maxDistance)
+    {
+      ++rejected;
+      continue;
+    }
+    keptPoints.push_back(points[k]);
+    keptDisplacements.push_back(displacements[k]);
+  }
+  if (keptPoints.empty())
+  {
+    throw Error(std::string(function) + ": every point of the exposed region is farther than " +
+                std::to_string(settings.maxDistance) + " mm from the " + surfaceName +
+                ". Check that the surface is registered to the preoperative image (same physical space, mm) "
+                "and that the craniotomy region faces it, or raise maxDistance");
+  }
+  PrescribedDisplacement load = DisplacementsFromSparsePoints(model, exposedNodes, keptPoints, keptDisplacements,
+                                                              settings, report, modelSurface);
+  if (report != nullptr && outliers > 0)
+  {
+    report->rejectedPoints += outliers;
+    report->warnings.push_back(std::to_string(outliers) + " of " + std::to_string(scanned.size()) +
+                               " exposed-surface matches differ from their neighbours' by more than max(1 mm, 20%) "
+                               "(closest points across a sulcus or the fissure) and are left out of the load");
+  }
+  if (report != nullptr && rejected > 0)
+  {
+    report->rejectedPoints += rejected;
+    report->warnings.push_back(std::to_string(rejected) + " of " + std::to_string(points.size()) +
+                               " exposed-surface points are farther than " + std::to_string(settings.maxDistance) +
+                               " mm from the " + surfaceName + " and are left out of the load");
   }
   return load;
 }

@@ -77,6 +77,9 @@ StageTimer::Seconds(const std::string & name) const
 namespace
 {
 
+/** Spacing (mm) of the points of a scanned surface that load the model: the tracked-point density of a surface scan. */
+constexpr double kScanPointSpacing = 5.0;
+
 /** Checks that the intraoperative data name one source of the exposed surface's motion. */
 void
 CheckIntraoperativeData(const IntraoperativeData & data)
@@ -106,6 +109,7 @@ LoadFromIntraoperativeData(const Model &              model,
                            const BrainSurfaces &      surfaces,
                            const IntraoperativeData & data,
                            const AtlasSettings &      atlas,
+                           double                     elementSize,
                            StageTimer &               timer,
                            LoadReport &               report,
                            std::vector<std::string> & warnings)
@@ -134,8 +138,12 @@ LoadFromIntraoperativeData(const Model &              model,
     });
     intraoperativeSurface.name = "brain surface of the intraoperative image";
   }
-  // Surface to surface: the staircase of a hexahedral grid is not brain motion.
-  return DisplacementsFromSurface(model, exposed, intraoperativeSurface, settings, &report, &surfaces.brain);
+  // Surface to surface: neither the staircase of a hexahedral grid nor the
+  // walls of sulci inside the opening are brain motion.
+  // Staircase nodes lie up to about one cell from the brain surface.
+  const double reach = elementSize;
+  return DisplacementsBetweenSurfaces(model, exposed, surfaces.brain, intraoperativeSurface, reach, kScanPointSpacing,
+                                      settings, &report, modelSurface);
 }
 
 } // namespace
@@ -311,7 +319,8 @@ BuildBrainModel(const RegistrationImage *      image,
   if (intraoperative != nullptr)
   {
     result.load = timer.Run("loads", [&] {
-      return LoadFromIntraoperativeData(model, result.exposedNodes, result.surfaces, *intraoperative, settings.atlas, timer,
+      return LoadFromIntraoperativeData(model, result.exposedNodes, result.surfaces, *intraoperative, settings.atlas,
+                                        std::max(result.gridQuality.meanEdgeLength, settings.grid.elementSize), timer,
                                         result.loadReport, warnings);
     });
     warnings.insert(warnings.end(), result.loadReport.warnings.begin(), result.loadReport.warnings.end());

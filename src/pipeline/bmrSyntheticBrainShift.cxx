@@ -153,6 +153,7 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
   }
   centroid /= static_cast<double>(model.nodes.size());
   const Vector3 down = (centroid - settings.craniotomyCentre).normalized();
+  truth.down = down;
 
   // The sag of the exposed surface, and gravity on the rest.
   PrescribedDisplacement sag;
