@@ -37,4 +37,6 @@ fi
 OMP_WAIT_POLICY=PASSIVE "${build}/apps/bmrImageBenchmark" --output docs/benchmarks.md
 # Model building from an MRI (Colin27): docs/model-building-benchmark.md.
 /usr/bin/python3 scripts/benchmark-model-building.py "${build}/apps/biomech"
-echo "run-benchmarks: wrote docs/benchmarks.md and docs/model-building-benchmark.md"
+# The whole registration, end to end, with its error: docs/registration-benchmark.md.
+/usr/bin/python3 scripts/benchmark-registration.py
+echo "run-benchmarks: wrote docs/benchmarks.md, docs/model-building-benchmark.md and docs/registration-benchmark.md"
