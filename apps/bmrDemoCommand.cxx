@@ -103,6 +103,20 @@ PrintTable(const std::vector<MethodResult> & methods)
                 method.seconds, method.error.mean, method.error.p95, method.error.max, method.edges.Percentile(50),
                 method.edges.Percentile(90), method.edges.Percentile(95), 100.0 * method.edges.fractionWithinThreshold);
   }
+  std::printf("\ntime per stage (s)\n");
+  for (const MethodResult & method : methods)
+  {
+    if (method.stages.empty())
+    {
+      continue;
+    }
+    std::printf("  %-26s", method.name.c_str());
+    for (const auto & [stage, seconds] : method.stages.items())
+    {
+      std::printf(" %s %.2f", stage.c_str(), seconds.get<double>());
+    }
+    std::printf("\n");
+  }
 }
 
 std::string

@@ -110,7 +110,6 @@ LoadFromIntraoperativeData(const Model &              model,
                            const IntraoperativeData & data,
                            const AtlasSettings &      atlas,
                            double                     elementSize,
-                           StageTimer &               timer,
                            LoadReport &               report,
                            std::vector<std::string> & warnings)
 {
@@ -127,23 +126,28 @@ LoadFromIntraoperativeData(const Model &              model,
   if (intraoperativeSurface.triangles.empty())
   {
     // The exposed surface is taken from the intraoperative image: the boundary of its brain mask.
-    const RegistrationLabelImage::Pointer mask = data.imageBrainMask.IsNotNull()
-                                                   ? RegistrationLabelImage::Pointer()
-                                                   : timer.Run("intraop-mask", [&] { return AtlasBrainMask(data.image, atlas); });
+    const RegistrationLabelImage::Pointer mask =
+      data.imageBrainMask.IsNotNull() ? RegistrationLabelImage::Pointer() : AtlasBrainMask(data.image, atlas);
     const LabelVolume maskVolume =
       MaskVolume(data.imageBrainMask.IsNotNull() ? data.imageBrainMask.GetPointer() : mask.GetPointer(),
                  "intraoperative brain mask", nullptr);
-    intraoperativeSurface = timer.Run("intraop-surface", [&] {
-      return BrainSurfacesOfMask(maskVolume, BrainSurfaceSettings{}.skullGap, warnings).brain;
-    });
+    // Made as the preoperative one is (the boundary of a hexahedral grid of
+    // the mask, smoothed), so that both surfaces show the same detail: a
+    // mask's own surface shows sulci the model's does not, and closest
+    // points between the two land in them (a 5 mm Colin27 model folded).
+    ImageGridSettings coarse;
+    coarse.elementSize = elementSize;
+    const ImageGrid grid = MakeGridFromLabels(maskVolume, coarse, &warnings);
+    intraoperativeSurface =
+      BrainSurfacesOfMask(RasterizeCells(grid.model, maskVolume.geometry), BrainSurfaceSettings{}.skullGap, warnings)
+        .brain;
     intraoperativeSurface.name = "brain surface of the intraoperative image";
   }
   // Surface to surface: neither the staircase of a hexahedral grid nor the
-  // walls of sulci inside the opening are brain motion.
-  // Staircase nodes lie up to about one cell from the brain surface.
-  const double reach = elementSize;
-  return DisplacementsBetweenSurfaces(model, exposed, surfaces.brain, intraoperativeSurface, reach, kScanPointSpacing,
-                                      settings, &report, modelSurface);
+  // walls of sulci inside the opening are brain motion. Staircase nodes lie
+  // up to about a cell from the model's smoothed surface.
+  return DisplacementsBetweenSurfaces(model, exposed, surfaces.brain, intraoperativeSurface, elementSize,
+                                      kScanPointSpacing, settings, &report, modelSurface);
 }
 
 } // namespace
@@ -320,7 +324,7 @@ BuildBrainModel(const RegistrationImage *      image,
   {
     result.load = timer.Run("loads", [&] {
       return LoadFromIntraoperativeData(model, result.exposedNodes, result.surfaces, *intraoperative, settings.atlas,
-                                        std::max(result.gridQuality.meanEdgeLength, settings.grid.elementSize), timer,
+                                        std::max(result.gridQuality.meanEdgeLength, settings.grid.elementSize),
                                         result.loadReport, warnings);
     });
     warnings.insert(warnings.end(), result.loadReport.warnings.begin(), result.loadReport.warnings.end());
