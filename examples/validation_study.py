@@ -79,8 +79,9 @@ def plot(runs, path):
             if method["name"] == "no registration":
                 continue
             kind = method["name"]
-            marker = markers.setdefault(kind, "os^vD<>p*"[len(markers) % 9])
-            axis.scatter(method["seconds"], method["displacement_error_mm"]["p95"], marker=marker,
+            index = markers.setdefault(kind, len(markers))
+            axis.scatter(method["seconds"], method["displacement_error_mm"]["p95"], marker="os^vD<>p*"[index % 9],
+                         color="C%d" % (index % 10),
                          label=kind if kind not in axis.get_legend_handles_labels()[1] else None)
     axis.set_xscale("log")
     axis.set_xlabel("registration time (s, log scale)")
