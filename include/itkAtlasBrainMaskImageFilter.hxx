@@ -2,6 +2,7 @@
 #define itkAtlasBrainMaskImageFilter_hxx
 
 #include "itkAtlasBrainMaskImageFilter.h"
+#include "itkFloatImageScan.h"
 
 #include "itkBSplineTransformInitializer.h"
 #include "itkCastImageFilter.h"
@@ -124,46 +125,22 @@ AtlasBrainMaskImageFilter<TInputImage, TOutputImage>::MakeRealImage(const InputI
                                                                     const char *           role) const ->
   typename RealImageType::Pointer
 {
-  using CasterType = CastImageFilter<InputImageType, RealImageType>;
-  auto caster = CasterType::New();
-  caster->SetInput(image);
-  caster->Update();
-  typename RealImageType::Pointer real = caster->GetOutput();
-  real->DisconnectPipeline();
-
   // NaN or infinity would poison the joint histogram silently.
-  SizeValueType notFinite = 0;
-  typename RealImageType::IndexType firstNotFinite{};
-  float minimum = NumericTraits<float>::max();
-  float maximum = NumericTraits<float>::NonpositiveMin();
-  for (ImageRegionConstIteratorWithIndex<RealImageType> it(real, real->GetBufferedRegion()); !it.IsAtEnd(); ++it)
+  const auto scan = CastAndScanToFloat<RealImageType>(image);
+  if (scan.notFinite > 0)
   {
-    const float value = it.Get();
-    if (!std::isfinite(value))
-    {
-      if (notFinite++ == 0)
-      {
-        firstNotFinite = it.GetIndex();
-      }
-      continue;
-    }
-    minimum = std::min(minimum, value);
-    maximum = std::max(maximum, value);
-  }
-  if (notFinite > 0)
-  {
-    itkExceptionMacro("AtlasBrainMaskImageFilter: the " << role << " image contains " << notFinite
+    itkExceptionMacro("AtlasBrainMaskImageFilter: the " << role << " image contains " << scan.notFinite
                                                         << " NaN or infinite voxel(s), the first at index "
-                                                        << firstNotFinite
+                                                        << scan.firstNotFinite
                                                         << "; replace them (e.g. by 0) before skull stripping.");
   }
-  if (!(maximum > minimum))
+  if (scan.Constant())
   {
     itkExceptionMacro("AtlasBrainMaskImageFilter: the " << role
                                                         << " image is constant; a T1-weighted head image is needed "
                                                            "for registration.");
   }
-  return real;
+  return scan.image;
 }
 
 template <typename TInputImage, typename TOutputImage>

@@ -2,6 +2,7 @@
 #define itkBSplineIntensityRegistrationFilter_hxx
 
 #include "itkBSplineIntensityRegistrationFilter.h"
+#include "itkFloatImageScan.h"
 
 #include "itkBSplineTransformInitializer.h"
 #include "itkBSplineTransformParametersAdaptor.h"
@@ -171,45 +172,21 @@ BSplineIntensityRegistrationFilter<TFixedImage, TMovingImage, TMaskImage>::MakeR
                                                                                          const char *   role) const ->
   typename RealImageType::Pointer
 {
-  using CasterType = CastImageFilter<TImage, RealImageType>;
-  auto caster = CasterType::New();
-  caster->SetInput(image);
-  caster->Update();
-  typename RealImageType::Pointer real = caster->GetOutput();
-  real->DisconnectPipeline();
-
   // NaN or infinity would poison the joint histogram silently.
-  SizeValueType                     notFinite = 0;
-  typename RealImageType::IndexType firstNotFinite{};
-  float                             minimum = NumericTraits<float>::max();
-  float                             maximum = NumericTraits<float>::NonpositiveMin();
-  for (ImageRegionConstIteratorWithIndex<RealImageType> it(real, real->GetBufferedRegion()); !it.IsAtEnd(); ++it)
-  {
-    const float value = it.Get();
-    if (!std::isfinite(value))
-    {
-      if (notFinite++ == 0)
-      {
-        firstNotFinite = it.GetIndex();
-      }
-      continue;
-    }
-    minimum = std::min(minimum, value);
-    maximum = std::max(maximum, value);
-  }
-  if (notFinite > 0)
+  const auto scan = CastAndScanToFloat<RealImageType>(image);
+  if (scan.notFinite > 0)
   {
     itkExceptionMacro("BSplineIntensityRegistrationFilter: the "
-                      << role << " image contains " << notFinite << " NaN or infinite voxel(s), the first at index "
-                      << firstNotFinite << "; replace them (e.g. by 0) before registration.");
+                      << role << " image contains " << scan.notFinite << " NaN or infinite voxel(s), the first at index "
+                      << scan.firstNotFinite << "; replace them (e.g. by 0) before registration.");
   }
-  if (!(maximum > minimum))
+  if (scan.Constant())
   {
     itkExceptionMacro("BSplineIntensityRegistrationFilter: the "
-                      << role << " image is constant (every voxel " << minimum
+                      << role << " image is constant (every voxel " << scan.minimum
                       << "); intensity registration needs image structure. Check that the right file was given.");
   }
-  return real;
+  return scan.image;
 }
 
 template <typename TFixedImage, typename TMovingImage, typename TMaskImage>

@@ -2,6 +2,7 @@
 #define itkEdgeHausdorffDistanceImageFilter_hxx
 
 #include "itkEdgeHausdorffDistanceImageFilter.h"
+#include "itkFloatImageScan.h"
 
 #include "itkCannyEdgeDetectionImageFilter.h"
 #include "itkDiscreteGaussianImageFilter.h"
@@ -450,33 +451,14 @@ auto
 EdgeHausdorffDistanceImageFilter<TImage, TMaskImage>::MakeRealImage(const ImageType * image, const char * role) const ->
   typename RealImageType::Pointer
 {
-  auto real = RealImageType::New();
-  real->CopyInformation(image);
-  real->SetRegions(image->GetLargestPossibleRegion());
-  real->Allocate();
-  SizeValueType                      notFinite = 0;
-  typename ImageType::IndexType      firstNotFinite{};
-  ImageRegionIterator<RealImageType> out(real, real->GetBufferedRegion());
-  for (ImageRegionConstIteratorWithIndex<ImageType> in(image, image->GetLargestPossibleRegion()); !in.IsAtEnd();
-       ++in, ++out)
-  {
-    const auto value = static_cast<float>(in.Get());
-    if (!std::isfinite(value))
-    {
-      if (notFinite++ == 0)
-      {
-        firstNotFinite = in.GetIndex();
-      }
-    }
-    out.Set(value);
-  }
-  if (notFinite > 0)
+  const auto scan = CastAndScanToFloat<RealImageType>(image);
+  if (scan.notFinite > 0)
   {
     itkExceptionMacro("EdgeHausdorffDistanceImageFilter: the "
-                      << role << " image contains " << notFinite << " NaN or infinite pixel(s), the first at index "
-                      << firstNotFinite << "; replace them (e.g. by 0) before evaluating.");
+                      << role << " image contains " << scan.notFinite << " NaN or infinite pixel(s), the first at index "
+                      << scan.firstNotFinite << "; replace them (e.g. by 0) before evaluating.");
   }
-  return real;
+  return scan.image;
 }
 
 template <typename TImage, typename TMaskImage>
