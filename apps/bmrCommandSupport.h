@@ -114,18 +114,7 @@ ReadImage(const std::string & path, const std::string & what)
 inline RegistrationLabelImage::Pointer
 ReadMaskImage(const std::string & path, const std::string & what)
 {
-  const RegistrationImage::Pointer image = ReadImage<RegistrationImage>(path, what);
-  auto                             mask = RegistrationLabelImage::New();
-  mask->CopyInformation(image);
-  mask->SetRegions(image->GetBufferedRegion());
-  mask->Allocate();
-  const float *   values = image->GetBufferPointer();
-  unsigned char * inside = mask->GetBufferPointer();
-  for (std::size_t voxel = 0, count = image->GetBufferedRegion().GetNumberOfPixels(); voxel < count; ++voxel)
-  {
-    inside[voxel] = values[voxel] > 0.0f ? 1 : 0;
-  }
-  return mask;
+  return ThresholdMask(ReadImage<RegistrationImage>(path, what));
 }
 
 using itk::MoveIntoPlace;

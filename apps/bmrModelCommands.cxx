@@ -318,23 +318,94 @@ DisplacementCsv(const PrescribedDisplacement & load)
 // The model pipeline: MRI (+ mask, tumour, craniotomy, measurements) -> scene.
 // ---------------------------------------------------------------------------
 
+/** The preoperative side of a patient model, shared by `model` and `register`:
+ *  the image and its masks, and every setting of bmr::BuildBrainModel. */
+struct PatientModelOptions
+{
+  std::string         image;
+  std::string         mask;
+  std::string         tumourMask;
+  std::string         skullSurface;
+  AtlasOptions        atlas;
+  ClassifierOptions   classifier;
+  GridOptions         grid;
+  RegionOptions       regions;
+  double              skullGap = BrainSurfaceSettings{}.skullGap;
+  bool                noContact = false;
+  std::vector<double> gravity;
+  int                 threads = 0;
+
+  void Add(CLI::App * command)
+  {
+    command->add_option("image", image, "Preoperative T1 MRI (.nii.gz, .nrrd, .mha, ...)")->required();
+    command->add_option("--mask", mask, "Brain mask on the image grid (voxels > 0); default: atlas skull stripping");
+    command->add_option("--tumour-mask", tumourMask, "Tumour mask on the image grid (voxels > 0)");
+    command->add_option("--skull-surface", skullSurface,
+                        "Rigid skull surface (.stl, .obj, .vtp, .vtk) to use instead of the body dilated by --skull-gap");
+    atlas.Add(command);
+    classifier.Add(command);
+    grid.Add(command);
+    regions.Add(command);
+    command->add_option("--skull-gap", skullGap, "Gap between the brain surface and the rigid skull (mm)")
+      ->capture_default_str();
+    command->add_flag("--no-contact", noContact, "No brain-skull contact");
+    command->add_option("--gravity", gravity, "Body acceleration X Y Z (mm/s^2), e.g. 0 0 -9810")->expected(3);
+    command->add_option("--threads", threads, "Worker threads (0: all)")->check(CLI::Range(0, 4096));
+  }
+
+  /** The settings of bmr::BuildBrainModel (reads the craniotomy mask when one is given). */
+  BrainModelSettings Settings() const
+  {
+    BrainModelSettings settings;
+    settings.classifier = classifier.Settings();
+    settings.atlas = atlas.Settings();
+    settings.grid = grid.Settings(threads);
+    settings.skullGap = skullGap;
+    regions.Apply(settings);
+    settings.contact = !noContact;
+    if (!gravity.empty())
+    {
+      settings.gravity = ThreeValues(gravity, "--gravity");
+    }
+    settings.threads = threads;
+    return settings;
+  }
+
+  /** The image, and the masks and skull surface that were given (null or empty otherwise). */
+  struct Inputs
+  {
+    ImageType::Pointer     image;
+    MaskImageType::Pointer brainMask;
+    MaskImageType::Pointer tumourMask;
+    ContactSurface         skullSurface;
+  };
+
+  Inputs Read() const
+  {
+    Inputs inputs;
+    inputs.image = ReadImage<ImageType>(image, "preoperative image");
+    if (!mask.empty())
+    {
+      inputs.brainMask = ReadMaskImage(mask, "brain mask");
+    }
+    if (!tumourMask.empty())
+    {
+      inputs.tumourMask = ReadMaskImage(tumourMask, "tumour mask");
+    }
+    if (!skullSurface.empty())
+    {
+      inputs.skullSurface = ReadSurface(skullSurface);
+    }
+    return inputs;
+  }
+};
+
 struct ModelOptions
 {
-  std::string        image;
-  std::string        mask;
-  std::string        tumourMask;
-  std::string        outputDirectory = "model";
-  AtlasOptions       atlas;
-  ClassifierOptions  classifier;
-  GridOptions        grid;
-  RegionOptions      regions;
-  MeasurementOptions measurements;
-  double             skullGap = BrainSurfaceSettings{}.skullGap;
-  std::string        skullSurface;
-  bool               noContact = false;
-  std::vector<double> gravity;
-  int                threads = 0;
-  bool               quiet = false;
+  PatientModelOptions patient;
+  MeasurementOptions  measurements;
+  std::string         outputDirectory = "model";
+  bool                quiet = false;
 };
 
 int
@@ -343,51 +414,24 @@ RunModel(const ModelOptions & options)
   const fs::path outputDirectory(options.outputDirectory);
   StepTimer      timer(!options.quiet);
   json           report;
-  report["image"] = options.image;
+  const PatientModelOptions & patient = options.patient;
+  report["image"] = patient.image;
+  report["mask"] = patient.mask.empty() ? "atlas: " + patient.atlas.settings.image : patient.mask;
+  if (!patient.skullSurface.empty())
+  {
+    report["skull_surface"] = patient.skullSurface;
+  }
 
   // Everything is computed before anything is written, so a failure leaves no partial model.
-  const ImageType::Pointer image = timer.Run("read", [&] { return ReadImage<ImageType>(options.image, "image"); });
-  MaskImageType::Pointer   brainMask;
-  if (!options.mask.empty())
-  {
-    brainMask = ReadMaskImage(options.mask, "brain mask");
-    report["mask"] = options.mask;
-  }
-  else
-  {
-    report["mask"] = "atlas: " + options.atlas.settings.image;
-  }
-  MaskImageType::Pointer tumourMask;
-  if (!options.tumourMask.empty())
-  {
-    tumourMask = ReadMaskImage(options.tumourMask, "tumour mask");
-  }
-  ContactSurface skullSurface;
-  if (!options.skullSurface.empty())
-  {
-    skullSurface = ReadSurface(options.skullSurface);
-    report["skull_surface"] = options.skullSurface;
-  }
-
-  BrainModelSettings settings;
-  settings.classifier = options.classifier.Settings();
-  settings.atlas = options.atlas.Settings();
-  settings.grid = options.grid.Settings(options.threads);
-  settings.skullGap = options.skullGap;
-  if (options.measurements.Given() && !options.regions.HasCraniotomy())
+  const PatientModelOptions::Inputs inputs = timer.Run("read", [&] { return patient.Read(); });
+  if (options.measurements.Given() && !patient.regions.HasCraniotomy())
   {
     throw Error("intraoperative measurements need the craniotomy region they belong to: give --craniotomy-centre "
                 "and --craniotomy-radius, or --craniotomy-mask");
   }
-  options.regions.Apply(settings);
-  settings.contact = !options.noContact;
-  if (!options.gravity.empty())
-  {
-    settings.gravity = ThreeValues(options.gravity, "--gravity");
-  }
-  settings.threads = options.threads;
+  const BrainModelSettings                settings = patient.Settings();
   const std::optional<IntraoperativeData> measurements = options.measurements.Data();
-  const BrainModel brain = BuildBrainModel(image, brainMask, tumourMask, skullSurface,
+  const BrainModel brain = BuildBrainModel(inputs.image, inputs.brainMask, inputs.tumourMask, inputs.skullSurface,
                                            measurements ? &*measurements : nullptr, settings, timer);
   const Model &                  model = brain.model;
   const std::vector<Index> &     exposed = brain.exposedNodes;
@@ -395,7 +439,7 @@ RunModel(const ModelOptions & options)
   const BrainSurfaces &          surfaces = brain.surfaces;
   const std::vector<Index> &     surfaceNodes = model.NodeSet("surface");
   std::vector<std::string>       warnings = brain.warnings;
-  report["classification"] = { { "classes", options.classifier.classes },
+  report["classification"] = { { "classes", patient.classifier.classes },
                                { "centroids", brain.classification.fit.centroids },
                                { "iterations", brain.classification.fit.iterations },
                                { "converged", brain.classification.fit.converged } };
@@ -408,8 +452,8 @@ RunModel(const ModelOptions & options)
   const bool meshless = model.discretization == Discretization::Meshless;
   json       scene;
   std::ostringstream description;
-  description << "Brain model of " << fs::path(options.image).filename().string() << " made by biomech model ("
-              << ImageGridKindName(options.grid.Settings(0).kind) << ", " << options.grid.elementSize << " mm)";
+  description << "Brain model of " << fs::path(patient.image).filename().string() << " made by biomech model ("
+              << ImageGridKindName(patient.grid.Settings(0).kind) << ", " << patient.grid.elementSize << " mm)";
   scene["description"] = description.str();
   scene["mesh"] = "model.vtu";
   if (meshless)
@@ -438,10 +482,9 @@ RunModel(const ModelOptions & options)
   {
     scene["prescribed_displacements"] = json::array({ { { "csv", "exposed-displacements.csv" } } });
   }
-  if (!options.gravity.empty())
+  if (!settings.gravity.isZero())
   {
-    const Vector3 gravity = ThreeValues(options.gravity, "--gravity");
-    scene["gravity"] = { gravity.x(), gravity.y(), gravity.z() };
+    scene["gravity"] = { settings.gravity.x(), settings.gravity.y(), settings.gravity.z() };
   }
   if (!model.contactSurfaces.empty())
   {
@@ -449,18 +492,14 @@ RunModel(const ModelOptions & options)
     scene["contact"] = json::array(
       { { { "surface", "skull.vtp" }, { "name", "skull" }, { "body_side", "inside" }, { "slave_node_set", "contact" } } });
   }
-  if (load.nodes.empty() && options.gravity.empty())
-  {
-    warnings.push_back("the scene has no load (no intraoperative measurements and no --gravity): its solution is zero");
-  }
   // 0.01 mm, as the brain-sized examples: far below the 0.1 mm a registration needs, and
   // reached by CGAL tetrahedra (slivers, soft CSF) that stall near 0.001 mm with contact.
   scene["solver"] = { { "integrator", "dynamic_relaxation" }, { "tolerance", 0.01 } };
   scene["output"] = { { "vtu", "brain-result.vtu" }, { "report", "brain-report.json" } };
 
   const ModelCounts counts = CountModel(model);
-  report["grid"] = { { "kind", ImageGridKindName(options.grid.Settings(0).kind) },
-                     { "element_size_mm", options.grid.elementSize },
+  report["grid"] = { { "kind", ImageGridKindName(patient.grid.Settings(0).kind) },
+                     { "element_size_mm", patient.grid.elementSize },
                      { "nodes", counts.nodes },
                      { "cells", counts.cells },
                      { "dofs", counts.dofs },
@@ -471,7 +510,7 @@ RunModel(const ModelOptions & options)
   report["regions"] = { { "surface_nodes", surfaceNodes.size() },
                         { "exposed_nodes", exposed.size() },
                         { "skull_base_nodes", model.NodeSet("skull_base").size() } };
-  report["skull_gap_mm"] = options.skullGap;
+  report["skull_gap_mm"] = patient.skullGap;
   report["warnings"] = warnings;
 
   timer.Run("write", [&] {
@@ -495,7 +534,7 @@ RunModel(const ModelOptions & options)
                          outputDirectory / "memberships.nii.gz");
     WriteImageAtomically(itk::MakeImageFromBiomechanicalVolume<MaskImageType>(brain.classification.labels).GetPointer(),
                          outputDirectory / "tissue-labels.nii.gz");
-    if (options.mask.empty())
+    if (patient.mask.empty())
     {
       WriteImageAtomically(itk::MakeImageFromBiomechanicalVolume<MaskImageType>(brain.brainMask).GetPointer(),
                            outputDirectory / "brain-mask.nii.gz");
@@ -509,8 +548,8 @@ RunModel(const ModelOptions & options)
   PrintWarnings(warnings);
   if (!options.quiet)
   {
-    std::cout << "model of " << options.image << "\n"
-              << "  grid              " << ImageGridKindName(options.grid.Settings(0).kind) << ", " << counts.nodes
+    std::cout << "model of " << patient.image << "\n"
+              << "  grid              " << ImageGridKindName(patient.grid.Settings(0).kind) << ", " << counts.nodes
               << " nodes, " << counts.cells << " cells, " << counts.dofs << " DOF";
     if (counts.integrationPoints > 0)
     {
@@ -530,29 +569,18 @@ RunModel(const ModelOptions & options)
 
 struct RegisterOptions
 {
-  std::string              image;
-  std::string              mask;
-  std::string              tumourMask;
-  std::string              skullSurface;
-  std::vector<std::string> labelMaps;
-  std::string              intraoperativeImage;
-  std::string              intraoperativeMask;
-  std::string              outputDirectory = "registration";
-  AtlasOptions             atlas;
-  ClassifierOptions        classifier;
-  GridOptions              grid;
-  RegionOptions            regions;
-  MeasurementOptions       measurements;
-  double                   skullGap = BrainSurfaceSettings{}.skullGap;
-  bool                     noContact = false;
-  std::vector<double>      gravity;
+  PatientModelOptions            patient;
+  MeasurementOptions             measurements;
+  std::vector<std::string>       labelMaps;
+  std::string                    intraoperativeImage;
+  std::string                    intraoperativeMask;
+  std::string                    outputDirectory = "registration";
   BrainShiftRegistrationSettings defaults;
-  double                   tolerance = defaults.solver.tolerance;
-  double                   fitTolerance = defaults.fitTolerance;
-  double                   minimumControlPointSpacing = defaults.minimumControlPointSpacing;
-  int                      overlays = 5;
-  int                      threads = 0;
-  bool                     quiet = false;
+  double                         tolerance = defaults.solver.tolerance;
+  double                         fitTolerance = defaults.fitTolerance;
+  double                         minimumControlPointSpacing = defaults.minimumControlPointSpacing;
+  int                            overlays = 5;
+  bool                           quiet = false;
 };
 
 /** "labels.nii.gz" -> "labels-warped.nii.gz". */
@@ -577,25 +605,17 @@ RunRegister(const RegisterOptions & options)
   const fs::path outputDirectory(options.outputDirectory);
   const bool     terminal = !options.quiet && ::isatty(STDERR_FILENO) != 0;
 
-  BrainShiftRegistrationInputs inputs;
-  inputs.preoperativeImage = ReadImage<ImageType>(options.image, "preoperative image");
-  if (!options.mask.empty())
-  {
-    inputs.brainMask = ReadMaskImage(options.mask, "brain mask");
-  }
-  if (!options.tumourMask.empty())
-  {
-    inputs.tumourMask = ReadMaskImage(options.tumourMask, "tumour mask");
-  }
-  if (!options.skullSurface.empty())
-  {
-    inputs.skullSurface = ReadSurface(options.skullSurface);
-  }
+  const PatientModelOptions::Inputs patient = options.patient.Read();
+  BrainShiftRegistrationInputs      inputs;
+  inputs.preoperativeImage = patient.image;
+  inputs.brainMask = patient.brainMask;
+  inputs.tumourMask = patient.tumourMask;
+  inputs.skullSurface = patient.skullSurface;
   for (const std::string & path : options.labelMaps)
   {
     inputs.labelMaps.push_back(ReadImage<MaskImageType>(path, "label map"));
   }
-  if (!options.regions.HasCraniotomy())
+  if (!options.patient.regions.HasCraniotomy())
   {
     throw Error("give the craniotomy: --craniotomy-centre X Y Z with --craniotomy-radius R, or --craniotomy-mask");
   }
@@ -618,17 +638,7 @@ RunRegister(const RegisterOptions & options)
   }
 
   BrainShiftRegistrationSettings settings;
-  settings.model.classifier = options.classifier.Settings();
-  settings.model.atlas = options.atlas.Settings();
-  settings.model.grid = options.grid.Settings(options.threads);
-  settings.model.skullGap = options.skullGap;
-  options.regions.Apply(settings.model);
-  settings.model.contact = !options.noContact;
-  if (!options.gravity.empty())
-  {
-    settings.model.gravity = ThreeValues(options.gravity, "--gravity");
-  }
-  settings.model.threads = options.threads;
+  settings.model = options.patient.Settings();
   settings.solver.tolerance = options.tolerance;
   settings.fitTolerance = options.fitTolerance;
   settings.minimumControlPointSpacing = options.minimumControlPointSpacing;
@@ -652,7 +662,7 @@ RunRegister(const RegisterOptions & options)
   std::error_code ignored;
   fs::remove(reportPath, ignored);
   json report = RegistrationReportJson(result, settings);
-  report["preoperative_image"] = options.image;
+  report["preoperative_image"] = options.patient.image;
   json files = json::object();
   const auto write = [&](const std::string & key, const fs::path & path, const auto & writeFile) {
     writeFile(path);
@@ -915,36 +925,17 @@ AddModelCommands(CLI::App & app)
   auto options = std::make_shared<ModelOptions>();
   CLI::App * model = app.add_subcommand(
     "model", "From an MRI (+ mask, tumour mask, craniotomy, intraoperative measurements) to a scene for 'solve'");
-  model->add_option("image", options->image, "Preoperative T1 MRI (.nii.gz, .nrrd, .mha, ...)")->required();
-  model->add_option("--mask", options->mask, "Brain mask on the image grid (voxels > 0); default: atlas skull stripping");
-  model->add_option("--tumour-mask", options->tumourMask, "Tumour mask on the image grid (voxels > 0)");
+  options->patient.Add(model);
+  options->measurements.Add(model);
   model->add_option("-o,--output-dir", options->outputDirectory, "Folder for the scene and its files")
     ->capture_default_str();
-  options->atlas.Add(model);
-  options->classifier.Add(model);
-  options->grid.Add(model);
-  options->regions.Add(model);
-  options->measurements.Add(model);
-  model->add_option("--skull-gap", options->skullGap, "Gap between the brain surface and the rigid skull (mm)")
-    ->capture_default_str();
-  model->add_option("--skull-surface", options->skullSurface,
-                    "Rigid skull surface (.stl, .obj, .vtp, .vtk) to use instead of the body dilated by --skull-gap");
-  model->add_flag("--no-contact", options->noContact, "No brain-skull contact");
-  model->add_option("--gravity", options->gravity, "Body acceleration X Y Z (mm/s^2), e.g. 0 0 -9810")->expected(3);
-  model->add_option("--threads", options->threads, "Worker threads (0: all)")->check(CLI::Range(0, 4096));
   model->add_flag("--quiet,-q", options->quiet, "Print nothing but warnings and errors");
 
   auto registration = std::make_shared<RegisterOptions>();
   CLI::App * registerCommand = app.add_subcommand(
     "register", "Brain-shift registration in one call: model, solve, transform, warped image (+ labels), evaluation, "
                 "report. Exit 0 converged, 2 not converged (results written), 1 error");
-  registerCommand->add_option("image", registration->image, "Preoperative T1 MRI (.nii.gz, .nrrd, .mha, ...)")
-    ->required();
-  registerCommand->add_option("--mask", registration->mask,
-                              "Brain mask on the image grid (voxels > 0); default: atlas skull stripping");
-  registerCommand->add_option("--tumour-mask", registration->tumourMask, "Tumour mask on the image grid (voxels > 0)");
-  registerCommand->add_option("--skull-surface", registration->skullSurface,
-                              "Rigid skull surface (.stl, .obj, .vtp, .vtk) instead of the body dilated by --skull-gap");
+  registration->patient.Add(registerCommand);
   registerCommand->add_option("--labels", registration->labelMaps,
                               "Label maps on the image grid to warp (nearest neighbour); repeat for several");
   registration->measurements.Add(registerCommand);
@@ -954,14 +945,6 @@ AddModelCommands(CLI::App & app)
   registerCommand->add_option("--intraoperative-mask", registration->intraoperativeMask,
                               "Brain mask of the intraoperative image (default: atlas skull stripping when its "
                               "surface is needed; the registered preoperative mask for the evaluation)");
-  registration->regions.Add(registerCommand);
-  registration->grid.Add(registerCommand);
-  registration->classifier.Add(registerCommand);
-  registration->atlas.Add(registerCommand);
-  registerCommand->add_option("--skull-gap", registration->skullGap, "Gap between brain surface and rigid skull (mm)")
-    ->capture_default_str();
-  registerCommand->add_flag("--no-contact", registration->noContact, "No brain-skull contact");
-  registerCommand->add_option("--gravity", registration->gravity, "Body acceleration X Y Z (mm/s^2)")->expected(3);
   registerCommand->add_option("--solver-tolerance", registration->tolerance,
                               "Dynamic relaxation: estimated distance to the solution at which it stops (mm)")
     ->capture_default_str();
@@ -974,7 +957,6 @@ AddModelCommands(CLI::App & app)
   registerCommand->add_option("--overlays", registration->overlays, "Edge-overlay PNGs per evaluation (0: none)")
     ->capture_default_str();
   registerCommand->add_option("-o,--output-dir", registration->outputDirectory, "Output folder")->capture_default_str();
-  registerCommand->add_option("--threads", registration->threads, "Worker threads (0: all)")->check(CLI::Range(0, 4096));
   registerCommand->add_flag("--quiet,-q", registration->quiet, "Print nothing but warnings and errors");
 
   return [=]() -> int {

@@ -105,6 +105,21 @@ AtlasBrainMask(const RegistrationImage * image, const AtlasSettings & settings =
 BrainSurfaces
 BrainSurfacesOfMask(const LabelVolume & mask, double skullGap, std::vector<std::string> & warnings);
 
+/** 1 where `image` > 0, 0 elsewhere, same grid: a brain-extracted image
+ *  such as Colin27's ch2bet.nii.gz as a mask. */
+RegistrationLabelImage::Pointer
+ThresholdMask(const RegistrationImage * image);
+
+/** `image` resampled through the backward map `transform` onto `grid` (null:
+ *  the image's own grid) with itk::TransformWarpImageFilter: linear for
+ *  intensities, nearest neighbour for labels. Throws bmr::Error. */
+RegistrationImage::Pointer
+WarpImage(const RegistrationImage * image, const itk::Transform<double, 3, 3> * transform,
+          const itk::ImageBase<3> * grid = nullptr);
+RegistrationLabelImage::Pointer
+WarpLabelImage(const RegistrationLabelImage * labels, const itk::Transform<double, 3, 3> * transform,
+               const itk::ImageBase<3> * grid = nullptr);
+
 /** A mask image as a core volume (voxels > 0 are 1). When `grid` is given the
  *  mask must lie on it; otherwise an Error names `what` and both grids. */
 LabelVolume

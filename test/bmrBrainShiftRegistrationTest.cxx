@@ -28,20 +28,6 @@ HaveColin27()
   return fs::exists(Colin27Folder / "ch2.nii.gz") && fs::exists(Colin27Folder / "ch2bet.nii.gz");
 }
 
-bmr::RegistrationLabelImage::Pointer
-ThresholdMask(const bmr::RegistrationImage * image)
-{
-  auto mask = bmr::RegistrationLabelImage::New();
-  mask->CopyInformation(image);
-  mask->SetRegions(image->GetBufferedRegion());
-  mask->Allocate();
-  for (std::size_t n = 0, count = image->GetBufferedRegion().GetNumberOfPixels(); n < count; ++n)
-  {
-    mask->GetBufferPointer()[n] = image->GetBufferPointer()[n] > 0.0f ? 1 : 0;
-  }
-  return mask;
-}
-
 /** Colin27, read once for all tests. */
 struct Colin27
 {
@@ -53,7 +39,7 @@ struct Colin27
     static const Colin27 data = [] {
       Colin27 colin;
       colin.image = itk::ReadBiomechanicalImage<bmr::RegistrationImage>((Colin27Folder / "ch2.nii.gz").string(), "Colin27");
-      colin.mask = ThresholdMask(
+      colin.mask = bmr::ThresholdMask(
         itk::ReadBiomechanicalImage<bmr::RegistrationImage>((Colin27Folder / "ch2bet.nii.gz").string(), "mask"));
       return colin;
     }();

@@ -152,6 +152,22 @@ LoadFromIntraoperativeData(const Model &              model,
 
 } // namespace
 
+RegistrationLabelImage::Pointer
+ThresholdMask(const RegistrationImage * image)
+{
+  auto mask = RegistrationLabelImage::New();
+  mask->CopyInformation(image);
+  mask->SetRegions(image->GetBufferedRegion());
+  mask->Allocate();
+  const float *   values = image->GetBufferPointer();
+  unsigned char * inside = mask->GetBufferPointer();
+  for (std::size_t voxel = 0, count = image->GetBufferedRegion().GetNumberOfPixels(); voxel < count; ++voxel)
+  {
+    inside[voxel] = values[voxel] > 0.0f ? 1 : 0;
+  }
+  return mask;
+}
+
 LabelVolume
 MaskVolume(const RegistrationLabelImage * image, const std::string & what, const ImageGeometry * grid)
 {
@@ -441,6 +457,20 @@ Warp(const TImage *                                      image,
 
 } // namespace
 
+RegistrationImage::Pointer
+WarpImage(const RegistrationImage * image, const itk::Transform<double, 3, 3> * transform,
+          const itk::ImageBase<3> * grid)
+{
+  return Warp(image, transform, grid, itk::WarpInterpolation::Linear);
+}
+
+RegistrationLabelImage::Pointer
+WarpLabelImage(const RegistrationLabelImage * labels, const itk::Transform<double, 3, 3> * transform,
+               const itk::ImageBase<3> * grid)
+{
+  return Warp(labels, transform, grid, itk::WarpInterpolation::NearestNeighbor);
+}
+
 // ---------------------------------------------------------------------------
 // The registration.
 // ---------------------------------------------------------------------------
@@ -527,15 +557,14 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
   }
 
   result.warpedImage = timer.Run("warp", [&] {
-    return Warp<RegistrationImage>(inputs.preoperativeImage, result.transform, nullptr, itk::WarpInterpolation::Linear);
+    return WarpImage(inputs.preoperativeImage, result.transform);
   });
   if (!inputs.labelMaps.empty())
   {
     timer.Run("warp-labels", [&] {
       for (const auto & labels : inputs.labelMaps)
       {
-        result.warpedLabelMaps.push_back(Warp<RegistrationLabelImage>(labels, result.transform, nullptr,
-                                                                      itk::WarpInterpolation::NearestNeighbor));
+        result.warpedLabelMaps.push_back(WarpLabelImage(labels, result.transform));
       }
     });
   }
@@ -545,10 +574,8 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
   {
     timer.Run("evaluate", [&] {
       auto identity = itk::IdentityTransform<double, 3>::New();
-      result.unregisteredOnIntraoperativeGrid = Warp<RegistrationImage>(
-        inputs.preoperativeImage, identity, intraoperativeImage, itk::WarpInterpolation::Linear);
-      result.registeredOnIntraoperativeGrid = Warp<RegistrationImage>(
-        inputs.preoperativeImage, result.transform, intraoperativeImage, itk::WarpInterpolation::Linear);
+      result.unregisteredOnIntraoperativeGrid = WarpImage(inputs.preoperativeImage, identity, intraoperativeImage);
+      result.registeredOnIntraoperativeGrid = WarpImage(inputs.preoperativeImage, result.transform, intraoperativeImage);
       // The brain of the intraoperative image: its own mask, or the registered preoperative mask.
       if (inputs.intraoperative.imageBrainMask.IsNotNull())
       {
@@ -557,8 +584,7 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
       else
       {
         const auto preoperativeMask = itk::MakeImageFromBiomechanicalVolume<RegistrationLabelImage>(result.model.brainMask);
-        result.evaluationMask = Warp<RegistrationLabelImage>(preoperativeMask, result.transform, intraoperativeImage,
-                                                             itk::WarpInterpolation::NearestNeighbor);
+        result.evaluationMask = WarpLabelImage(preoperativeMask, result.transform, intraoperativeImage);
       }
       result.unregistered = EvaluateEdges(intraoperativeImage, result.unregisteredOnIntraoperativeGrid,
                                           result.evaluationMask, settings.evaluationSliceAxis,

@@ -5,7 +5,6 @@
 #include "itkBiomechanicalImageConversion.h"
 #include "itkDisplacementPointSetToBSplineTransformFilter.h"
 #include "itkImageRegionIteratorWithIndex.h"
-#include "itkTransformWarpImageFilter.h"
 
 #include <algorithm>
 #include <chrono>
@@ -80,22 +79,6 @@ ResampledGrid(const RegistrationImage * image, const Vector3 & spacing)
   grid->SetSpacing(newSpacing);
   grid->SetRegions(newSize);
   return grid;
-}
-
-template <typename TImage>
-typename TImage::Pointer
-WarpOnto(const TImage * image, const itk::Transform<double, 3, 3> * transform, const itk::ImageBase<3> * grid,
-         itk::WarpInterpolation interpolation)
-{
-  auto warp = itk::TransformWarpImageFilter<TImage>::New();
-  warp->SetInput(image);
-  warp->SetTransform(transform);
-  warp->SetReferenceImage(grid);
-  warp->SetInterpolation(interpolation);
-  warp->Update();
-  typename TImage::Pointer output = warp->GetOutput();
-  output->DisconnectPipeline();
-  return output;
 }
 
 } // namespace
@@ -281,12 +264,9 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
   // truth onto an intraoperative grid, with noise; and its brain mask.
   timer.Run("intraop-image", [&] {
     const auto grid = ResampledGrid(preoperativeImage, settings.intraoperativeSpacing);
-    truth.intraoperativeImage = WarpOnto<RegistrationImage>(preoperativeImage, truth.truthTransform, grid,
-                                                            itk::WarpInterpolation::Linear);
-    truth.intraoperativeBrainMask = WarpOnto<RegistrationLabelImage>(brainMask, truth.truthTransform, grid,
-                                                                     itk::WarpInterpolation::NearestNeighbor);
-    truth.intraoperativeBrainOnPreoperativeGrid = WarpOnto<RegistrationLabelImage>(
-      brainMask, truth.truthTransform, brainMask, itk::WarpInterpolation::NearestNeighbor);
+    truth.intraoperativeImage = WarpImage(preoperativeImage, truth.truthTransform, grid);
+    truth.intraoperativeBrainMask = WarpLabelImage(brainMask, truth.truthTransform, grid);
+    truth.intraoperativeBrainOnPreoperativeGrid = WarpLabelImage(brainMask, truth.truthTransform);
     if (settings.noise > 0.0)
     {
       const double                     level = OverlayGreyRange(preoperativeImage).second;
