@@ -10,7 +10,8 @@ packages=(
   libgtest-dev googletest libbenchmark-dev
   nlohmann-json3-dev libcli11-dev libnanoflann-dev
   calculix-ccx mricron-data insighttoolkit5-examples
-  python3 python3-numpy python3-matplotlib python3-pytest
+  python3 python3-dev python3-numpy python3-matplotlib python3-pytest
+  pybind11-dev python3-nbclient python3-nbformat python3-ipykernel
 )
 
 missing=()

@@ -1,0 +1,216 @@
+"""Brain-shift registration with a nonlinear biomechanical model, from Python.
+
+The binding of the BiomechanicalRegistration ITK module (docs/python.md):
+images are :class:`Image` objects (NumPy arrays indexed [z, y, x] with ITK's
+spacing, origin and direction), meshes and results are NumPy arrays (mm, N,
+Pa), every filter takes its parameters as keyword arguments, long calls
+release the GIL and report progress to an optional callable
+``progress(stage, fraction, info)``, and errors from C++ arrive as
+:class:`Error` (a RuntimeError) with the command-line tool's messages.
+
+Quick start::
+
+    import biomechanical_registration as bmr
+    image = bmr.imread("/usr/share/mricron/templates/ch2.nii.gz")
+    mask = bmr.imread("/usr/share/mricron/templates/ch2bet.nii.gz")
+    mask = bmr.image_from_array(bmr.array_from_image(mask) > 0, mask.spacing, mask.origin, mask.direction)
+    result = bmr.register(image, brain_mask=mask, intraoperative_surface=surface,
+                          craniotomy_centre=(-11, 43, 84), craniotomy_radius=30)
+"""
+
+import json as _json
+import os as _os
+
+from . import _bmr
+from ._bmr import (
+    BrainModel,
+    BSplineRegistration,
+    EdgeEvaluation,
+    Error,
+    ImageGrid,
+    Material,
+    Model,
+    PrescribedDisplacement,
+    RegistrationResult,
+    Scene,
+    SolveError,
+    SolveResult,
+    SolverSettings,
+    Surface,
+    SyntheticBrainShift,
+    TissueClassification,
+    Transform,
+    atlas_brain_mask,
+    brain_surfaces,
+    bspline_registration,
+    classify_tissue,
+    displacements_between_surfaces,
+    displacements_from_points,
+    displacements_from_surface,
+    evaluate_edges,
+    fit_transform,
+    format_report,
+    identity_transform,
+    imread,
+    imwrite,
+    make_block_mesh,
+    make_ellipsoid_surface,
+    make_grid,
+    make_synthetic_brain_shift,
+    measure_displacement_error,
+    parse_scene,
+    read_mesh,
+    read_scene,
+    read_sparse_displacements,
+    read_surface,
+    read_transform,
+    report_json,
+    skull_base_nodes,
+    surface_nodes_in_mask,
+    surface_nodes_in_sphere,
+    warp_image,
+    write_mesh,
+    write_result,
+    write_surface,
+)
+from .image import Image, array_from_image, array_view_from_image, image_from_array, image_view_from_array
+
+__version__ = "0.1.0"
+
+
+def write_transform(transform, path):
+    """Writes a transform (.h5, .tfm, .txt), as `biomech register` writes transform.h5."""
+    transform.write(_os.fspath(path))
+
+
+def solve(scene, settings=None, progress=None, **overrides):
+    """Solves a model to steady state (dynamic relaxation) or over time (explicit dynamics).
+
+    ``scene`` is a scene file path (as ``biomech solve`` takes), a dict with
+    the scene file's content (docs/scene-format.md; relative paths are
+    relative to the current folder), a :class:`Scene`, or a :class:`Model`
+    (then ``settings`` is a :class:`SolverSettings`, default the solver's
+    defaults). Keyword arguments override single solver settings, e.g.
+    ``tolerance=0.01``, ``max_steps=20000``, ``threads=1``.
+
+    A solve that stops without converging is not an exception: the result
+    says so (``converged``, ``message``). A failed solve (an inverted element)
+    raises :class:`SolveError` with ``step`` and ``element``.
+    """
+    if isinstance(scene, Model):
+        model = scene
+        base = SolverSettings() if settings is None else settings
+    else:
+        if settings is not None:
+            raise TypeError("settings is for a Model; a scene carries its own (override single ones with keywords)")
+        scene = _as_scene(scene)
+        model, base = scene.model, scene.settings
+    if not isinstance(base, SolverSettings):
+        raise TypeError("settings must be a SolverSettings, got %s" % type(base).__name__)
+    chosen = base.copy()
+    for name, value in overrides.items():
+        if name.startswith("_") or not hasattr(chosen, name) or callable(getattr(chosen, name)):
+            raise TypeError("solve() got an unknown solver setting '%s'" % name)
+        setattr(chosen, name, value)
+    return _bmr._solve(model, chosen, progress)
+
+
+def _as_scene(scene):
+    if isinstance(scene, Scene):
+        return scene
+    if isinstance(scene, dict):
+        return parse_scene(_json.dumps(scene), _os.path.join(_os.getcwd(), "scene.json"))
+    if isinstance(scene, (str, _os.PathLike)):
+        return read_scene(_os.fspath(scene))
+    raise TypeError("scene must be a path, a dict, a Scene or a Model; got %s" % type(scene).__name__)
+
+
+def default_registration_settings():
+    """The keyword settings of :func:`register` and :func:`build_brain_model` with their defaults.
+
+    They are the options of ``biomech register`` (underscores for dashes;
+    the classifier's ``--tolerance`` and ``--max-iterations`` are
+    ``classifier_tolerance`` and ``classifier_max_iterations``, ``--no-contact``
+    is ``contact=False``, ``--min-control-point-spacing`` is
+    ``min_control_point_spacing``).
+    """
+    return _bmr._default_registration_settings()
+
+
+def _checked_settings(function, settings):
+    known = _bmr._default_registration_settings()
+    unknown = sorted(set(settings) - set(known))
+    if unknown:
+        raise TypeError(
+            "%s() got unknown setting%s %s; the settings are: %s"
+            % (function, "s" if len(unknown) > 1 else "", ", ".join(unknown), ", ".join(sorted(known)))
+        )
+    return dict(settings)
+
+
+def build_brain_model(
+    image,
+    brain_mask=None,
+    *,
+    tumour_mask=None,
+    skull_surface=None,
+    intraoperative_surface=None,
+    sparse_points=None,
+    sparse_displacements=None,
+    progress=None,
+    **settings
+):
+    """The patient-specific model of ``biomech model``: classification, grid, materials,
+    surfaces, fixed skull base, exposed surface loaded from the measurements, skull contact.
+
+    ``brain_mask`` None: atlas skull stripping (Colin27 from mricron-data).
+    Settings: see :func:`default_registration_settings`. Returns a :class:`BrainModel`;
+    ``solve(brain_model.model)`` solves it.
+    """
+    values = _checked_settings("build_brain_model", settings)
+    return _bmr._build_brain_model(
+        image, brain_mask, tumour_mask, skull_surface, intraoperative_surface, sparse_points, sparse_displacements,
+        values, progress,
+    )
+
+
+def register(
+    preoperative_image,
+    *,
+    brain_mask=None,
+    tumour_mask=None,
+    skull_surface=None,
+    label_maps=(),
+    intraoperative_surface=None,
+    sparse_points=None,
+    sparse_displacements=None,
+    intraoperative_image=None,
+    intraoperative_mask=None,
+    progress=None,
+    **settings
+):
+    """The whole registration in one call, as ``biomech register``: model, solve,
+    B-spline transform, warped image and label maps, edge-based evaluation.
+
+    Intraoperative data: a displaced surface (:class:`Surface`), sparse
+    points with their displacements ((N, 3) arrays, mm), or an intraoperative
+    image (and its brain mask), which is also the evaluation's fixed image.
+    Settings: the options of ``biomech register`` as keywords (see
+    :func:`default_registration_settings`), e.g. ``grid="tetrahedra"``,
+    ``element_size=7``, ``craniotomy_centre=(x, y, z)``, ``craniotomy_radius=30``.
+
+    Returns a :class:`RegistrationResult` with ``report``, the dict
+    ``biomech register`` writes as registration-report.json. A solve that did
+    not converge is reported there (``report["solve"]["converged"]``) and in
+    ``warnings``; bad input and a failed solve raise :class:`Error`.
+    """
+    values = _checked_settings("register", settings)
+    result, report = _bmr._register(
+        preoperative_image, brain_mask, tumour_mask, skull_surface, list(label_maps), intraoperative_surface,
+        sparse_points, sparse_displacements, intraoperative_image, intraoperative_mask, values, progress,
+    )
+    result.report = report
+    return result
+
+
+__all__ = [name for name in dir() if not name.startswith("_")]

@@ -1,0 +1,1285 @@
+// The Python module biomechanical_registration._bmr: conversions, errors and
+// the mechanics core (models, scenes, the solver, meshes and surfaces, tissue
+// classification, grids, loads). The ITK layer is bound in bmrPythonImages.cxx.
+#include "bmrPythonSupport.h"
+
+#include "bmrBrainSurfaces.h"
+#include "bmrFuzzyCMeans.h"
+#include "bmrImageGrids.h"
+#include "bmrMeshGenerators.h"
+#include "bmrMeshIO.h"
+#include "bmrScene.h"
+#include "bmrSurfaceLoads.h"
+
+#include <Python.h>
+#include <pybind11/functional.h>
+
+#include <cmath>
+#include <cstring>
+#include <sstream>
+
+namespace bmr::python
+{
+
+// ---------------------------------------------------------------------------
+// Arrays.
+// ---------------------------------------------------------------------------
+
+py::array_t<double>
+ArrayFromPoints(const std::vector<Vector3> & points)
+{
+  py::array_t<double> array({ static_cast<py::ssize_t>(points.size()), py::ssize_t{ 3 } });
+  auto                view = array.mutable_unchecked<2>();
+  for (std::size_t i = 0; i < points.size(); ++i)
+  {
+    for (int d = 0; d < 3; ++d)
+    {
+      view(static_cast<py::ssize_t>(i), d) = points[i][d];
+    }
+  }
+  return array;
+}
+
+namespace
+{
+
+/** `object` as a C-contiguous float64 array; ValueError naming `what` when NumPy cannot read it as numbers. */
+py::array_t<double, py::array::c_style | py::array::forcecast>
+DoubleArray(const py::handle & object, const std::string & what)
+{
+  try
+  {
+    return py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(object);
+  }
+  catch (const py::error_already_set &)
+  {
+  }
+  throw py::value_error(what + " must be numbers (an array or a sequence)");
+}
+
+std::string
+ShapeText(const py::array & array)
+{
+  std::ostringstream text;
+  text << "(";
+  for (py::ssize_t d = 0; d < array.ndim(); ++d)
+  {
+    text << (d > 0 ? ", " : "") << array.shape(d);
+  }
+  text << (array.ndim() == 1 ? ",)" : ")");
+  return text.str();
+}
+
+} // namespace
+
+std::vector<Vector3>
+PointsFromArray(const py::handle & object, const std::string & what)
+{
+  const auto array = DoubleArray(object, what);
+  if (!array || array.ndim() != 2 || array.shape(1) != 3)
+  {
+    throw py::value_error(what + " must be an (N, 3) array of x, y, z (mm); got shape " +
+                          (array ? ShapeText(array) : std::string("none")));
+  }
+  const auto           view = array.unchecked<2>();
+  std::vector<Vector3> points(static_cast<std::size_t>(array.shape(0)));
+  for (py::ssize_t i = 0; i < array.shape(0); ++i)
+  {
+    points[static_cast<std::size_t>(i)] = Vector3(view(i, 0), view(i, 1), view(i, 2));
+    if (!points[static_cast<std::size_t>(i)].allFinite())
+    {
+      throw py::value_error(what + " row " + std::to_string(i) + " is not finite: " +
+                            FormatPoint(points[static_cast<std::size_t>(i)]));
+    }
+  }
+  return points;
+}
+
+Vector3
+VectorFromObject(const py::handle & object, const std::string & what)
+{
+  const auto array = DoubleArray(object, what);
+  if (!array || array.ndim() != 1 || array.shape(0) != 3)
+  {
+    throw py::value_error(what + " must be three numbers (x, y, z); got shape " +
+                          (array ? ShapeText(array) : std::string("none")));
+  }
+  const Vector3 vector(array.at(0), array.at(1), array.at(2));
+  if (!vector.allFinite())
+  {
+    throw py::value_error(what + " is not finite: " + FormatPoint(vector));
+  }
+  return vector;
+}
+
+py::array_t<Index>
+ArrayFromIndices(const std::vector<Index> & indices)
+{
+  py::array_t<Index> array(static_cast<py::ssize_t>(indices.size()));
+  if (!indices.empty())
+  {
+    std::memcpy(array.mutable_data(), indices.data(), indices.size() * sizeof(Index));
+  }
+  return array;
+}
+
+std::vector<Index>
+IndicesFromArray(const py::handle & object, const std::string & what)
+{
+  py::array array;
+  try
+  {
+    array = py::array::ensure(object);
+  }
+  catch (const py::error_already_set &)
+  {
+  }
+  if (!array || array.ndim() != 1 ||
+      (array.size() > 0 && array.dtype().kind() != 'i' && array.dtype().kind() != 'u'))
+  {
+    throw py::value_error(what + " must be a 1-D sequence of integer node ids");
+  }
+  const auto values = py::array_t<long long, py::array::c_style | py::array::forcecast>::ensure(array);
+  std::vector<Index> indices(static_cast<std::size_t>(values.size()));
+  for (py::ssize_t i = 0; i < values.size(); ++i)
+  {
+    const long long value = values.at(i);
+    if (value < 0 || value > std::numeric_limits<Index>::max())
+    {
+      throw py::value_error(what + " holds " + std::to_string(value) + ", which is not a node id (0 or more)");
+    }
+    indices[static_cast<std::size_t>(i)] = static_cast<Index>(value);
+  }
+  return indices;
+}
+
+std::array<bool, 3>
+ComponentsFromObject(const py::handle & object, const std::string & what)
+{
+  const auto sequence = py::cast<std::vector<bool>>(object);
+  if (sequence.size() != 3)
+  {
+    throw py::value_error(what + " must be three booleans (x, y, z)");
+  }
+  return { sequence[0], sequence[1], sequence[2] };
+}
+
+// ---------------------------------------------------------------------------
+// Images.
+// ---------------------------------------------------------------------------
+
+namespace
+{
+
+py::object
+ImageClass()
+{
+  return py::module_::import("biomechanical_registration.image").attr("Image");
+}
+
+py::object
+ImageAttribute(const py::handle & image, const char * name, const std::string & what)
+{
+  if (image.is_none() || !py::hasattr(image, name))
+  {
+    throw py::type_error(what + " must be a biomechanical_registration.Image (from image_from_array or imread); "
+                                "got " +
+                         std::string(py::str(py::type::of(image).attr("__name__"))));
+  }
+  return image.attr(name);
+}
+
+/** The image's array with `what` in messages: 3-D, or 4-D when `components` is allowed. */
+py::array
+ImageArray(const py::handle & image, const std::string & what, bool allowComponents)
+{
+  const py::array array = py::array::ensure(ImageAttribute(image, "array", what));
+  if (!array || !(array.ndim() == 3 || (allowComponents && array.ndim() == 4)))
+  {
+    throw py::value_error(what + " must be a 3-D image: its array must have shape (z, y, x)" +
+                          std::string(allowComponents ? " or (z, y, x, components)" : "") + ", got " +
+                          (array ? ShapeText(array) : std::string("none")));
+  }
+  for (py::ssize_t d = 0; d < array.ndim(); ++d)
+  {
+    if (array.shape(d) == 0)
+    {
+      throw py::value_error(what + " is empty: its array has shape " + ShapeText(array));
+    }
+  }
+  return array;
+}
+
+template <typename T>
+void
+FillVolume(const py::handle & image, const py::array & array, const std::string & what, Volume<T> & volume)
+{
+  volume.geometry = GeometryFromImage(image, what);
+  // [z, y, x] in NumPy is x fastest in memory: ITK's buffer order.
+  volume.geometry.size = { static_cast<int>(array.shape(2)), static_cast<int>(array.shape(1)),
+                           static_cast<int>(array.shape(0)) };
+  volume.components = array.ndim() == 4 ? static_cast<int>(array.shape(3)) : 1;
+  volume.values.resize(volume.geometry.VoxelCount() * static_cast<std::size_t>(volume.components));
+}
+
+template <typename T>
+py::object
+MakeImage(const Volume<T> & volume)
+{
+  std::vector<py::ssize_t> shape{ volume.geometry.size[2], volume.geometry.size[1], volume.geometry.size[0] };
+  if (volume.components != 1)
+  {
+    shape.push_back(volume.components);
+  }
+  py::array_t<T> array(shape);
+  if (!volume.values.empty())
+  {
+    std::memcpy(array.mutable_data(), volume.values.data(), volume.values.size() * sizeof(T));
+  }
+  const ImageGeometry &  geometry = volume.geometry;
+  py::array_t<double>    direction({ 3, 3 });
+  auto                   view = direction.mutable_unchecked<2>();
+  for (int row = 0; row < 3; ++row)
+  {
+    for (int column = 0; column < 3; ++column)
+    {
+      view(row, column) = geometry.direction(row, column);
+    }
+  }
+  return ImageClass()(array, py::arg("spacing") = py::make_tuple(geometry.spacing.x(), geometry.spacing.y(), geometry.spacing.z()),
+                      py::arg("origin") = py::make_tuple(geometry.origin.x(), geometry.origin.y(), geometry.origin.z()),
+                      py::arg("direction") = direction);
+}
+
+} // namespace
+
+ImageGeometry
+GeometryFromImage(const py::handle & image, const std::string & what)
+{
+  ImageGeometry geometry;
+  const auto    array = ImageArray(image, what, true);
+  geometry.size = { static_cast<int>(array.shape(2)), static_cast<int>(array.shape(1)), static_cast<int>(array.shape(0)) };
+  geometry.spacing = VectorFromObject(ImageAttribute(image, "spacing", what), what + " spacing");
+  if ((geometry.spacing.array() <= 0.0).any())
+  {
+    throw py::value_error(what + " spacing must be positive (mm); got " + FormatPoint(geometry.spacing));
+  }
+  geometry.origin = VectorFromObject(ImageAttribute(image, "origin", what), what + " origin");
+  const auto direction = DoubleArray(ImageAttribute(image, "direction", what), what + " direction");
+  if (!direction || direction.ndim() != 2 || direction.shape(0) != 3 || direction.shape(1) != 3)
+  {
+    throw py::value_error(what + " direction must be a 3 x 3 matrix (columns: the index axes' directions)");
+  }
+  for (int row = 0; row < 3; ++row)
+  {
+    for (int column = 0; column < 3; ++column)
+    {
+      geometry.direction(row, column) = direction.at(row, column);
+    }
+  }
+  if (!geometry.direction.allFinite() || std::abs(std::abs(geometry.direction.determinant()) - 1.0) > 1e-3)
+  {
+    throw py::value_error(what + " direction must be a rotation (orthonormal columns, determinant +-1)");
+  }
+  return geometry;
+}
+
+ScalarVolume
+ScalarVolumeFromImage(const py::handle & image, const std::string & what)
+{
+  const py::array array = ImageArray(image, what, true);
+  const char      kind = array.dtype().kind();
+  if (kind != 'f' && kind != 'i' && kind != 'u' && kind != 'b')
+  {
+    throw py::type_error(what + " must hold numbers; its array has dtype " + std::string(py::str(array.dtype())));
+  }
+  ScalarVolume volume;
+  FillVolume(image, array, what, volume);
+  const auto values = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(array);
+  std::memcpy(volume.values.data(), values.data(), volume.values.size() * sizeof(float));
+  return volume;
+}
+
+LabelVolume
+LabelVolumeFromImage(const py::handle & image, const std::string & what)
+{
+  const py::array array = ImageArray(image, what, false);
+  const char      kind = array.dtype().kind();
+  if (kind != 'u' && kind != 'i' && kind != 'b')
+  {
+    throw py::type_error(what + " must be a mask or label image of dtype uint8 or bool (labels 0..255); its array has "
+                                "dtype " +
+                         std::string(py::str(array.dtype())) + ": convert it, e.g. (array > 0).astype(numpy.uint8)");
+  }
+  LabelVolume volume;
+  FillVolume(image, array, what, volume);
+  const auto values = py::array_t<long long, py::array::c_style | py::array::forcecast>::ensure(array);
+  const long long * data = values.data();
+  for (std::size_t k = 0; k < volume.values.size(); ++k)
+  {
+    if (data[k] < 0 || data[k] > 255)
+    {
+      throw py::value_error(what + " holds the label " + std::to_string(data[k]) +
+                            "; masks and label maps take labels 0..255");
+    }
+    volume.values[k] = static_cast<std::uint8_t>(data[k]);
+  }
+  return volume;
+}
+
+py::object
+ImageFromVolume(const ScalarVolume & volume)
+{
+  return MakeImage(volume);
+}
+
+py::object
+ImageFromVolume(const LabelVolume & volume)
+{
+  return MakeImage(volume);
+}
+
+// ---------------------------------------------------------------------------
+// Progress.
+// ---------------------------------------------------------------------------
+
+void
+ProgressReporter::Report(const std::string & stage, double fraction,
+                         const std::vector<std::pair<const char *, double>> & info, bool interrupt)
+{
+  if (m_Error)
+  {
+    if (interrupt)
+      throw CallbackInterrupted{};
+    return;
+  }
+  py::gil_scoped_acquire acquire;
+  try
+  {
+    // Ctrl-C in a notebook or terminal stops a long solve here.
+    if (PyErr_CheckSignals() != 0)
+    {
+      throw py::error_already_set();
+    }
+    if (!m_Callback.is_none())
+    {
+      py::dict details;
+      for (const auto & [key, value] : info)
+      {
+        details[key] = value;
+      }
+      m_Callback(stage, fraction, details);
+    }
+  }
+  catch (py::error_already_set & error)
+  {
+    m_Error = std::make_unique<py::error_already_set>(std::move(error));
+    if (interrupt)
+      throw CallbackInterrupted{};
+  }
+}
+
+std::function<void(const std::string &, double)>
+ProgressReporter::StageCallback()
+{
+  return [this](const std::string & stage, double seconds) {
+    if (seconds < 0.0)
+      Report(stage, 0.0, {}, false);
+    else
+      Report(stage, 1.0, { { "seconds", seconds } }, false);
+  };
+}
+
+ProgressCallback
+ProgressReporter::SolverCallback(const std::string & stage)
+{
+  return [this, stage](int step, double fraction, double estimatedError) {
+    Report(stage, fraction, { { "step", static_cast<double>(step) }, { "estimated_error", estimatedError } });
+  };
+}
+
+void
+ProgressReporter::Rethrow()
+{
+  if (m_Error)
+  {
+    throw * m_Error;
+  }
+  throw std::runtime_error("a progress callback stopped the computation");
+}
+
+// ---------------------------------------------------------------------------
+// Model helpers.
+// ---------------------------------------------------------------------------
+
+namespace
+{
+
+constexpr int kVtkHexahedron = 12;
+constexpr int kVtkTetra = 10;
+
+/** (M, 8) with -1 padding for tetrahedra when the mesh has hexahedra; (M, 4) when it has only tetrahedra. */
+py::array_t<Index>
+CellArray(const Model & model)
+{
+  bool anyHexahedron = false;
+  for (const Cell & cell : model.cells)
+  {
+    anyHexahedron = anyHexahedron || cell.type == CellType::Hexahedron;
+  }
+  const int          columns = anyHexahedron || model.cells.empty() ? 8 : 4;
+  py::array_t<Index> array({ static_cast<py::ssize_t>(model.cells.size()), static_cast<py::ssize_t>(columns) });
+  auto               view = array.mutable_unchecked<2>();
+  for (std::size_t c = 0; c < model.cells.size(); ++c)
+  {
+    const Cell & cell = model.cells[c];
+    for (int k = 0; k < columns; ++k)
+    {
+      view(static_cast<py::ssize_t>(c), k) = k < NodesPerCell(cell.type) ? cell.nodes[static_cast<std::size_t>(k)] : -1;
+    }
+  }
+  return array;
+}
+
+/** Cells from (M, 4) tetrahedra, (M, 8) hexahedra, or (M, 8) with -1 in the last four columns for tetrahedra. */
+std::vector<Cell>
+CellsFromArray(const py::handle & object)
+{
+  const auto array = py::array_t<long long, py::array::c_style | py::array::forcecast>::ensure(object);
+  if (!array || array.ndim() != 2 || (array.shape(1) != 4 && array.shape(1) != 8))
+  {
+    throw py::value_error("cells must be an (M, 4) array of tetrahedra or an (M, 8) array of hexahedra (VTK node "
+                          "order; -1 in the last four columns marks a tetrahedron in a mixed mesh)");
+  }
+  const auto        view = array.unchecked<2>();
+  std::vector<Cell> cells(static_cast<std::size_t>(array.shape(0)));
+  for (py::ssize_t c = 0; c < array.shape(0); ++c)
+  {
+    Cell & cell = cells[static_cast<std::size_t>(c)];
+    const bool tetrahedron = array.shape(1) == 4 || view(c, 4) < 0;
+    cell.type = tetrahedron ? CellType::Tetrahedron : CellType::Hexahedron;
+    for (int k = 0; k < NodesPerCell(cell.type); ++k)
+    {
+      if (view(c, k) < 0 || view(c, k) > std::numeric_limits<Index>::max())
+      {
+        throw py::value_error("cell " + std::to_string(c) + " has the node id " + std::to_string(view(c, k)) +
+                              "; node ids are 0 or more");
+      }
+      cell.nodes[static_cast<std::size_t>(k)] = static_cast<Index>(view(c, k));
+    }
+  }
+  return cells;
+}
+
+ContactSurface
+MakeSurface(const py::handle & vertices, const py::handle & triangles, const std::string & name,
+            const std::string & bodySide, bool flipNormals, const std::string & slaveNodeSet)
+{
+  ContactSurface surface;
+  surface.name = name;
+  surface.vertices = PointsFromArray(vertices, "surface vertices");
+  const auto array = py::array_t<long long, py::array::c_style | py::array::forcecast>::ensure(triangles);
+  if (!array || array.ndim() != 2 || array.shape(1) != 3)
+  {
+    throw py::value_error("surface triangles must be an (M, 3) array of vertex ids");
+  }
+  for (py::ssize_t t = 0; t < array.shape(0); ++t)
+  {
+    std::array<Index, 3> triangle{};
+    for (int k = 0; k < 3; ++k)
+    {
+      const long long id = array.at(t, k);
+      if (id < 0 || id >= static_cast<long long>(surface.vertices.size()))
+      {
+        throw py::value_error("surface triangle " + std::to_string(t) + " names vertex " + std::to_string(id) +
+                              ", but the surface has " + std::to_string(surface.vertices.size()) + " vertices");
+      }
+      triangle[static_cast<std::size_t>(k)] = static_cast<Index>(id);
+    }
+    surface.triangles.push_back(triangle);
+  }
+  if (bodySide != "inside" && bodySide != "outside")
+  {
+    throw py::value_error("body_side must be 'inside' or 'outside', not '" + bodySide + "'");
+  }
+  surface.bodySide = bodySide == "outside" ? ContactSurface::Side::Outside : ContactSurface::Side::Inside;
+  surface.flipNormals = flipNormals;
+  surface.slaveNodeSet = slaveNodeSet;
+  return surface;
+}
+
+py::array_t<Index>
+TriangleArray(const std::vector<std::array<Index, 3>> & triangles)
+{
+  py::array_t<Index> array({ static_cast<py::ssize_t>(triangles.size()), py::ssize_t{ 3 } });
+  if (!triangles.empty())
+  {
+    std::memcpy(array.mutable_data(), triangles.data(), triangles.size() * sizeof(triangles[0]));
+  }
+  return array;
+}
+
+LoadCurve
+MakeCurve(const std::string & shape, double rampTime)
+{
+  LoadCurve curve;
+  if (shape == "smooth")
+    curve.shape = LoadCurve::Shape::Smooth;
+  else if (shape == "linear")
+    curve.shape = LoadCurve::Shape::Linear;
+  else if (shape == "step")
+    curve.shape = LoadCurve::Shape::Step;
+  else
+    throw py::value_error("curve must be 'smooth', 'linear' or 'step', not '" + shape + "'");
+  if (!(rampTime > 0.0))
+  {
+    throw py::value_error("ramp_time must be positive (s)");
+  }
+  curve.rampTime = rampTime;
+  return curve;
+}
+
+std::string
+CurveName(const LoadCurve & curve)
+{
+  return curve.shape == LoadCurve::Shape::Linear ? "linear" : (curve.shape == LoadCurve::Shape::Step ? "step" : "smooth");
+}
+
+py::dict
+LoadReportDict(const LoadReport & report)
+{
+  py::dict result;
+  result["used"] = report.usedPoints;
+  result["rejected"] = report.rejectedPoints;
+  result["max_correspondence_distance_mm"] = report.maxCorrespondenceDistance;
+  result["rms_correspondence_distance_mm"] = report.rmsCorrespondenceDistance;
+  result["warnings"] = report.warnings;
+  return result;
+}
+
+py::dict
+GridQualityDict(const GridQuality & quality)
+{
+  py::dict result;
+  result["cells"] = quality.cells;
+  result["hexahedra"] = quality.hexahedra;
+  result["tetrahedra"] = quality.tetrahedra;
+  result["nodes"] = quality.nodes;
+  result["mesh_volume_mm3"] = quality.meshVolume;
+  result["mask_volume_mm3"] = quality.maskVolume;
+  result["volume_error"] = quality.volumeError;
+  result["min_scaled_jacobian"] = quality.minScaledJacobian;
+  result["mean_scaled_jacobian"] = quality.meanScaledJacobian;
+  result["min_dihedral_angle_deg"] = quality.minDihedralAngleDeg;
+  result["max_dihedral_angle_deg"] = quality.maxDihedralAngleDeg;
+  result["max_aspect_ratio"] = quality.maxAspectRatio;
+  result["mean_edge_length_mm"] = quality.meanEdgeLength;
+  result["integration_points"] = quality.integrationPoints;
+  result["min_neighbours_per_point"] = quality.minNeighboursPerPoint;
+  result["mean_neighbours_per_point"] = quality.meanNeighboursPerPoint;
+  result["seconds"] = quality.seconds;
+  return result;
+}
+
+py::dict
+DataArrays(const std::map<std::string, DataArray> & arrays)
+{
+  py::dict result;
+  for (const auto & [name, data] : arrays)
+  {
+    py::array_t<double> array(data.components == 1
+                                ? std::vector<py::ssize_t>{ static_cast<py::ssize_t>(data.Tuples()) }
+                                : std::vector<py::ssize_t>{ static_cast<py::ssize_t>(data.Tuples()), data.components });
+    if (!data.values.empty())
+    {
+      std::memcpy(array.mutable_data(), data.values.data(), data.values.size() * sizeof(double));
+    }
+    result[py::str(name)] = array;
+  }
+  return result;
+}
+
+std::vector<Index>
+SurfaceNodesOrBoundary(const Model & model, const py::object & surfaceNodes)
+{
+  return surfaceNodes.is_none() ? model.BoundaryNodes() : IndicesFromArray(surfaceNodes, "surface_nodes");
+}
+
+const char *
+IntegratorName(Integrator integrator)
+{
+  return integrator == Integrator::ExplicitDynamics ? "explicit_dynamics" : "dynamic_relaxation";
+}
+
+/** The settings object's attribute setter for a string choice. */
+Integrator
+ParseIntegrator(const std::string & name)
+{
+  if (name == "dynamic_relaxation")
+    return Integrator::DynamicRelaxation;
+  if (name == "explicit_dynamics")
+    return Integrator::ExplicitDynamics;
+  throw py::value_error("integrator must be 'dynamic_relaxation' or 'explicit_dynamics', not '" + name + "'");
+}
+
+TetrahedronFormulation
+ParseTetrahedron(const std::string & name)
+{
+  if (name == "anp")
+    return TetrahedronFormulation::AverageNodalPressure;
+  if (name == "linear")
+    return TetrahedronFormulation::Linear;
+  throw py::value_error("tetrahedron must be 'anp' (average nodal pressure) or 'linear', not '" + name + "'");
+}
+
+GridCells
+ParseGridCells(const std::string & name)
+{
+  if (name == "hexahedra")
+    return GridCells::Hexahedra;
+  if (name == "tetrahedra")
+    return GridCells::Tetrahedra;
+  if (name == "mixed")
+    return GridCells::Mixed;
+  throw py::value_error("cells must be 'hexahedra', 'tetrahedra' or 'mixed', not '" + name + "'");
+}
+
+void
+BindErrors(py::module_ & module)
+{
+  // bmr::Error (and its SolveError) -> biomechanical_registration.Error /
+  // SolveError (with .step and .element), both RuntimeErrors as in ITK Python.
+  static py::exception<Error> error(module, "Error", PyExc_RuntimeError);
+  static py::exception<SolveError> solveError(module, "SolveError", error.ptr());
+  py::register_exception_translator([](std::exception_ptr pointer) {
+    try
+    {
+      if (pointer)
+        std::rethrow_exception(pointer);
+    }
+    catch (const SolveError & exception)
+    {
+      py::object instance = py::reinterpret_borrow<py::object>(solveError.ptr())(exception.what());
+      instance.attr("step") = exception.Step();
+      instance.attr("element") = exception.Element();
+      PyErr_SetObject(solveError.ptr(), instance.ptr());
+    }
+    catch (const Error & exception)
+    {
+      error(exception.what());
+    }
+  });
+}
+
+void
+BindModel(py::module_ & module)
+{
+  py::class_<Material>(module, "Material", "Compressible neo-Hookean material (Pa, -, kg/m^3).")
+    .def(py::init([](const std::string & name, double youngsModulus, double poissonRatio, double density) {
+           return Material{ name, youngsModulus, poissonRatio, density };
+         }),
+         py::arg("name") = "material", py::arg("youngs_modulus") = Material{}.youngsModulus,
+         py::arg("poisson_ratio") = Material{}.poissonRatio, py::arg("density") = Material{}.density)
+    .def_readwrite("name", &Material::name)
+    .def_readwrite("youngs_modulus", &Material::youngsModulus)
+    .def_readwrite("poisson_ratio", &Material::poissonRatio)
+    .def_readwrite("density", &Material::density)
+    .def_property_readonly("shear_modulus", &Material::ShearModulus)
+    .def_property_readonly("bulk_modulus", &Material::BulkModulus)
+    .def("__repr__", [](const Material & material) {
+      std::ostringstream text;
+      text << "Material(name='" << material.name << "', youngs_modulus=" << material.youngsModulus
+           << ", poisson_ratio=" << material.poissonRatio << ", density=" << material.density << ")";
+      return text.str();
+    });
+
+  py::class_<ContactSurface>(module, "Surface",
+                             "Triangulated surface (mm): a rigid contact surface, a brain or skull surface, an "
+                             "intraoperative surface.")
+    .def(py::init(&MakeSurface), py::arg("vertices"), py::arg("triangles"), py::arg("name") = "surface",
+         py::arg("body_side") = "inside", py::arg("flip_normals") = false, py::arg("slave_node_set") = "")
+    .def_property(
+      "vertices", [](const ContactSurface & surface) { return ArrayFromPoints(surface.vertices); },
+      [](ContactSurface & surface, const py::object & vertices) {
+        surface.vertices = PointsFromArray(vertices, "surface vertices");
+      })
+    .def_property_readonly("triangles", [](const ContactSurface & surface) { return TriangleArray(surface.triangles); })
+    .def_readwrite("name", &ContactSurface::name)
+    .def_property(
+      "body_side",
+      [](const ContactSurface & surface) {
+        return surface.bodySide == ContactSurface::Side::Outside ? "outside" : "inside";
+      },
+      [](ContactSurface & surface, const std::string & side) {
+        surface = MakeSurface(ArrayFromPoints(surface.vertices), TriangleArray(surface.triangles), surface.name, side,
+                              surface.flipNormals, surface.slaveNodeSet);
+      })
+    .def_readwrite("flip_normals", &ContactSurface::flipNormals)
+    .def_readwrite("slave_node_set", &ContactSurface::slaveNodeSet)
+    .def("is_closed", &IsClosedOrientedSurface, "True for a closed, consistently oriented surface.")
+    .def("enclosed_volume", &EnclosedVolume, "Volume enclosed by a closed surface (mm^3).")
+    .def("__repr__", [](const ContactSurface & surface) {
+      return "Surface(name='" + surface.name + "', " + std::to_string(surface.vertices.size()) + " vertices, " +
+             std::to_string(surface.triangles.size()) + " triangles)";
+    });
+
+  py::class_<PrescribedDisplacement>(module, "PrescribedDisplacement",
+                                     "Enforced displacements (mm) of nodes, ramped by a load curve.")
+    .def(py::init([](const py::object & nodes, const py::object & displacements, const py::object & components,
+                     const std::string & curve, double rampTime) {
+           PrescribedDisplacement load;
+           load.nodes = IndicesFromArray(nodes, "nodes");
+           load.displacements = PointsFromArray(displacements, "displacements");
+           if (load.nodes.size() != load.displacements.size())
+           {
+             throw py::value_error("nodes and displacements differ in length (" + std::to_string(load.nodes.size()) +
+                                   " and " + std::to_string(load.displacements.size()) + ")");
+           }
+           load.components = ComponentsFromObject(components, "components");
+           load.curve = MakeCurve(curve, rampTime);
+           return load;
+         }),
+         py::arg("nodes"), py::arg("displacements"), py::arg("components") = py::make_tuple(true, true, true),
+         py::arg("curve") = "smooth", py::arg("ramp_time") = 1.0)
+    .def_property_readonly("nodes", [](const PrescribedDisplacement & load) { return ArrayFromIndices(load.nodes); })
+    .def_property_readonly("displacements",
+                           [](const PrescribedDisplacement & load) { return ArrayFromPoints(load.displacements); })
+    .def_property_readonly("components", [](const PrescribedDisplacement & load) {
+      return py::make_tuple(load.components[0], load.components[1], load.components[2]);
+    })
+    .def_property_readonly("curve", [](const PrescribedDisplacement & load) { return CurveName(load.curve); })
+    .def_property_readonly("ramp_time", [](const PrescribedDisplacement & load) { return load.curve.rampTime; })
+    .def("__repr__", [](const PrescribedDisplacement & load) {
+      return "PrescribedDisplacement(" + std::to_string(load.nodes.size()) + " nodes)";
+    });
+
+  py::class_<Model>(module, "Model",
+                    "A mechanical model: nodes (mm), cells, materials, node sets, constraints, loads, contact "
+                    "surfaces. Arrays are copies: assign to change them.")
+    .def(py::init([](const py::object & nodes, const py::object & cells, const std::vector<Material> & materials,
+                     const py::object & cellMaterials, const std::map<std::string, py::object> & nodeSets) {
+           Model model;
+           model.nodes = PointsFromArray(nodes, "nodes");
+           model.cells = CellsFromArray(cells);
+           model.materials = materials.empty() ? std::vector<Material>{ Material{ "material" } } : materials;
+           if (!cellMaterials.is_none())
+           {
+             const std::vector<Index> indices = IndicesFromArray(cellMaterials, "cell_materials");
+             if (indices.size() != model.cells.size())
+             {
+               throw py::value_error("cell_materials has " + std::to_string(indices.size()) + " entries for " +
+                                     std::to_string(model.cells.size()) + " cells");
+             }
+             for (std::size_t c = 0; c < indices.size(); ++c)
+             {
+               model.cells[c].material = indices[c];
+             }
+           }
+           for (const auto & [name, ids] : nodeSets)
+           {
+             model.nodeSets[name] = IndicesFromArray(ids, "node set '" + name + "'");
+           }
+           model.Validate();
+           return model;
+         }),
+         py::arg("nodes"), py::arg("cells"), py::arg("materials") = std::vector<Material>{},
+         py::arg("cell_materials") = py::none(), py::arg("node_sets") = std::map<std::string, py::object>{},
+         "Nodes (N, 3) mm; cells (M, 4) tetrahedra or (M, 8) hexahedra in VTK order (-1 in the last four columns "
+         "for a tetrahedron of a mixed mesh); one material for every cell unless cell_materials indexes materials.")
+    .def_property(
+      "nodes", [](const Model & model) { return ArrayFromPoints(model.nodes); },
+      [](Model & model, const py::object & nodes) {
+        std::vector<Vector3> points = PointsFromArray(nodes, "nodes");
+        if (points.size() != model.nodes.size())
+        {
+          throw py::value_error("the model has " + std::to_string(model.nodes.size()) + " nodes; got " +
+                                std::to_string(points.size()));
+        }
+        model.nodes = std::move(points);
+      })
+    .def_property_readonly("cells", &CellArray)
+    .def_property_readonly("cell_types",
+                           [](const Model & model) {
+                             py::array_t<std::uint8_t> types(static_cast<py::ssize_t>(model.cells.size()));
+                             for (std::size_t c = 0; c < model.cells.size(); ++c)
+                             {
+                               types.mutable_at(static_cast<py::ssize_t>(c)) =
+                                 model.cells[c].type == CellType::Hexahedron ? kVtkHexahedron : kVtkTetra;
+                             }
+                             return types;
+                           },
+                           "VTK cell type per cell: 12 hexahedron, 10 tetrahedron.")
+    .def_property(
+      "cell_materials",
+      [](const Model & model) {
+        std::vector<Index> indices;
+        for (const Cell & cell : model.cells)
+        {
+          indices.push_back(cell.material);
+        }
+        return ArrayFromIndices(indices);
+      },
+      [](Model & model, const py::object & values) {
+        const std::vector<Index> indices = IndicesFromArray(values, "cell_materials");
+        if (indices.size() != model.cells.size())
+        {
+          throw py::value_error("cell_materials needs one entry per cell (" + std::to_string(model.cells.size()) + ")");
+        }
+        for (std::size_t c = 0; c < indices.size(); ++c)
+        {
+          model.cells[c].material = indices[c];
+        }
+      })
+    .def_readwrite("materials", &Model::materials)
+    .def_property_readonly("node_sets",
+                           [](const Model & model) {
+                             py::dict sets;
+                             for (const auto & [name, ids] : model.nodeSets)
+                             {
+                               sets[py::str(name)] = ArrayFromIndices(ids);
+                             }
+                             return sets;
+                           })
+    .def(
+      "add_node_set",
+      [](Model & model, const std::string & name, const py::object & nodes) {
+        model.nodeSets[name] = IndicesFromArray(nodes, "node set '" + name + "'");
+      },
+      py::arg("name"), py::arg("nodes"))
+    .def_property(
+      "gravity", [](const Model & model) { return py::make_tuple(model.bodyAcceleration.x(), model.bodyAcceleration.y(), model.bodyAcceleration.z()); },
+      [](Model & model, const py::object & value) { model.bodyAcceleration = VectorFromObject(value, "gravity"); },
+      "Body acceleration (mm/s^2), e.g. (0, 0, -9810).")
+    .def(
+      "fix",
+      [](Model & model, const std::string & nodeSet, const py::object & components) {
+        model.NodeSet(nodeSet);
+        model.fixedConstraints.push_back(FixedConstraint{ nodeSet, ComponentsFromObject(components, "components") });
+      },
+      py::arg("node_set"), py::arg("components") = py::make_tuple(true, true, true),
+      "Holds the nodes of a set at zero displacement in the chosen components.")
+    .def_property_readonly("fixed_constraints",
+                           [](const Model & model) {
+                             py::list constraints;
+                             for (const FixedConstraint & constraint : model.fixedConstraints)
+                             {
+                               constraints.append(py::make_tuple(
+                                 constraint.nodeSet,
+                                 py::make_tuple(constraint.components[0], constraint.components[1], constraint.components[2])));
+                             }
+                             return constraints;
+                           })
+    .def(
+      "add_prescribed_displacement",
+      [](Model & model, const PrescribedDisplacement & load) { model.prescribedDisplacements.push_back(load); },
+      py::arg("load"))
+    .def_readonly("prescribed_displacements", &Model::prescribedDisplacements)
+    .def(
+      "add_contact_surface", [](Model & model, const ContactSurface & surface) { model.contactSurfaces.push_back(surface); },
+      py::arg("surface"), "A rigid surface the body stays on one side of (frictionless, with separation).")
+    .def_readonly("contact_surfaces", &Model::contactSurfaces)
+    .def("clear_loads",
+         [](Model & model) {
+           model.fixedConstraints.clear();
+           model.prescribedDisplacements.clear();
+           model.contactSurfaces.clear();
+           model.bodyAcceleration = Vector3::Zero();
+         })
+    .def_property_readonly("is_meshless",
+                           [](const Model & model) { return model.discretization == Discretization::Meshless; })
+    .def_property_readonly("integration_points",
+                           [](const Model & model) { return ArrayFromPoints(model.meshless.integrationPoints); })
+    .def("boundary_nodes", [](const Model & model) { return ArrayFromIndices(model.BoundaryNodes()); })
+    .def("boundary_triangles", [](const Model & model) { return TriangleArray(model.BoundaryTriangles()); })
+    .def("validate", &Model::Validate, "Raises Error naming the first bad cell, material or node set.")
+    .def("__copy__", [](const Model & model) { return Model(model); })
+    .def("__deepcopy__", [](const Model & model, const py::dict &) { return Model(model); }, py::arg("memo"))
+    .def("copy", [](const Model & model) { return Model(model); })
+    .def("__repr__", [](const Model & model) {
+      const ModelCounts counts = CountModel(model);
+      return "Model(" + std::to_string(counts.nodes) + " nodes, " + std::to_string(counts.cells) + " cells, " +
+             std::to_string(counts.materials) + " materials" +
+             (model.discretization == Discretization::Meshless
+                ? ", meshless, " + std::to_string(counts.integrationPoints) + " integration points"
+                : std::string()) +
+             ")";
+    });
+}
+
+void
+BindSolver(py::module_ & module)
+{
+  py::class_<SolverSettings>(module, "SolverSettings",
+                             "Settings of the TLED solver (docs/scene-format.md names the same keys).")
+    .def(py::init([](const py::kwargs & values) {
+           SolverSettings settings;
+           py::object     object = py::cast(settings);
+           for (const auto & [key, value] : values)
+           {
+             if (!py::hasattr(object, key))
+             {
+               throw py::type_error("SolverSettings has no setting '" + std::string(py::str(key)) + "'");
+             }
+             object.attr(key) = value;
+           }
+           return object.cast<SolverSettings>();
+         }))
+    .def_property(
+      "integrator", [](const SolverSettings & settings) { return IntegratorName(settings.integrator); },
+      [](SolverSettings & settings, const std::string & name) { settings.integrator = ParseIntegrator(name); })
+    .def_property(
+      "tetrahedron",
+      [](const SolverSettings & settings) {
+        return settings.tetrahedron == TetrahedronFormulation::Linear ? "linear" : "anp";
+      },
+      [](SolverSettings & settings, const std::string & name) { settings.tetrahedron = ParseTetrahedron(name); })
+    .def_readwrite("hourglass_coefficient", &SolverSettings::hourglassCoefficient)
+    .def_readwrite("time_step_safety_factor", &SolverSettings::timeStepSafetyFactor)
+    .def_readwrite("time_step", &SolverSettings::timeStep)
+    .def_readwrite("end_time", &SolverSettings::endTime)
+    .def_readwrite("damping_coefficient", &SolverSettings::dampingCoefficient)
+    .def_readwrite("load_steps", &SolverSettings::loadSteps)
+    .def_readwrite("tolerance", &SolverSettings::tolerance)
+    .def_readwrite("max_steps", &SolverSettings::maxSteps)
+    .def_readwrite("adapt_interval", &SolverSettings::adaptInterval)
+    .def_readwrite("compute_stress", &SolverSettings::computeStress)
+    .def_readwrite("threads", &SolverSettings::threads)
+    .def("copy", [](const SolverSettings & settings) { return SolverSettings(settings); })
+    .def("__repr__", [](const SolverSettings & settings) {
+      std::ostringstream text;
+      text << "SolverSettings(integrator='" << IntegratorName(settings.integrator) << "', tolerance=" << settings.tolerance
+           << ", max_steps=" << settings.maxSteps << ", end_time=" << settings.endTime << ")";
+      return text.str();
+    });
+
+  py::class_<SolveResult>(module, "SolveResult", "Displacements (mm), reaction forces (N) and convergence of a solve.")
+    .def_property_readonly("displacements", [](const SolveResult & result) { return ArrayFromPoints(result.displacements); })
+    .def_property_readonly("reaction_forces",
+                           [](const SolveResult & result) { return ArrayFromPoints(result.reactionForces); })
+    .def_property_readonly("cauchy_stress",
+                           [](const SolveResult & result) {
+                             py::array_t<double> array(
+                               { static_cast<py::ssize_t>(result.cauchyStress.size()), py::ssize_t{ 3 }, py::ssize_t{ 3 } });
+                             auto view = array.mutable_unchecked<3>();
+                             for (std::size_t c = 0; c < result.cauchyStress.size(); ++c)
+                             {
+                               for (int i = 0; i < 3; ++i)
+                                 for (int j = 0; j < 3; ++j)
+                                   view(static_cast<py::ssize_t>(c), i, j) = result.cauchyStress[c](i, j);
+                             }
+                             return array;
+                           },
+                           "Cauchy stress (Pa) per cell (meshless: per integration point) when compute_stress was on.")
+    .def_property_readonly("nodal_parameters",
+                           [](const SolveResult & result) { return ArrayFromPoints(result.nodalParameters); })
+    .def_readonly("converged", &SolveResult::converged)
+    .def_readonly("steps", &SolveResult::steps)
+    .def_readonly("time_step", &SolveResult::timeStep)
+    .def_readonly("critical_time_step", &SolveResult::criticalTimeStep)
+    .def_readonly("estimated_error", &SolveResult::estimatedError)
+    .def_readonly("convergence_rate", &SolveResult::convergenceRate)
+    .def_readonly("restarts", &SolveResult::restarts)
+    .def_readonly("wall_seconds", &SolveResult::wallSeconds)
+    .def_readonly("max_displacement", &SolveResult::maxDisplacement)
+    .def_readonly("strain_energy", &SolveResult::strainEnergy)
+    .def_readonly("hourglass_energy", &SolveResult::hourglassEnergy)
+    .def_readonly("kinetic_energy", &SolveResult::kineticEnergy)
+    .def_readonly("contact_nodes", &SolveResult::contactNodes)
+    .def_readonly("max_penetration", &SolveResult::maxPenetration)
+    .def_readonly("active_components", &SolveResult::activeComponents)
+    .def_readonly("message", &SolveResult::message)
+    .def("__repr__", [](const SolveResult & result) {
+      std::ostringstream text;
+      text << "SolveResult(" << (result.converged ? "converged" : "NOT CONVERGED") << ", " << result.steps
+           << " steps, max displacement " << result.maxDisplacement << " mm, estimated error " << result.estimatedError
+           << " mm)";
+      return text.str();
+    });
+
+  py::class_<Scene>(module, "Scene", "A parsed scene file (docs/scene-format.md): model, solver settings, outputs.")
+    .def_readonly("path", &Scene::path)
+    .def_readonly("description", &Scene::description)
+    .def_readonly("mesh_source", &Scene::meshSource)
+    .def_readwrite("model", &Scene::model)
+    .def_readwrite("settings", &Scene::settings)
+    .def_readonly("result_vtu_file", &Scene::resultVtuFile)
+    .def_readonly("report_file", &Scene::reportFile)
+    .def("__repr__", [](const Scene & scene) { return "Scene('" + scene.path + "')"; });
+
+  module.def("read_scene", &ReadScene, py::arg("path"), "Reads a scene file (JSON, docs/scene-format.md).");
+  module.def("parse_scene", &ParseScene, py::arg("text"), py::arg("path"),
+             "Parses scene JSON text as if it were the file `path` (relative paths inside it are relative to its folder).");
+
+  module.def(
+    "_solve",
+    [](const Model & model, const SolverSettings & settings, const py::object & progress) {
+      ProgressReporter reporter(progress);
+      return RunWithoutGil(reporter, [&] {
+        Solver solver(model, settings);
+        return solver.Solve(reporter.SolverCallback());
+      });
+    },
+    py::arg("model"), py::arg("settings"), py::arg("progress") = py::none());
+
+  module.def(
+    "report_json", [](const Scene & scene, const SolveResult & result) {
+      return py::module_::import("json").attr("loads")(MakeReportJson(scene, result));
+    },
+    py::arg("scene"), py::arg("result"), "The run report of `biomech solve` (keys in docs/scene-format.md) as a dict.");
+  module.def("format_report", &FormatReportTable, py::arg("scene"), py::arg("result"));
+}
+
+void
+BindFiles(py::module_ & module)
+{
+  module.def(
+    "read_mesh",
+    [](const std::string & path, const std::string & labelArray) {
+      MeshData mesh = ReadMesh(path, labelArray);
+      py::dict result;
+      result["model"] = std::move(mesh.model);
+      result["cell_labels"] = py::array_t<int>(static_cast<py::ssize_t>(mesh.cellLabels.size()), mesh.cellLabels.data());
+      result["point_data"] = DataArrays(mesh.pointData);
+      result["cell_data"] = DataArrays(mesh.cellData);
+      return result;
+    },
+    py::arg("path"), py::arg("label_array") = "material",
+    "Reads a .vtu or .vtk volume mesh: a dict with 'model', 'cell_labels', 'point_data' and 'cell_data' (arrays by name).");
+  module.def("write_mesh", [](const std::string & path, const Model & model) { WriteMesh(path, model); },
+             py::arg("path"), py::arg("model"), "Writes nodes, cells, materials and node sets (.vtu or .vtk), atomically.");
+  module.def(
+    "write_result", [](const std::string & path, const Model & model, const SolveResult & result) {
+      if (result.displacements.size() != model.nodes.size())
+      {
+        throw py::value_error("the result has " + std::to_string(result.displacements.size()) +
+                              " displacements but the model has " + std::to_string(model.nodes.size()) +
+                              " nodes: write a result with the model it was solved on");
+      }
+      WriteResultVtu(path, model, result);
+    },
+    py::arg("path"), py::arg("model"), py::arg("result"),
+    "Writes a solve result as .vtu (point data 'displacement', 'reaction_force'), as `biomech solve` does.");
+  module.def("read_surface", &ReadSurface, py::arg("path"), "Reads a triangulated surface (.stl, .obj, .vtp, .vtk).");
+  module.def("write_surface", [](const std::string & path, const ContactSurface & surface) { WriteSurface(path, surface); },
+             py::arg("path"), py::arg("surface"), "Writes a surface (.vtp, .stl, .vtk), atomically.");
+  module.def(
+    "read_sparse_displacements",
+    [](const std::string & path) {
+      const SparseDisplacements sparse = ReadSparseDisplacements(path);
+      return py::make_tuple(ArrayFromPoints(sparse.points), ArrayFromPoints(sparse.displacements));
+    },
+    py::arg("path"), "Reads a CSV x,y,z,ux,uy,uz (mm): (points, displacements) as (N, 3) arrays.");
+
+  module.def(
+    "make_block_mesh",
+    [](const py::object & size, const std::array<int, 3> & divisions, const std::string & cells,
+       const Material & material, const py::object & origin) {
+      for (int d = 0; d < 3; ++d)
+      {
+        if (divisions[static_cast<std::size_t>(d)] < 1)
+        {
+          throw py::value_error("divisions must be at least 1 along every axis");
+        }
+      }
+      const Vector3 extent = VectorFromObject(size, "size");
+      if ((extent.array() <= 0.0).any())
+      {
+        throw py::value_error("size must be positive along every axis (mm)");
+      }
+      return MakeBlockMesh(extent, divisions, ParseGridCells(cells), material, VectorFromObject(origin, "origin"));
+    },
+    py::arg("size"), py::arg("divisions"), py::arg("cells") = "hexahedra", py::arg("material") = Material{},
+    py::arg("origin") = py::make_tuple(0.0, 0.0, 0.0),
+    "Box [origin, origin + size] (mm) meshed with divisions cells per axis; node sets xmin..zmax and all.");
+  module.def(
+    "make_ellipsoid_surface",
+    [](const py::object & semiAxes, int subdivisions, const py::object & centre) {
+      if (subdivisions < 0 || subdivisions > 8)
+      {
+        throw py::value_error("subdivisions must be within 0..8");
+      }
+      return MakeEllipsoidSurface(VectorFromObject(semiAxes, "semi_axes"), subdivisions, VectorFromObject(centre, "centre"));
+    },
+    py::arg("semi_axes"), py::arg("subdivisions") = 3, py::arg("centre") = py::make_tuple(0.0, 0.0, 0.0));
+}
+
+void
+BindModelBuilding(py::module_ & module)
+{
+  py::class_<TissueClassification>(module, "TissueClassification")
+    .def_property_readonly("centroids", [](const TissueClassification & result) { return result.fit.centroids; })
+    .def_property_readonly("iterations", [](const TissueClassification & result) { return result.fit.iterations; })
+    .def_property_readonly("converged", [](const TissueClassification & result) { return result.fit.converged; })
+    .def_property_readonly("memberships", [](const TissueClassification & result) { return ImageFromVolume(result.memberships); },
+                           "Image of float32 memberships, array [z, y, x, class] (ascending centroid); 0 outside the mask.")
+    .def_property_readonly("labels", [](const TissueClassification & result) { return ImageFromVolume(result.labels); },
+                           "uint8 Image: 1..K, the class of largest membership; 0 outside the mask.");
+
+  module.def(
+    "classify_tissue",
+    [](const py::object & image, const py::object & mask, int classes, double fuzziness, double tolerance,
+       int maxIterations, int threads, const py::object & progress) {
+      const ScalarVolume intensities = ScalarVolumeFromImage(image, "image");
+      LabelVolume        maskVolume;
+      if (!mask.is_none())
+      {
+        maskVolume = LabelVolumeFromImage(mask, "mask");
+      }
+      FuzzyCMeansSettings settings;
+      settings.classes = classes;
+      settings.fuzziness = fuzziness;
+      settings.tolerance = tolerance;
+      settings.maxIterations = maxIterations;
+      settings.threads = threads;
+      ProgressReporter         reporter(progress);
+      std::vector<std::string> warnings;
+      TissueClassification     result = RunWithoutGil(reporter, [&] {
+        return ClassifyTissue(intensities, mask.is_none() ? nullptr : &maskVolume, settings,
+                              [&](double fraction) { reporter.Report("classify", fraction); }, &warnings);
+      });
+      for (const std::string & warning : warnings)
+      {
+        PyErr_WarnEx(PyExc_RuntimeWarning, warning.c_str(), 1);
+      }
+      return result;
+    },
+    py::arg("image"), py::arg("mask") = py::none(), py::kw_only(), py::arg("classes") = FuzzyCMeansSettings{}.classes,
+    py::arg("fuzziness") = FuzzyCMeansSettings{}.fuzziness, py::arg("tolerance") = FuzzyCMeansSettings{}.tolerance,
+    py::arg("max_iterations") = FuzzyCMeansSettings{}.maxIterations, py::arg("threads") = 0,
+    py::arg("progress") = py::none(),
+    "Fuzzy c-means tissue classification inside the mask (itk::FuzzyCMeansClassifierImageFilter's method).");
+
+  py::class_<ImageGrid>(module, "ImageGrid")
+    .def_readonly("model", &ImageGrid::model)
+    .def_property_readonly("cell_labels", [](const ImageGrid & grid) {
+      return py::array_t<int>(static_cast<py::ssize_t>(grid.cellLabels.size()), grid.cellLabels.data());
+    })
+    .def_property_readonly("quality", [](const ImageGrid & grid) { return GridQualityDict(grid.quality); })
+    .def_readonly("meshless_body", &ImageGrid::meshlessBody);
+
+  module.def(
+    "make_grid",
+    [](const py::object & labels, const std::string & kind, double elementSize, double facetAngle, double facetDistance,
+       double cellRadiusEdgeRatio, bool optimise, std::uint32_t seed, int threads) {
+      const LabelVolume volume = LabelVolumeFromImage(labels, "labels");
+      ImageGridSettings settings;
+      settings.kind = ParseImageGridKind(kind);
+      settings.elementSize = elementSize;
+      settings.facetAngle = facetAngle;
+      settings.facetDistance = facetDistance;
+      settings.cellRadiusEdgeRatio = cellRadiusEdgeRatio;
+      settings.optimise = optimise;
+      settings.seed = seed;
+      settings.threads = threads;
+      std::vector<std::string> warnings;
+      ImageGrid                grid;
+      {
+        py::gil_scoped_release release;
+        grid = MakeGridFromLabels(volume, settings, &warnings);
+      }
+      for (const std::string & warning : warnings)
+      {
+        PyErr_WarnEx(PyExc_RuntimeWarning, warning.c_str(), 1);
+      }
+      return grid;
+    },
+    py::arg("labels"), py::kw_only(), py::arg("kind") = "hexahedra", py::arg("element_size") = ImageGridSettings{}.elementSize,
+    py::arg("facet_angle") = ImageGridSettings{}.facetAngle, py::arg("facet_distance") = ImageGridSettings{}.facetDistance,
+    py::arg("cell_radius_edge_ratio") = ImageGridSettings{}.cellRadiusEdgeRatio,
+    py::arg("optimise") = ImageGridSettings{}.optimise, py::arg("seed") = ImageGridSettings{}.seed, py::arg("threads") = 0,
+    "Computational grid of a mask or label image (itk::BiomechanicalGridImageFilter's method): 'hexahedra', "
+    "'tetrahedra', 'mixed' or 'meshless'.");
+
+  module.def(
+    "surface_nodes_in_sphere",
+    [](const Model & model, const py::object & centre, double radius, const py::object & surfaceNodes) {
+      return ArrayFromIndices(
+        SurfaceNodesInSphere(model, SurfaceNodesOrBoundary(model, surfaceNodes), VectorFromObject(centre, "centre"), radius));
+    },
+    py::arg("model"), py::arg("centre"), py::arg("radius"), py::arg("surface_nodes") = py::none(),
+    "Boundary nodes (or of surface_nodes) within radius mm of centre: e.g. the craniotomy.");
+  module.def(
+    "surface_nodes_in_mask",
+    [](const Model & model, const py::object & mask, double tolerance, const py::object & surfaceNodes) {
+      const LabelVolume region = LabelVolumeFromImage(mask, "mask");
+      return ArrayFromIndices(SurfaceNodesInMask(model, SurfaceNodesOrBoundary(model, surfaceNodes), region, tolerance));
+    },
+    py::arg("model"), py::arg("mask"), py::arg("tolerance") = -1.0, py::arg("surface_nodes") = py::none());
+  module.def(
+    "skull_base_nodes",
+    [](const Model & model, double height, const py::object & superior, const py::object & surfaceNodes) {
+      SkullBaseSettings settings;
+      settings.height = height;
+      settings.superior = VectorFromObject(superior, "superior");
+      return ArrayFromIndices(SkullBaseNodes(model, SurfaceNodesOrBoundary(model, surfaceNodes), settings));
+    },
+    py::arg("model"), py::arg("height") = SkullBaseSettings{}.height, py::arg("superior") = py::make_tuple(0.0, 0.0, 1.0),
+    py::arg("surface_nodes") = py::none(), "Boundary nodes within height mm of the lowest one along superior.");
+}
+
+void
+BindLoads(py::module_ & module)
+{
+  const auto settingsOf = [](double maxDistance, double smoothing) {
+    SurfaceLoadSettings settings;
+    settings.maxDistance = maxDistance;
+    settings.smoothing = smoothing;
+    return settings;
+  };
+  module.def(
+    "displacements_from_surface",
+    [settingsOf](const Model & model, const py::object & exposedNodes, const ContactSurface & surface, double maxDistance) {
+      LoadReport report;
+      auto       load = DisplacementsFromSurface(model, IndicesFromArray(exposedNodes, "exposed_nodes"), surface,
+                                           settingsOf(maxDistance, 0.0), &report);
+      return py::make_tuple(load, LoadReportDict(report));
+    },
+    py::arg("model"), py::arg("exposed_nodes"), py::arg("surface"), py::kw_only(),
+    py::arg("max_distance") = SurfaceLoadSettings{}.maxDistance,
+    "Each exposed node moves to its closest point of the intraoperative surface: (PrescribedDisplacement, report).");
+  module.def(
+    "displacements_from_points",
+    [settingsOf](const Model & model, const py::object & exposedNodes, const py::object & points,
+                 const py::object & displacements, double maxDistance, double smoothing,
+                 const std::optional<ContactSurface> & modelSurface) {
+      LoadReport report;
+      auto load = DisplacementsFromSparsePoints(model, IndicesFromArray(exposedNodes, "exposed_nodes"),
+                                                PointsFromArray(points, "points"), PointsFromArray(displacements, "displacements"),
+                                                settingsOf(maxDistance, smoothing), &report,
+                                                modelSurface ? &*modelSurface : nullptr);
+      return py::make_tuple(load, LoadReportDict(report));
+    },
+    py::arg("model"), py::arg("exposed_nodes"), py::arg("points"), py::arg("displacements"), py::kw_only(),
+    py::arg("max_distance") = SurfaceLoadSettings{}.maxDistance, py::arg("smoothing") = SurfaceLoadSettings{}.smoothing,
+    py::arg("model_surface") = py::none(),
+    "Sparse displacements (tracked points, electrodes) interpolated to the exposed nodes with the thin-plate spline.");
+  module.def(
+    "displacements_between_surfaces",
+    [settingsOf](const Model & model, const py::object & exposedNodes, const ContactSurface & preoperative,
+                 const ContactSurface & intraoperative, double reach, double spacing, double maxDistance) {
+      LoadReport report;
+      auto load = DisplacementsBetweenSurfaces(model, IndicesFromArray(exposedNodes, "exposed_nodes"), preoperative,
+                                               intraoperative, reach, spacing, settingsOf(maxDistance, 0.0), &report);
+      return py::make_tuple(load, LoadReportDict(report));
+    },
+    py::arg("model"), py::arg("exposed_nodes"), py::arg("preoperative_surface"), py::arg("intraoperative_surface"),
+    py::kw_only(), py::arg("reach"), py::arg("spacing"), py::arg("max_distance") = SurfaceLoadSettings{}.maxDistance,
+    "Surface to surface: scanner-visible points of the smooth preoperative surface matched to the intraoperative one.");
+}
+
+} // namespace
+
+} // namespace bmr::python
+
+PYBIND11_MODULE(_bmr, module)
+{
+  using namespace bmr::python;
+  module.doc() = "C++ core of biomechanical_registration; use the package, not this module.";
+  BindErrors(module);
+  BindModel(module);
+  BindSolver(module);
+  BindFiles(module);
+  BindModelBuilding(module);
+  BindLoads(module);
+  BindImages(module);
+}

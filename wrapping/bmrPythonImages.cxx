@@ -1,0 +1,828 @@
+// The ITK layer of the Python binding: image and transform files, atlas skull
+// stripping, brain surfaces, the transform fitter, warping, the edge-based
+// Hausdorff evaluator, the B-spline baseline, the patient model and the
+// one-call registration. It calls the pipeline library
+// (bmrBrainShiftRegistration.h), which holds the filters compiled on float
+// images and unsigned char masks, so that this file instantiates few templates.
+
+// ITK before the core: ITK's bundled Eigen must be seen before the system
+// Eigen (the pipeline header includes ITK's first).
+#include "bmrBrainShiftRegistration.h"
+
+#include "itkBiomechanicalImageConversion.h"
+#include "itkBiomechanicalImageIO.h"
+#include "itkBiomechanicalTransformIO.h"
+#include "itkDisplacementPointSetToBSplineTransformFilter.h"
+#include "itkIdentityTransform.h"
+#include "itkImageIOFactory.h"
+#include "itkVectorImage.h"
+
+#include "bmrSyntheticBrainShift.h"
+
+#include "bmrPythonSupport.h"
+
+#include <pybind11/functional.h>
+
+#include <sstream>
+
+namespace bmr::python
+{
+namespace
+{
+
+using TransformType = itk::Transform<double, 3, 3>;
+using VectorImageType = itk::VectorImage<float, 3>;
+
+/** A transform as Python sees it: any ITK transform of 3-D points (the
+ *  registrations give B-spline backward maps: intraoperative -> preoperative). */
+struct PythonTransform
+{
+  TransformType::ConstPointer transform;
+};
+
+RegistrationImage::Pointer
+ItkImage(const py::handle & image, const std::string & what)
+{
+  return itk::MakeImageFromBiomechanicalVolume<RegistrationImage>(ScalarVolumeFromImage(image, what));
+}
+
+RegistrationImage::Pointer
+OptionalItkImage(const py::handle & image, const std::string & what)
+{
+  return image.is_none() ? nullptr : ItkImage(image, what);
+}
+
+RegistrationLabelImage::Pointer
+ItkLabelImage(const py::handle & image, const std::string & what)
+{
+  return image.is_none() ? nullptr
+                         : itk::MakeImageFromBiomechanicalVolume<RegistrationLabelImage>(LabelVolumeFromImage(image, what));
+}
+
+py::object
+PythonImage(const RegistrationImage * image)
+{
+  if (image == nullptr)
+    return py::none();
+  return ImageFromVolume(itk::MakeBiomechanicalVolume<float>(image));
+}
+
+py::object
+PythonImage(const RegistrationLabelImage * image)
+{
+  if (image == nullptr)
+    return py::none();
+  return ImageFromVolume(itk::MakeBiomechanicalVolume<std::uint8_t>(image));
+}
+
+bool
+IsLabelImage(const py::handle & image)
+{
+  const py::array array = py::array::ensure(image.attr("array"));
+  return array && (array.dtype().kind() == 'u' || array.dtype().kind() == 'b') && array.itemsize() == 1;
+}
+
+/** ITK exceptions (filters, readers, writers) become biomechanical_registration.Error with ITK's description. */
+template <typename Call>
+auto
+TranslateItkErrors(Call && call) -> decltype(call())
+{
+  try
+  {
+    return call();
+  }
+  catch (const itk::ExceptionObject & exception)
+  {
+    throw Error(exception.GetDescription());
+  }
+}
+
+py::dict
+JsonToDict(const nlohmann::json & value)
+{
+  return py::module_::import("json").attr("loads")(value.dump());
+}
+
+// ---------------------------------------------------------------------------
+
+void
+BindFilesAndTransforms(py::module_ & module)
+{
+  module.def(
+    "imread",
+    [](const std::string & path, const std::string & pixelType) -> py::object {
+      if (pixelType != "auto" && pixelType != "float32" && pixelType != "uint8")
+      {
+        throw py::value_error("pixel_type must be 'auto', 'float32' or 'uint8', not '" + pixelType + "'");
+      }
+      return TranslateItkErrors([&]() -> py::object {
+        auto io = itk::ImageIOFactory::CreateImageIO(path.c_str(), itk::CommonEnums::IOFileMode::ReadMode);
+        if (io.IsNull())
+        {
+          throw Error("cannot read image '" + path + "': the file does not exist or its format is unknown "
+                      "(NIfTI .nii/.nii.gz, MetaImage .mha/.mhd, PNG and the other formats of ITK)");
+        }
+        io->SetFileName(path);
+        io->ReadImageInformation();
+        if (io->GetNumberOfDimensions() != 3 && io->GetNumberOfDimensions() != 2)
+        {
+          throw Error("'" + path + "' has " + std::to_string(io->GetNumberOfDimensions()) +
+                      " dimensions; the module works on 3-D images");
+        }
+        if (io->GetNumberOfComponents() > 1)
+        {
+          if (pixelType == "uint8")
+          {
+            throw Error("'" + path + "' has " + std::to_string(io->GetNumberOfComponents()) +
+                        " components per voxel; read it as float32");
+          }
+          const auto image = itk::ReadBiomechanicalImage<VectorImageType>(path, "image");
+          return ImageFromVolume(itk::MakeBiomechanicalVolume<float>(image.GetPointer()));
+        }
+        const bool labels = pixelType == "uint8" ||
+                            (pixelType == "auto" && io->GetComponentType() == itk::IOComponentEnum::UCHAR);
+        if (labels)
+        {
+          return PythonImage(itk::ReadBiomechanicalImage<RegistrationLabelImage>(path, "image").GetPointer());
+        }
+        return PythonImage(itk::ReadBiomechanicalImage<RegistrationImage>(path, "image").GetPointer());
+      });
+    },
+    py::arg("path"), py::arg("pixel_type") = "auto",
+    "Reads an image (.nii.gz, .nrrd, .mha, ...): uint8 files as uint8, everything else as float32 (pixel_type "
+    "'float32' or 'uint8' forces one); multi-component files as float32 [z, y, x, component].");
+
+  module.def(
+    "imwrite",
+    [](const py::object & image, const std::string & path) {
+      TranslateItkErrors([&] {
+        const py::array     array = py::array::ensure(image.attr("array"));
+        if (array.ndim() == 4)
+        {
+          const ScalarVolume volume = ScalarVolumeFromImage(image, "image");
+          auto               vectorImage = VectorImageType::New();
+          itk::ApplyBiomechanicalGeometry(volume.geometry, vectorImage.GetPointer());
+          vectorImage->SetNumberOfComponentsPerPixel(static_cast<unsigned int>(volume.components));
+          vectorImage->Allocate();
+          std::copy(volume.values.begin(), volume.values.end(), vectorImage->GetBufferPointer());
+          itk::WriteBiomechanicalImage(vectorImage.GetPointer(), path);
+        }
+        else if (IsLabelImage(image))
+        {
+          itk::WriteBiomechanicalImage(ItkLabelImage(image, "image").GetPointer(), path);
+        }
+        else
+        {
+          itk::WriteBiomechanicalImage(ItkImage(image, "image").GetPointer(), path);
+        }
+      });
+    },
+    py::arg("image"), py::arg("path"),
+    "Writes an image (uint8/bool arrays as uint8, others as float32), through a temporary file: never half-written.");
+
+  py::class_<PythonTransform>(module, "Transform",
+                              "An ITK transform of 3-D points (mm). The registrations' transforms are backward maps: "
+                              "intraoperative point -> preoperative point, what resampling needs.")
+    .def_property_readonly("name", [](const PythonTransform & self) { return std::string(self.transform->GetNameOfClass()); })
+    .def_property_readonly("number_of_parameters",
+                           [](const PythonTransform & self) { return self.transform->GetNumberOfParameters(); })
+    .def(
+      "transform_points",
+      [](const PythonTransform & self, const py::object & points) {
+        std::vector<Vector3> values = PointsFromArray(points, "points");
+        for (Vector3 & value : values)
+        {
+          TransformType::InputPointType point;
+          for (int d = 0; d < 3; ++d)
+            point[d] = value[d];
+          const auto mapped = self.transform->TransformPoint(point);
+          value = Vector3(mapped[0], mapped[1], mapped[2]);
+        }
+        return ArrayFromPoints(values);
+      },
+      py::arg("points"), "T(x) for an (N, 3) array of points (mm).")
+    .def(
+      "displacement_field",
+      [](const PythonTransform & self, const py::object & reference) {
+        ScalarVolume field;
+        field.geometry = GeometryFromImage(reference, "reference");
+        field.components = 3;
+        field.values.resize(field.geometry.VoxelCount() * 3);
+        {
+          py::gil_scoped_release release;
+          const auto & size = field.geometry.size;
+          for (int k = 0; k < size[2]; ++k)
+            for (int j = 0; j < size[1]; ++j)
+              for (int i = 0; i < size[0]; ++i)
+              {
+                const Vector3                 x = field.geometry.IndexToPoint(Vector3(i, j, k));
+                TransformType::InputPointType point;
+                for (int d = 0; d < 3; ++d)
+                  point[d] = x[d];
+                const auto mapped = self.transform->TransformPoint(point);
+                for (int d = 0; d < 3; ++d)
+                  field.At(i, j, k, d) = static_cast<float>(mapped[d] - x[d]);
+              }
+        }
+        return ImageFromVolume(field);
+      },
+      py::arg("reference"),
+      "T(x) - x (mm) at the voxel centres of `reference`: an Image with array [z, y, x, 3] (x, y, z components).")
+    .def(
+      "write", [](const PythonTransform & self, const std::string & path) {
+        TranslateItkErrors([&] { itk::WriteBiomechanicalTransform(self.transform, path); });
+      },
+      py::arg("path"), "Writes the transform (.h5, .tfm, .txt) as `biomech register` does.")
+    .def("__repr__", [](const PythonTransform & self) {
+      return std::string("Transform(") + self.transform->GetNameOfClass() + ", " +
+             std::to_string(self.transform->GetNumberOfParameters()) + " parameters)";
+    });
+
+  module.def(
+    "read_transform",
+    [](const std::string & path) {
+      return TranslateItkErrors([&] {
+        auto transform = itk::ReadBiomechanicalTransform(path);
+        const auto * typed = dynamic_cast<const TransformType *>(transform.GetPointer());
+        if (typed == nullptr)
+        {
+          throw Error("'" + path + "' holds a " + transform->GetNameOfClass() + ", not a 3-D transform of doubles");
+        }
+        return PythonTransform{ typed };
+      });
+    },
+    py::arg("path"), "Reads a transform file written by `biomech register` or ITK (.h5, .tfm, .txt).");
+  module.def(
+    "identity_transform", [] { return PythonTransform{ itk::IdentityTransform<double, 3>::New().GetPointer() }; },
+    "The identity: 'no registration' in comparisons.");
+}
+
+void
+BindFilters(py::module_ & module)
+{
+  module.def(
+    "atlas_brain_mask",
+    [](const py::object & image, const std::string & atlasImage, const std::string & atlasMask, bool bsplineStage) {
+      const auto   input = ItkImage(image, "image");
+      AtlasSettings settings;
+      settings.image = atlasImage;
+      settings.mask = atlasMask;
+      settings.bsplineStage = bsplineStage;
+      RegistrationLabelImage::Pointer mask;
+      {
+        py::gil_scoped_release release;
+        mask = TranslateItkErrors([&] { return AtlasBrainMask(input, settings); });
+      }
+      return PythonImage(mask.GetPointer());
+    },
+    py::arg("image"), py::kw_only(), py::arg("atlas_image") = AtlasSettings{}.image,
+    py::arg("atlas_mask") = AtlasSettings{}.mask, py::arg("bspline_stage") = AtlasSettings{}.bsplineStage,
+    "Brain mask (uint8, 1 inside) of a T1 image by registering an atlas (itk::AtlasBrainMaskImageFilter; Colin27 from "
+    "mricron-data by default).");
+
+  module.def(
+    "brain_surfaces",
+    [](const py::object & mask, double skullGap) {
+      const LabelVolume        volume = LabelVolumeFromImage(mask, "mask");
+      std::vector<std::string> warnings;
+      BrainSurfaces            surfaces;
+      {
+        py::gil_scoped_release release;
+        surfaces = BrainSurfacesOfMask(volume, skullGap, warnings);
+      }
+      for (const std::string & warning : warnings)
+      {
+        PyErr_WarnEx(PyExc_RuntimeWarning, warning.c_str(), 1);
+      }
+      return py::make_tuple(surfaces.brain, surfaces.skull);
+    },
+    py::arg("mask"), py::kw_only(), py::arg("skull_gap") = BrainSurfaceSettings{}.skullGap,
+    "(brain, skull): the smoothed brain surface of a mask and a rigid skull skull_gap mm outside it "
+    "(itk::BrainSurfaceMeshSource).");
+
+  module.def(
+    "fit_transform",
+    [](const py::object & points, const py::object & displacements, const py::object & reference, double tolerance,
+       double minimumControlPointSpacing, bool extendDomainToPoints) {
+      const std::vector<Vector3> nodes = PointsFromArray(points, "points");
+      const std::vector<Vector3> values = PointsFromArray(displacements, "displacements");
+      if (nodes.size() != values.size())
+      {
+        throw py::value_error("points and displacements differ in length (" + std::to_string(nodes.size()) + " and " +
+                              std::to_string(values.size()) + ")");
+      }
+      const auto referenceImage = ItkImage(reference, "reference");
+      using PointSetType = itk::DisplacementPointSetType<3>;
+      using FitterType = itk::DisplacementPointSetToBSplineTransformFilter<PointSetType>;
+      auto fitter = FitterType::New();
+      fitter->SetInput(itk::MakeDisplacementPointSet<PointSetType>(nodes, values));
+      fitter->SetReferenceImage(referenceImage);
+      fitter->SetTolerance(tolerance);
+      fitter->SetMinimumControlPointSpacing(minimumControlPointSpacing);
+      fitter->SetExtendDomainToPoints(extendDomainToPoints);
+      {
+        py::gil_scoped_release release;
+        TranslateItkErrors([&] { fitter->Update(); });
+      }
+      const itk::BSplineFitReport & fit = fitter->GetReport();
+      py::dict                      report;
+      report["max_residual_mm"] = fit.maximumResidual;
+      report["rms_residual_mm"] = fit.rmsResidual;
+      report["levels"] = fit.levels;
+      report["control_point_spacing_mm"] = fit.controlPointSpacing;
+      report["mesh_size"] = fit.meshSize;
+      report["tolerance_reached"] = fit.toleranceReached;
+      report["domain_extended"] = fitter->GetDomainExtended();
+      return py::make_tuple(PythonTransform{ fitter->GetTransform() }, report);
+    },
+    py::arg("points"), py::arg("displacements"), py::arg("reference"), py::kw_only(), py::arg("tolerance") = 0.1,
+    py::arg("minimum_control_point_spacing") = 1.0, py::arg("extend_domain_to_points") = true,
+    "Fits the backward B-spline map T(x + u) = x to displacements u at points (e.g. model nodes) over the grid of "
+    "`reference` (itk::DisplacementPointSetToBSplineTransformFilter): (Transform, report).");
+
+  module.def(
+    "warp_image",
+    [](const py::object & image, const PythonTransform & transform, const py::object & reference,
+       const std::string & interpolation) {
+      if (interpolation != "auto" && interpolation != "linear" && interpolation != "nearest")
+      {
+        throw py::value_error("interpolation must be 'auto', 'linear' or 'nearest', not '" + interpolation + "'");
+      }
+      const bool labels = interpolation == "nearest" || (interpolation == "auto" && IsLabelImage(image));
+      const auto grid = reference.is_none() ? nullptr : ItkImage(reference, "reference");
+      if (labels)
+      {
+        const auto                      input = ItkLabelImage(image, "image");
+        RegistrationLabelImage::Pointer output;
+        {
+          py::gil_scoped_release release;
+          output = WarpLabelImage(input, transform.transform, grid.GetPointer());
+        }
+        return PythonImage(output.GetPointer());
+      }
+      const auto                 input = ItkImage(image, "image");
+      RegistrationImage::Pointer output;
+      {
+        py::gil_scoped_release release;
+        output = WarpImage(input, transform.transform, grid.GetPointer());
+      }
+      return PythonImage(output.GetPointer());
+    },
+    py::arg("image"), py::arg("transform"), py::arg("reference") = py::none(), py::kw_only(),
+    py::arg("interpolation") = "auto",
+    "The image resampled through the backward map onto the grid of `reference` (default: its own) "
+    "(itk::TransformWarpImageFilter). interpolation 'auto': nearest neighbour for uint8/bool images (label maps, "
+    "masks; the result is uint8), linear for the others (float32); 'linear' or 'nearest' choose, and 'nearest' "
+    "needs labels 0..255.");
+
+  py::class_<EdgeEvaluation>(module, "EdgeEvaluation",
+                             "Edge-based Hausdorff distance (Garlapati et al.): distances (mm) at percentiles 1..100.")
+    .def_readonly("valid", &EdgeEvaluation::valid)
+    .def_readonly("message", &EdgeEvaluation::message)
+    .def_property_readonly("percentiles",
+                           [](const EdgeEvaluation & evaluation) {
+                             return py::array_t<double>(static_cast<py::ssize_t>(evaluation.symmetric.size()),
+                                                        evaluation.symmetric.data());
+                           },
+                           "Symmetric edge distance (mm) at percentiles 1, 2, ..., 100.")
+    .def("percentile", &EdgeEvaluation::Percentile, py::arg("k"))
+    .def_readonly("fraction_within_threshold", &EdgeEvaluation::fractionWithinThreshold)
+    .def_readonly("fixed_edges", &EdgeEvaluation::fixedEdges)
+    .def_readonly("moving_edges", &EdgeEvaluation::movingEdges)
+    .def_property_readonly("fixed_edge_image",
+                           [](const EdgeEvaluation & evaluation) { return PythonImage(evaluation.fixedEdgeImage.GetPointer()); })
+    .def_property_readonly("moving_edge_image",
+                           [](const EdgeEvaluation & evaluation) { return PythonImage(evaluation.movingEdgeImage.GetPointer()); })
+    .def("__repr__", [](const EdgeEvaluation & evaluation) {
+      if (!evaluation.valid)
+        return "EdgeEvaluation(invalid: " + evaluation.message + ")";
+      std::ostringstream text;
+      text << "EdgeEvaluation(95th percentile " << evaluation.Percentile(95) << " mm, "
+           << 100.0 * evaluation.fractionWithinThreshold << " % of edges within the threshold)";
+      return text.str();
+    });
+
+  module.def(
+    "evaluate_edges",
+    [](const py::object & fixed, const py::object & moving, const py::object & mask, int sliceAxis,
+       double distanceThreshold) {
+      const auto fixedImage = ItkImage(fixed, "fixed");
+      const auto movingImage = ItkImage(moving, "moving");
+      const auto maskImage = ItkLabelImage(mask, "mask");
+      py::gil_scoped_release release;
+      return TranslateItkErrors(
+        [&] { return EvaluateEdges(fixedImage, movingImage, maskImage, sliceAxis, distanceThreshold); });
+    },
+    py::arg("fixed"), py::arg("moving"), py::arg("mask") = py::none(), py::kw_only(), py::arg("slice_axis") = 2,
+    py::arg("distance_threshold") = 1.7,
+    "Edge-based Hausdorff evaluation of two images on the same grid inside `mask` "
+    "(itk::EdgeHausdorffDistanceImageFilter): slice_axis 0..2 for slice by slice, -1 for the whole volume.");
+
+  py::class_<BaselineRegistration>(module, "BSplineRegistration")
+    .def_property_readonly("transform",
+                           [](const BaselineRegistration & result) { return PythonTransform{ result.transform.GetPointer() }; })
+    .def_property_readonly("warped", [](const BaselineRegistration & result) { return PythonImage(result.warpedOnFixedGrid.GetPointer()); },
+                           "The moving image warped onto the fixed grid.")
+    .def_readonly("seconds", &BaselineRegistration::seconds);
+
+  module.def(
+    "bspline_registration",
+    [](const py::object & fixed, const py::object & moving, const py::object & fixedMask,
+       const std::vector<unsigned int> & shrinkFactors, const std::vector<double> & smoothingSigmas,
+       unsigned int iterations) {
+      if (shrinkFactors.empty() || shrinkFactors.size() != smoothingSigmas.size())
+      {
+        throw py::value_error("shrink_factors and smoothing_sigmas must name the same number (>= 1) of levels");
+      }
+      const auto fixedImage = ItkImage(fixed, "fixed");
+      const auto movingImage = ItkImage(moving, "moving");
+      const auto maskImage = ItkLabelImage(fixedMask, "fixed_mask");
+      BaselineSettings settings;
+      settings.shrinkFactors = shrinkFactors;
+      settings.smoothingSigmas = smoothingSigmas;
+      settings.iterations = iterations;
+      py::gil_scoped_release release;
+      return TranslateItkErrors(
+        [&] { return RegisterWithBSplineBaseline(fixedImage, movingImage, maskImage, settings); });
+    },
+    py::arg("fixed"), py::arg("moving"), py::arg("fixed_mask") = py::none(), py::kw_only(),
+    py::arg("shrink_factors") = BaselineSettings{}.shrinkFactors,
+    py::arg("smoothing_sigmas") = BaselineSettings{}.smoothingSigmas, py::arg("iterations") = 0,
+    "Intensity-based B-spline registration, the baseline (itk::BSplineIntensityRegistrationFilter: translation, then "
+    "B-spline, Mattes mutual information, L-BFGS-B); iterations 0 keeps the filter's default per level.");
+}
+
+// ---------------------------------------------------------------------------
+// The patient model and the one-call registration: settings from keywords.
+// ---------------------------------------------------------------------------
+
+/** The keywords of build_brain_model and register, with their defaults (the
+ *  names of `biomech register`'s options). The Python layer checks names. */
+py::dict
+DefaultRegistrationSettings()
+{
+  const BrainShiftRegistrationSettings defaults;
+  const BrainModelSettings &           model = defaults.model;
+  py::dict                             settings;
+  settings["classes"] = model.classifier.classes;
+  settings["fuzziness"] = model.classifier.fuzziness;
+  settings["classifier_tolerance"] = model.classifier.tolerance;
+  settings["classifier_max_iterations"] = model.classifier.maxIterations;
+  settings["atlas"] = model.atlas.image;
+  settings["atlas_mask"] = model.atlas.mask;
+  settings["affine_only"] = !model.atlas.bsplineStage;
+  settings["grid"] = std::string(ImageGridKindName(model.grid.kind));
+  settings["element_size"] = model.grid.elementSize;
+  settings["skull_gap"] = model.skullGap;
+  settings["skull_base_height"] = model.skullBase.height;
+  settings["craniotomy_centre"] = py::none();
+  settings["craniotomy_radius"] = 0.0;
+  settings["craniotomy_mask"] = py::none();
+  settings["contact"] = model.contact;
+  settings["gravity"] = py::make_tuple(0.0, 0.0, 0.0);
+  settings["max_distance"] = IntraoperativeData{}.maxDistance;
+  settings["solver_tolerance"] = defaults.solver.tolerance;
+  settings["max_steps"] = defaults.solver.maxSteps;
+  settings["fit_tolerance"] = defaults.fitTolerance;
+  settings["min_control_point_spacing"] = defaults.minimumControlPointSpacing;
+  settings["evaluation_slice_axis"] = defaults.evaluationSliceAxis;
+  settings["evaluation_distance_threshold"] = defaults.evaluationDistanceThreshold;
+  settings["threads"] = model.threads;
+  return settings;
+}
+
+BrainShiftRegistrationSettings
+RegistrationSettingsFrom(const py::dict & values)
+{
+  const py::dict known = DefaultRegistrationSettings();
+  for (const auto & [key, value] : values)
+  {
+    if (!known.contains(key))
+    {
+      throw py::type_error("unknown setting '" + std::string(py::str(key)) + "'");
+    }
+  }
+  const auto get = [&](const char * name) -> py::object {
+    return values.contains(name) ? py::reinterpret_borrow<py::object>(values[name]) : py::object(known[name]);
+  };
+  BrainShiftRegistrationSettings settings;
+  BrainModelSettings &           model = settings.model;
+  model.classifier.classes = get("classes").cast<int>();
+  model.classifier.fuzziness = get("fuzziness").cast<double>();
+  model.classifier.tolerance = get("classifier_tolerance").cast<double>();
+  model.classifier.maxIterations = get("classifier_max_iterations").cast<int>();
+  model.atlas.image = get("atlas").cast<std::string>();
+  model.atlas.mask = get("atlas_mask").cast<std::string>();
+  model.atlas.bsplineStage = !get("affine_only").cast<bool>();
+  model.grid.kind = ParseImageGridKind(get("grid").cast<std::string>());
+  model.grid.elementSize = get("element_size").cast<double>();
+  model.skullGap = get("skull_gap").cast<double>();
+  model.skullBase.height = get("skull_base_height").cast<double>();
+  const py::object centre = get("craniotomy_centre");
+  const py::object mask = get("craniotomy_mask");
+  if (!centre.is_none() && !mask.is_none())
+  {
+    throw py::value_error("give the craniotomy either as a sphere (craniotomy_centre, craniotomy_radius) or as "
+                          "craniotomy_mask, not both");
+  }
+  if (!centre.is_none())
+  {
+    model.craniotomyCentre = VectorFromObject(centre, "craniotomy_centre");
+    model.craniotomyRadius = get("craniotomy_radius").cast<double>();
+    if (!(model.craniotomyRadius > 0.0))
+    {
+      throw py::value_error("craniotomy_centre needs craniotomy_radius > 0 (mm)");
+    }
+  }
+  if (!mask.is_none())
+  {
+    model.craniotomyMask = ItkLabelImage(mask, "craniotomy_mask");
+  }
+  model.contact = get("contact").cast<bool>();
+  model.gravity = VectorFromObject(get("gravity"), "gravity");
+  model.threads = get("threads").cast<int>();
+  settings.solver.tolerance = get("solver_tolerance").cast<double>();
+  settings.solver.maxSteps = get("max_steps").cast<int>();
+  settings.fitTolerance = get("fit_tolerance").cast<double>();
+  settings.minimumControlPointSpacing = get("min_control_point_spacing").cast<double>();
+  settings.evaluationSliceAxis = get("evaluation_slice_axis").cast<int>();
+  settings.evaluationDistanceThreshold = get("evaluation_distance_threshold").cast<double>();
+  return settings;
+}
+
+double
+MaxDistanceFrom(const py::dict & values)
+{
+  return values.contains("max_distance") ? values["max_distance"].cast<double>() : IntraoperativeData{}.maxDistance;
+}
+
+/** Intraoperative measurements: a surface, sparse points with displacements, or an image (+ mask). */
+IntraoperativeData
+IntraoperativeFrom(const py::object & surface, const py::object & points, const py::object & displacements,
+                   const py::object & image, const py::object & imageMask, double maxDistance)
+{
+  IntraoperativeData data;
+  data.maxDistance = maxDistance;
+  if (!surface.is_none())
+  {
+    data.surface = surface.cast<ContactSurface>();
+  }
+  if (points.is_none() != displacements.is_none())
+  {
+    throw py::value_error("sparse measurements need both sparse_points and sparse_displacements (N x 3 each, mm)");
+  }
+  if (!points.is_none())
+  {
+    data.sparse.points = PointsFromArray(points, "sparse_points");
+    data.sparse.displacements = PointsFromArray(displacements, "sparse_displacements");
+  }
+  data.image = OptionalItkImage(image, "intraoperative_image");
+  data.imageBrainMask = ItkLabelImage(imageMask, "intraoperative_mask");
+  return data;
+}
+
+py::dict
+StageSeconds(const StageTimer & timer)
+{
+  py::dict seconds;
+  for (const auto & [stage, value] : timer.Stages())
+  {
+    seconds[py::str(stage)] = value;
+  }
+  return seconds;
+}
+
+void
+BindRegistration(py::module_ & module)
+{
+  module.def("_default_registration_settings", &DefaultRegistrationSettings);
+
+  py::class_<BrainModel>(module, "BrainModel",
+                         "A patient-specific brain model: the mechanical model (skull base fixed, exposed surface "
+                         "loaded, skull contact), its surfaces, tissue classification and load report.")
+    .def_readonly("model", &BrainModel::model)
+    .def_property_readonly("brain_surface", [](const BrainModel & model) { return model.surfaces.brain; })
+    .def_property_readonly("skull_surface", [](const BrainModel & model) { return model.surfaces.skull; })
+    .def_property_readonly("tissue_classes", [](const BrainModel & model) { return ImageFromVolume(model.classification.labels); })
+    .def_property_readonly("centroids", [](const BrainModel & model) { return model.classification.fit.centroids; })
+    .def_property_readonly("brain_mask", [](const BrainModel & model) { return ImageFromVolume(model.brainMask); })
+    .def_property_readonly("exposed_nodes", [](const BrainModel & model) { return ArrayFromIndices(model.exposedNodes); })
+    .def_readonly("load", &BrainModel::load)
+    .def_property_readonly("load_report",
+                           [](const BrainModel & model) {
+                             py::dict report;
+                             report["used"] = model.loadReport.usedPoints;
+                             report["rejected"] = model.loadReport.rejectedPoints;
+                             report["max_correspondence_distance_mm"] = model.loadReport.maxCorrespondenceDistance;
+                             report["rms_correspondence_distance_mm"] = model.loadReport.rmsCorrespondenceDistance;
+                             return report;
+                           })
+    .def_readonly("warnings", &BrainModel::warnings);
+
+  module.def(
+    "_build_brain_model",
+    [](const py::object & image, const py::object & brainMask, const py::object & tumourMask,
+       const std::optional<ContactSurface> & skullSurface, const py::object & surface, const py::object & points,
+       const py::object & displacements, const py::dict & values, const py::object & progress) {
+      const BrainShiftRegistrationSettings settings = RegistrationSettingsFrom(values);
+      const auto                           preoperative = ItkImage(image, "image");
+      const auto                           mask = ItkLabelImage(brainMask, "brain_mask");
+      const auto                           tumour = ItkLabelImage(tumourMask, "tumour_mask");
+      const bool measured = !surface.is_none() || !points.is_none() || !displacements.is_none();
+      const IntraoperativeData intraoperative = IntraoperativeFrom(surface, points, displacements, py::none(),
+                                                                   py::none(), MaxDistanceFrom(values));
+      ProgressReporter reporter(progress);
+      return RunWithoutGil(reporter, [&] {
+        StageTimer timer(reporter.StageCallback());
+        return TranslateItkErrors([&] {
+          return BuildBrainModel(preoperative, mask, tumour, skullSurface.value_or(ContactSurface{}),
+                                 measured ? &intraoperative : nullptr, settings.model, timer);
+        });
+      });
+    },
+    py::arg("image"), py::arg("brain_mask"), py::arg("tumour_mask"), py::arg("skull_surface"),
+    py::arg("intraoperative_surface"), py::arg("sparse_points"), py::arg("sparse_displacements"), py::arg("settings"),
+    py::arg("progress"));
+
+  py::class_<BrainShiftRegistrationResult>(module, "RegistrationResult", py::dynamic_attr(),
+                                           "Everything `biomech register` writes, in memory.")
+    .def_readonly("brain_model", &BrainShiftRegistrationResult::model)
+    .def_readonly("solve", &BrainShiftRegistrationResult::solve)
+    .def_property_readonly("transform",
+                           [](const BrainShiftRegistrationResult & result) {
+                             return PythonTransform{ result.transform.GetPointer() };
+                           },
+                           "Backward map: intraoperative point -> preoperative point.")
+    .def_readonly("fit_max_residual", &BrainShiftRegistrationResult::fitMaxResidual)
+    .def_readonly("fit_rms_residual", &BrainShiftRegistrationResult::fitRmsResidual)
+    .def_property_readonly("warped_image",
+                           [](const BrainShiftRegistrationResult & result) { return PythonImage(result.warpedImage.GetPointer()); })
+    .def_property_readonly("warped_label_maps",
+                           [](const BrainShiftRegistrationResult & result) {
+                             py::list images;
+                             for (const auto & labels : result.warpedLabelMaps)
+                               images.append(PythonImage(labels.GetPointer()));
+                             return images;
+                           })
+    .def_property_readonly("unregistered_on_intraoperative_grid",
+                           [](const BrainShiftRegistrationResult & result) {
+                             return PythonImage(result.unregisteredOnIntraoperativeGrid.GetPointer());
+                           })
+    .def_property_readonly("registered_on_intraoperative_grid",
+                           [](const BrainShiftRegistrationResult & result) {
+                             return PythonImage(result.registeredOnIntraoperativeGrid.GetPointer());
+                           })
+    .def_property_readonly("evaluation_mask",
+                           [](const BrainShiftRegistrationResult & result) { return PythonImage(result.evaluationMask.GetPointer()); })
+    .def_readonly("unregistered", &BrainShiftRegistrationResult::unregistered)
+    .def_readonly("registered", &BrainShiftRegistrationResult::registered)
+    .def_property_readonly("evaluated", &BrainShiftRegistrationResult::Evaluated)
+    .def_property_readonly("stage_seconds", [](const BrainShiftRegistrationResult & result) { return StageSeconds(result.timer); })
+    .def_readonly("warnings", &BrainShiftRegistrationResult::warnings)
+    .def("table", &FormatRegistrationTable, "The table `biomech register` prints.");
+
+  module.def(
+    "_register",
+    [](const py::object & image, const py::object & brainMask, const py::object & tumourMask,
+       const std::optional<ContactSurface> & skullSurface, const std::vector<py::object> & labelMaps,
+       const py::object & surface, const py::object & points, const py::object & displacements,
+       const py::object & intraoperativeImage, const py::object & intraoperativeMask, const py::dict & values,
+       const py::object & progress) {
+      const BrainShiftRegistrationSettings settings = RegistrationSettingsFrom(values);
+      BrainShiftRegistrationInputs         inputs;
+      inputs.preoperativeImage = ItkImage(image, "preoperative_image");
+      inputs.brainMask = ItkLabelImage(brainMask, "brain_mask");
+      inputs.tumourMask = ItkLabelImage(tumourMask, "tumour_mask");
+      inputs.skullSurface = skullSurface.value_or(ContactSurface{});
+      for (std::size_t k = 0; k < labelMaps.size(); ++k)
+      {
+        inputs.labelMaps.push_back(ItkLabelImage(labelMaps[k], "label_maps[" + std::to_string(k) + "]"));
+      }
+      inputs.intraoperative = IntraoperativeFrom(surface, points, displacements, intraoperativeImage,
+                                                 intraoperativeMask, MaxDistanceFrom(values));
+      ProgressReporter reporter(progress);
+      auto result = RunWithoutGil(reporter, [&] {
+        return TranslateItkErrors([&] {
+          return RegisterBrainShift(
+            inputs, settings,
+            reporter.StageCallback(),
+            reporter.SolverCallback());
+        });
+      });
+      py::object report = JsonToDict(RegistrationReportJson(result, settings));
+      return py::make_tuple(std::move(result), report);
+    },
+    py::arg("preoperative_image"), py::arg("brain_mask"), py::arg("tumour_mask"), py::arg("skull_surface"),
+    py::arg("label_maps"), py::arg("intraoperative_surface"), py::arg("sparse_points"), py::arg("sparse_displacements"),
+    py::arg("intraoperative_image"), py::arg("intraoperative_mask"), py::arg("settings"), py::arg("progress"));
+}
+
+// ---------------------------------------------------------------------------
+// The synthetic brain shift of the demo (a known answer for notebooks and studies).
+// ---------------------------------------------------------------------------
+
+void
+BindSyntheticBrainShift(py::module_ & module)
+{
+  py::class_<SyntheticBrainShift>(module, "SyntheticBrainShift",
+                                  "A ground-truth brain shift (the README demo's): a finer model under a prescribed "
+                                  "sag of the exposed surface and gravity, and what a scanner would see.")
+    .def_readonly("brain_model", &SyntheticBrainShift::model)
+    .def_readonly("solve", &SyntheticBrainShift::solve)
+    .def_readonly("shift", &SyntheticBrainShift::shift)
+    .def_property_readonly("truth_transform",
+                           [](const SyntheticBrainShift & truth) { return PythonTransform{ truth.truthTransform.GetPointer() }; })
+    .def_property_readonly("intraoperative_image",
+                           [](const SyntheticBrainShift & truth) { return PythonImage(truth.intraoperativeImage.GetPointer()); })
+    .def_property_readonly("intraoperative_brain_mask",
+                           [](const SyntheticBrainShift & truth) { return PythonImage(truth.intraoperativeBrainMask.GetPointer()); })
+    .def_property_readonly("intraoperative_brain_on_preoperative_grid",
+                           [](const SyntheticBrainShift & truth) {
+                             return PythonImage(truth.intraoperativeBrainOnPreoperativeGrid.GetPointer());
+                           })
+    .def_readonly("exposed_surface", &SyntheticBrainShift::exposedSurface)
+    .def_property_readonly("tracked_points", [](const SyntheticBrainShift & truth) { return ArrayFromPoints(truth.trackedPoints.points); })
+    .def_property_readonly("tracked_displacements",
+                           [](const SyntheticBrainShift & truth) { return ArrayFromPoints(truth.trackedPoints.displacements); })
+    .def_property_readonly("stage_seconds", [](const SyntheticBrainShift & truth) { return StageSeconds(truth.timer); });
+
+  module.def(
+    "make_synthetic_brain_shift",
+    [](const py::object & image, const py::object & brainMask, const py::object & craniotomyCentre,
+       double craniotomyRadius, double shift, double gravity, double elementSize, const py::object & intraoperativeSpacing,
+       double noise, std::uint32_t seed, int threads, const py::object & progress) {
+      const auto                  preoperative = ItkImage(image, "image");
+      const auto                  mask = ItkLabelImage(brainMask, "brain_mask");
+      SyntheticBrainShiftSettings settings;
+      settings.craniotomyCentre = VectorFromObject(craniotomyCentre, "craniotomy_centre");
+      settings.craniotomyRadius = craniotomyRadius;
+      settings.targetShift = shift;
+      settings.gravity = gravity;
+      settings.grid.elementSize = elementSize;
+      settings.intraoperativeSpacing = VectorFromObject(intraoperativeSpacing, "intraoperative_spacing");
+      settings.noise = noise;
+      settings.seed = seed;
+      settings.threads = threads;
+      if (mask.IsNull())
+      {
+        throw py::value_error("brain_mask is required: the ground truth is made on a known brain");
+      }
+      ProgressReporter reporter(progress);
+      return RunWithoutGil(reporter, [&] {
+        return TranslateItkErrors([&] {
+          return MakeSyntheticBrainShift(preoperative, mask, settings, reporter.StageCallback());
+        });
+      });
+    },
+    py::arg("image"), py::arg("brain_mask"), py::kw_only(),
+    py::arg("craniotomy_centre") = py::make_tuple(SyntheticBrainShiftSettings{}.craniotomyCentre.x(),
+                                                  SyntheticBrainShiftSettings{}.craniotomyCentre.y(),
+                                                  SyntheticBrainShiftSettings{}.craniotomyCentre.z()),
+    py::arg("craniotomy_radius") = SyntheticBrainShiftSettings{}.craniotomyRadius,
+    py::arg("shift") = SyntheticBrainShiftSettings{}.targetShift, py::arg("gravity") = SyntheticBrainShiftSettings{}.gravity,
+    py::arg("element_size") = SyntheticBrainShiftSettings{}.grid.elementSize,
+    py::arg("intraoperative_spacing") = py::make_tuple(SyntheticBrainShiftSettings{}.intraoperativeSpacing.x(),
+                                                       SyntheticBrainShiftSettings{}.intraoperativeSpacing.y(),
+                                                       SyntheticBrainShiftSettings{}.intraoperativeSpacing.z()),
+    py::arg("noise") = SyntheticBrainShiftSettings{}.noise, py::arg("seed") = SyntheticBrainShiftSettings{}.seed,
+    py::arg("threads") = 0, py::arg("progress") = py::none(),
+    "The README demo's ground truth on any brain: shift mm sag of the craniotomy, gravity in g, a noisy "
+    "intraoperative image.");
+
+  module.def(
+    "measure_displacement_error",
+    [](const py::object & transform, const PythonTransform & truth, const py::object & region, int stride) {
+      const TransformType * mapped = transform.is_none() ? nullptr : transform.cast<const PythonTransform &>().transform.GetPointer();
+      const auto            mask = ItkLabelImage(region, "region");
+      if (stride < 1)
+      {
+        throw py::value_error("stride must be 1 or more");
+      }
+      DisplacementError error;
+      {
+        py::gil_scoped_release release;
+        error = MeasureDisplacementError(mapped, truth.transform, mask, stride);
+      }
+      py::dict result;
+      result["mean_mm"] = error.mean;
+      result["p95_mm"] = error.p95;
+      result["max_mm"] = error.max;
+      result["samples"] = error.samples;
+      return result;
+    },
+    py::arg("transform"), py::arg("truth"), py::arg("region"), py::kw_only(), py::arg("stride") = 2,
+    "|T(x) - T_truth(x)| (mm) over the voxels of region (> 0): mean, 95th percentile, maximum. None: no registration.");
+}
+
+} // namespace
+
+void
+BindImages(py::module_ & module)
+{
+  BindFilesAndTransforms(module);
+  BindFilters(module);
+  BindRegistration(module);
+  BindSyntheticBrainShift(module);
+}
+
+} // namespace bmr::python

@@ -1,0 +1,157 @@
+// Conversions between the module's C++ types and Python/NumPy, shared by the
+// two translation units of the binding (core in bmrPythonCore.cxx, ITK layer
+// in bmrPythonImages.cxx).
+//
+// Conventions (docs/python.md): points and vectors are (N, 3) float64 arrays
+// in ITK physical space (mm, LPS); node ids are int32 arrays; images are the
+// Python class biomechanical_registration.Image, whose `array` is ITK
+// Python's [z, y, x] (or [z, y, x, component]) view of the voxel buffer and
+// whose spacing, origin and direction are in ITK's (x, y, z) order.
+#ifndef bmrPythonSupport_h
+#define bmrPythonSupport_h
+
+#include "bmrImageVolume.h"
+#include "bmrModel.h"
+#include "bmrSolver.h"
+
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace bmr::python
+{
+namespace py = pybind11;
+
+// ---------------------------------------------------------------------------
+// Arrays.
+// ---------------------------------------------------------------------------
+
+/** (N, 3) float64 array of points or vectors. */
+py::array_t<double>
+ArrayFromPoints(const std::vector<Vector3> & points);
+
+/** Points from anything NumPy reads as an (N, 3) array of finite numbers; a
+ *  ValueError names `what` and the shape it got. */
+std::vector<Vector3>
+PointsFromArray(const py::handle & object, const std::string & what);
+
+/** Three finite numbers (a point, a vector). */
+Vector3
+VectorFromObject(const py::handle & object, const std::string & what);
+
+py::array_t<Index>
+ArrayFromIndices(const std::vector<Index> & indices);
+
+/** Node ids from a 1-D sequence of integers (no range check: the callee does it). */
+std::vector<Index>
+IndicesFromArray(const py::handle & object, const std::string & what);
+
+/** Three booleans (x, y, z components). */
+std::array<bool, 3>
+ComponentsFromObject(const py::handle & object, const std::string & what);
+
+// ---------------------------------------------------------------------------
+// Images: biomechanical_registration.Image <-> core volumes.
+// ---------------------------------------------------------------------------
+
+/** Geometry of a Python Image; ValueError for a missing or malformed field. */
+ImageGeometry
+GeometryFromImage(const py::handle & image, const std::string & what);
+
+/** Float intensities (any real dtype, cast to float32; components from a 4-D array). */
+ScalarVolume
+ScalarVolumeFromImage(const py::handle & image, const std::string & what);
+
+/** Masks and label maps: uint8 or bool arrays, or integers within 0..255. */
+LabelVolume
+LabelVolumeFromImage(const py::handle & image, const std::string & what);
+
+/** A Python Image of a core volume: float32 or uint8, [z, y, x] (+ components). */
+py::object
+ImageFromVolume(const ScalarVolume & volume);
+py::object
+ImageFromVolume(const LabelVolume & volume);
+
+/** True for None. */
+inline bool
+IsNone(const py::handle & object)
+{
+  return object.is_none();
+}
+
+// ---------------------------------------------------------------------------
+// Long calls: the GIL is released, progress goes to a Python callable.
+// ---------------------------------------------------------------------------
+
+/** Thrown through C++ code when the Python callback raised (or Ctrl-C was
+ *  pressed); RunWithoutGil turns it back into the Python exception. */
+struct CallbackInterrupted
+{};
+
+/** Forwards progress to `callback(stage, fraction, info)` (fraction in [0, 1],
+ *  or -1 when unknown; info a dict of numbers). Called from the thread that
+ *  runs the computation, which holds no GIL: Report takes it. A Python
+ *  exception from the callback, or a pending KeyboardInterrupt, stops the
+ *  computation: at once where the caller may be interrupted
+ *  (CallbackInterrupted), otherwise (stage ends, reported from destructors)
+ *  when the call returns. */
+class ProgressReporter
+{
+public:
+  explicit ProgressReporter(py::object callback)
+    : m_Callback(std::move(callback))
+  {}
+
+  void Report(const std::string & stage, double fraction, const std::vector<std::pair<const char *, double>> & info = {},
+              bool interrupt = true);
+
+  /** The solver's callback, reporting stage `stage`. */
+  ProgressCallback SolverCallback(const std::string & stage = "solve");
+  /** The pipeline's stage callback (start: fraction 0; end: 1 and the seconds); never throws. */
+  std::function<void(const std::string &, double)> StageCallback();
+
+  bool Failed() const { return m_Error != nullptr; }
+  /** Re-raises the stored Python exception (with the GIL held). */
+  [[noreturn]] void Rethrow();
+
+private:
+  py::object                              m_Callback;
+  std::unique_ptr<py::error_already_set> m_Error;
+};
+
+/** Runs `call` without the GIL; a Python exception raised in a progress
+ *  callback during it is re-raised here. */
+template <typename Call>
+auto
+RunWithoutGil(ProgressReporter & reporter, Call && call) -> decltype(call())
+{
+  try
+  {
+    auto result = [&] {
+      py::gil_scoped_release release;
+      return call();
+    }();
+    if (reporter.Failed())
+    {
+      reporter.Rethrow();
+    }
+    return result;
+  }
+  catch (const CallbackInterrupted &)
+  {
+    reporter.Rethrow();
+  }
+}
+
+/** Binds the ITK layer (bmrPythonImages.cxx). */
+void
+BindImages(py::module_ & module);
+
+} // namespace bmr::python
+
+#endif
