@@ -1006,8 +1006,8 @@ BindSolver(py::module_ & module)
     .def_readonly("report_file", &Scene::reportFile)
     .def("__repr__", [](const Scene & scene) { return "Scene('" + scene.path + "')"; });
 
-  module.def("read_scene", &ReadScene, py::arg("path"), "Reads a scene file (JSON, docs/scene-format.md).");
-  module.def("parse_scene", &ParseScene, py::arg("text"), py::arg("path"),
+  module.def("read_scene", [](const std::filesystem::path & path) { return ReadScene(path.string()); }, py::arg("path"), "Reads a scene file (JSON, docs/scene-format.md).");
+  module.def("parse_scene", [](const std::string & text, const std::filesystem::path & path) { return ParseScene(text, path.string()); }, py::arg("text"), py::arg("path"),
              "Parses scene JSON text as if it were the file `path` (relative paths inside it are relative to its folder).");
 
   module.def(
@@ -1034,7 +1034,8 @@ BindFiles(py::module_ & module)
 {
   module.def(
     "read_mesh",
-    [](const std::string & path, const std::string & labelArray) {
+    [](const std::filesystem::path & pathArgument, const std::string & labelArray) {
+      const std::string path = pathArgument.string();
       MeshData mesh = ReadMesh(path, labelArray);
       py::dict result;
       result["model"] = std::move(mesh.model);
@@ -1045,10 +1046,12 @@ BindFiles(py::module_ & module)
     },
     py::arg("path"), py::arg("label_array") = "material",
     "Reads a .vtu or .vtk volume mesh: a dict with 'model', 'cell_labels', 'point_data' and 'cell_data' (arrays by name).");
-  module.def("write_mesh", [](const std::string & path, const Model & model) { WriteMesh(path, model); },
+  module.def("write_mesh", [](const std::filesystem::path & pathArgument, const Model & model) {
+      const std::string path = pathArgument.string(); WriteMesh(path, model); },
              py::arg("path"), py::arg("model"), "Writes nodes, cells, materials and node sets (.vtu or .vtk), atomically.");
   module.def(
-    "write_result", [](const std::string & path, const Model & model, const SolveResult & result) {
+    "write_result", [](const std::filesystem::path & pathArgument, const Model & model, const SolveResult & result) {
+      const std::string path = pathArgument.string();
       if (result.displacements.size() != model.nodes.size())
       {
         throw py::value_error("the result has " + std::to_string(result.displacements.size()) +
@@ -1059,12 +1062,14 @@ BindFiles(py::module_ & module)
     },
     py::arg("path"), py::arg("model"), py::arg("result"),
     "Writes a solve result as .vtu (point data 'displacement', 'reaction_force'), as `biomech solve` does.");
-  module.def("read_surface", &ReadSurface, py::arg("path"), "Reads a triangulated surface (.stl, .obj, .vtp, .vtk).");
-  module.def("write_surface", [](const std::string & path, const ContactSurface & surface) { WriteSurface(path, surface); },
+  module.def("read_surface", [](const std::filesystem::path & path) { return ReadSurface(path.string()); }, py::arg("path"), "Reads a triangulated surface (.stl, .obj, .vtp, .vtk).");
+  module.def("write_surface", [](const std::filesystem::path & pathArgument, const ContactSurface & surface) {
+      const std::string path = pathArgument.string(); WriteSurface(path, surface); },
              py::arg("path"), py::arg("surface"), "Writes a surface (.vtp, .stl, .vtk), atomically.");
   module.def(
     "read_sparse_displacements",
-    [](const std::string & path) {
+    [](const std::filesystem::path & pathArgument) {
+      const std::string path = pathArgument.string();
       const SparseDisplacements sparse = ReadSparseDisplacements(path);
       return py::make_tuple(ArrayFromPoints(sparse.points), ArrayFromPoints(sparse.displacements));
     },

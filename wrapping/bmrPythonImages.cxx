@@ -110,7 +110,8 @@ BindFilesAndTransforms(py::module_ & module)
 {
   module.def(
     "imread",
-    [](const std::string & path, const std::string & pixelType) -> py::object {
+    [](const std::filesystem::path & pathArgument, const std::string & pixelType) -> py::object {
+      const std::string path = pathArgument.string();
       if (pixelType != "auto" && pixelType != "float32" && pixelType != "uint8")
       {
         throw py::value_error("pixel_type must be 'auto', 'float32' or 'uint8', not '" + pixelType + "'");
@@ -154,7 +155,8 @@ BindFilesAndTransforms(py::module_ & module)
 
   module.def(
     "imwrite",
-    [](const py::object & image, const std::string & path) {
+    [](const py::object & image, const std::filesystem::path & pathArgument) {
+      const std::string path = pathArgument.string();
       TranslateItkErrors([&] {
         const py::array     array = py::array::ensure(image.attr("array"));
         if (array.ndim() == 4)
@@ -229,7 +231,8 @@ BindFilesAndTransforms(py::module_ & module)
       py::arg("reference"),
       "T(x) - x (mm) at the voxel centres of `reference`: an Image with array [z, y, x, 3] (x, y, z components).")
     .def(
-      "write", [](const PythonTransform & self, const std::string & path) {
+      "write", [](const PythonTransform & self, const std::filesystem::path & pathArgument) {
+      const std::string path = pathArgument.string();
         TranslateItkErrors([&] { itk::WriteBiomechanicalTransform(self.transform, path); });
       },
       py::arg("path"), "Writes the transform (.h5, .tfm, .txt) as `biomech register` does.")
@@ -240,7 +243,8 @@ BindFilesAndTransforms(py::module_ & module)
 
   module.def(
     "read_transform",
-    [](const std::string & path) {
+    [](const std::filesystem::path & pathArgument) {
+      const std::string path = pathArgument.string();
       return TranslateItkErrors([&] {
         auto transform = itk::ReadBiomechanicalTransform(path);
         const auto * typed = dynamic_cast<const TransformType *>(transform.GetPointer());

@@ -1,0 +1,239 @@
+"""The ITK layer from Python: surfaces, transform fitting, warping, evaluation,
+the B-spline baseline, the patient model and the one-call registration
+(identical to `biomech register`), and the install command."""
+
+import json
+import os
+import pathlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import biomechanical_registration as bmr
+from conftest import COLIN27, SOURCE_DIR, ball_mask
+
+
+def blob(size=40, centre_shift=(0.0, 0.0, 0.0), spacing=1.0):
+    """A smooth float image with structure everywhere (for warps and registrations)."""
+    z, y, x = (np.indices((size, size, size)) - (size - 1) / 2.0) * spacing
+    x, y, z = x - centre_shift[0], y - centre_shift[1], z - centre_shift[2]
+    values = 100 * np.exp(-(x**2 + y**2 + z**2) / (2 * (0.25 * size * spacing) ** 2))
+    values += 30 * np.exp(-((x - 5) ** 2 + (y + 4) ** 2 + z**2) / 18.0)
+    return bmr.image_from_array(values.astype(np.float32), (spacing,) * 3, origin=(-(size - 1) / 2.0 * spacing,) * 3)
+
+
+def grid_points(low, high, count):
+    axis = np.linspace(low, high, count)
+    return np.array(np.meshgrid(axis, axis, axis, indexing="ij")).reshape(3, -1).T
+
+
+def translation(reference, vector):
+    """The backward map of a uniform forward displacement `vector`, fitted from points over
+    the whole reference grid (the fitted field is then within a few hundredths of a mm of the constant)."""
+    corner = reference.index_to_point((0, 0, 0))
+    points = grid_points(corner[0], -corner[0], 8)
+    transform, report = bmr.fit_transform(points, np.tile(vector, (len(points), 1)), reference, tolerance=0.01)
+    return transform, report
+
+
+def test_fit_transform_inverts_the_displacements_at_the_points():
+    reference = blob(32)
+    points = grid_points(-12, 12, 7)
+    displacements = np.column_stack([0.05 * points[:, 1], -0.03 * points[:, 0], 1.0 + 0.02 * points[:, 2]])
+    transform, report = bmr.fit_transform(points, displacements, reference, tolerance=0.01)
+    assert report["tolerance_reached"] and report["max_residual_mm"] <= 0.01
+    # Backward map: T(x + u(x)) = x.
+    np.testing.assert_allclose(transform.transform_points(points + displacements), points, atol=0.011)
+    field = transform.displacement_field(reference)
+    assert field.array.shape == (32, 32, 32, 3)
+    centre = field.array[16, 16, 16]
+    np.testing.assert_allclose(centre, transform.transform_points([reference.index_to_point((16, 16, 16))])[0] -
+                               reference.index_to_point((16, 16, 16)), atol=1e-5)
+    with pytest.raises(ValueError, match="differ in length"):
+        bmr.fit_transform(points, displacements[:-1], reference)
+    with pytest.raises(bmr.Error, match="points"):
+        bmr.fit_transform(points[:3], displacements[:3], reference)
+    with pytest.raises(bmr.Error, match="olerance"):
+        bmr.fit_transform(points, displacements, reference, tolerance=0)
+
+
+def test_warp_by_a_translation_shifts_the_image():
+    image = blob(40)
+    transform, _ = translation(image, [2.0, 0.0, 0.0])
+    warped = bmr.warp_image(image, transform)
+    assert warped.same_grid(image) and warped.array.dtype == np.float32
+    # Forward motion +2 mm in x: the warped image at x holds the original at x - 2 (2 voxels).
+    # The fitted translation is within about 0.03 mm of 2 mm; the gradient reaches about 6 per mm.
+    np.testing.assert_allclose(warped.array[8:32, 8:32, 10:30], image.array[8:32, 8:32, 8:28], atol=0.2)
+    assert np.max(np.abs(warped.array[8:32, 8:32, 10:30] - image.array[8:32, 8:32, 12:32])) > 10
+    labels = bmr.image_from_array((image.array > 50).astype(np.uint8), image.spacing, image.origin)
+    warped_labels = bmr.warp_image(labels, transform)
+    assert warped_labels.array.dtype == np.uint8 and set(np.unique(warped_labels.array)) <= {0, 1}
+    linear = bmr.warp_image(labels, transform, interpolation="linear")
+    assert linear.array.dtype == np.float32
+    coarse = bmr.image_from_array(np.zeros((10, 10, 10), np.float32), (4.0,) * 3, image.origin)
+    assert bmr.warp_image(image, transform, reference=coarse).same_grid(coarse)
+    with pytest.raises(ValueError, match="interpolation"):
+        bmr.warp_image(image, transform, interpolation="cubic")
+    with pytest.raises(TypeError):
+        bmr.warp_image(image, "not a transform")
+
+
+def test_edge_evaluation_measures_a_known_shift():
+    image = blob(48)
+    same = bmr.evaluate_edges(image, image, slice_axis=-1)
+    assert same.valid and same.percentile(100) == 0 and same.fraction_within_threshold == 1.0
+    transform, _ = translation(image, [3.0, 0.0, 0.0])
+    shifted = bmr.warp_image(image, transform)
+    region = bmr.image_from_array(ball_mask(48, 18).array, image.spacing, image.origin)
+    moved = bmr.evaluate_edges(image, shifted, region, slice_axis=-1)
+    assert moved.valid and len(moved.percentiles) == 100
+    assert 1.0 <= moved.percentile(95) <= 3.5
+    assert moved.fixed_edge_image.array.dtype == np.uint8 and moved.fixed_edge_image.same_grid(image)
+    with pytest.raises(bmr.Error, match="grid"):
+        bmr.evaluate_edges(image, blob(32))
+
+
+def test_bspline_baseline_recovers_a_shift():
+    fixed = blob(40)
+    transform, _ = translation(fixed, [2.0, -1.0, 0.0])
+    moving_truth = bmr.warp_image(fixed, transform)  # fixed moved by (2, -1, 0)
+    result = bmr.bspline_registration(moving_truth, fixed, shrink_factors=[2, 1], smoothing_sigmas=[1.0, 0.0], iterations=30)
+    before = bmr.evaluate_edges(moving_truth, bmr.warp_image(fixed, bmr.identity_transform()), slice_axis=-1)
+    after = bmr.evaluate_edges(moving_truth, result.warped, slice_axis=-1)
+    assert after.percentile(95) < 0.5 * before.percentile(95)
+    centre = np.array([[0.0, 0.0, 0.0]])
+    np.testing.assert_allclose(result.transform.transform_points(centre + [2, -1, 0]), centre, atol=0.3)
+    with pytest.raises(ValueError, match="levels"):
+        bmr.bspline_registration(moving_truth, fixed, shrink_factors=[2, 1], smoothing_sigmas=[1.0])
+
+
+def test_brain_surfaces_of_a_ball():
+    mask = ball_mask(48, 15, spacing=(1.0, 1.0, 1.0))
+    brain, skull = bmr.brain_surfaces(mask, skull_gap=3.0)
+    assert brain.is_closed() and skull.is_closed()
+    np.testing.assert_allclose(brain.enclosed_volume(), 4 / 3 * np.pi * 15**3, rtol=0.03)
+    np.testing.assert_allclose(skull.enclosed_volume(), 4 / 3 * np.pi * 18**3, rtol=0.05)
+    with pytest.raises(bmr.Error):
+        bmr.brain_surfaces(bmr.image_from_array(np.zeros((8, 8, 8), np.uint8)))
+
+
+def test_transform_files_round_trip(tmp_path):
+    image = blob(24)
+    transform, _ = translation(image, [1.5, 0.5, -0.5])
+    bmr.write_transform(transform, tmp_path / "transform.h5")
+    back = bmr.read_transform(tmp_path / "transform.h5")
+    points = grid_points(-8, 8, 4)
+    np.testing.assert_array_equal(back.transform_points(points), transform.transform_points(points))
+    assert back.name == "BSplineTransform"
+    with pytest.raises(bmr.Error, match="extension"):
+        transform.write(tmp_path / "transform.xyz")
+    with pytest.raises(bmr.Error):
+        bmr.read_transform(tmp_path / "missing.h5")
+
+
+def test_measure_displacement_error_of_a_known_offset():
+    image = blob(24)
+    truth, _ = translation(image, [2.0, 0.0, 0.0])
+    region = ball_mask(24, 6)
+    region = bmr.image_from_array(region.array, image.spacing, image.origin)
+    none = bmr.measure_displacement_error(None, truth, region, stride=1)
+    np.testing.assert_allclose([none["mean_mm"], none["max_mm"]], 2.0, atol=0.05)  # the fitted translation's error
+    exact = bmr.measure_displacement_error(truth, truth, region)
+    assert exact["max_mm"] == 0.0
+    with pytest.raises(ValueError, match="stride"):
+        bmr.measure_displacement_error(None, truth, region, stride=0)
+
+
+def test_synthetic_brain_shift_needs_a_mask():
+    with pytest.raises(TypeError):
+        bmr.make_synthetic_brain_shift(blob(16))
+    with pytest.raises(ValueError, match="brain_mask"):
+        bmr.make_synthetic_brain_shift(blob(16), None)
+
+
+def test_atlas_brain_mask_names_a_missing_atlas(tmp_path):
+    with pytest.raises(bmr.Error, match="missing-atlas"):
+        bmr.atlas_brain_mask(blob(16), atlas_image=str(tmp_path / "missing-atlas.nii.gz"))
+
+
+def sparse_csv():
+    return SOURCE_DIR / "examples" / "data" / "colin27-superior-craniotomy.csv"
+
+
+CRANIOTOMY = dict(craniotomy_centre=(-11, 43, 84), craniotomy_radius=30, element_size=8)
+
+
+def test_register_gives_what_biomech_register_writes(tmp_path, biomech, colin27):
+    image, mask = colin27
+    output = tmp_path / "registration"
+    run = biomech("register", COLIN27 / "ch2.nii.gz", "--mask", COLIN27 / "ch2bet.nii.gz", "--craniotomy-centre",
+                  -11, 43, 84, "--craniotomy-radius", 30, "--sparse-displacements", sparse_csv(), "--element-size", 8,
+                  "--labels", COLIN27 / "ch2bet.nii.gz", "-o", output, "-q")
+    assert run.returncode == 0, run.stderr
+    points, displacements = bmr.read_sparse_displacements(sparse_csv())
+    stages = []
+    result = bmr.register(image, brain_mask=mask, label_maps=[bmr.imread(COLIN27 / "ch2bet.nii.gz")],
+                          sparse_points=points, sparse_displacements=displacements,
+                          progress=lambda stage, fraction, info: stages.append((stage, fraction)), **CRANIOTOMY)
+    report = json.loads((output / "registration-report.json").read_text())
+    for section, key in [("solve", "converged"), ("solve", "steps"), ("solve", "max_displacement_mm"),
+                         ("solve", "estimated_error_mm"), ("fit", "max_residual_mm"), ("loads", "used")]:
+        assert result.report[section][key] == report[section][key], (section, key)
+    cli = bmr.read_transform(output / "transform.h5")
+    samples = grid_points(-60, 60, 9)
+    np.testing.assert_array_equal(result.transform.transform_points(samples), cli.transform_points(samples))
+    np.testing.assert_array_equal(result.warped_image.array, bmr.imread(output / "warped.nii.gz").array)
+    np.testing.assert_array_equal(result.warped_label_maps[0].array, bmr.imread(output / "ch2bet-warped.nii.gz").array)
+    assert ("solve", 1.0) in stages and ("fit", 0.0) in stages
+    assert "NOT CONVERGED" not in result.table()
+
+
+def test_build_brain_model_then_solve_reproduces_register(colin27):
+    image, mask = colin27
+    points, displacements = bmr.read_sparse_displacements(sparse_csv())
+    brain = bmr.build_brain_model(image, mask, sparse_points=points, sparse_displacements=displacements, **CRANIOTOMY)
+    assert len(brain.exposed_nodes) > 0 and brain.load_report["used"] == 61
+    solved = bmr.solve(brain.model, tolerance=0.01)
+    assert solved.converged
+    result = bmr.register(image, brain_mask=mask, sparse_points=points, sparse_displacements=displacements, **CRANIOTOMY)
+    np.testing.assert_array_equal(solved.displacements, result.solve.displacements)
+    transform, report = bmr.fit_transform(brain.model.nodes, solved.displacements, image, tolerance=0.1)
+    samples = grid_points(-50, 50, 5)
+    np.testing.assert_array_equal(transform.transform_points(samples), result.transform.transform_points(samples))
+
+
+def test_register_bad_arguments_are_named(colin27):
+    image, mask = colin27
+    points, displacements = bmr.read_sparse_displacements(sparse_csv())
+    with pytest.raises(TypeError, match="element_sise"):
+        bmr.register(image, brain_mask=mask, sparse_points=points, sparse_displacements=displacements, element_sise=8)
+    with pytest.raises(ValueError, match="both sparse_points and sparse_displacements"):
+        bmr.register(image, brain_mask=mask, sparse_points=points, **CRANIOTOMY)
+    with pytest.raises(ValueError, match="craniotomy_radius"):
+        bmr.register(image, brain_mask=mask, sparse_points=points, sparse_displacements=displacements,
+                     craniotomy_centre=(0, 0, 0))
+    with pytest.raises(bmr.Error, match="grid"):
+        bmr.register(image, brain_mask=ball_mask(16, 5), sparse_points=points, sparse_displacements=displacements,
+                     **CRANIOTOMY)
+    with pytest.raises(bmr.Error):
+        bmr.register(image, brain_mask=mask, **CRANIOTOMY)
+
+
+def test_install_command_installs_an_importable_package(tmp_path):
+    build = os.environ.get("BMR_BUILD_DIR")
+    if not build:
+        pytest.skip("BMR_BUILD_DIR is not set")
+    run = subprocess.run(["cmake", "--install", build, "--component", "python", "--prefix", str(tmp_path)],
+                         capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    version = "python%d.%d" % sys.version_info[:2]
+    site = tmp_path / "lib" / version / "dist-packages"
+    assert (site / "biomechanical_registration" / "__init__.py").exists()
+    probe = subprocess.run([sys.executable, "-c", "import biomechanical_registration as b; print(b.__file__); "
+                            "print(b.make_block_mesh((1, 1, 1), (1, 1, 1)))"],
+                           env={**os.environ, "PYTHONPATH": str(site)}, capture_output=True, text=True, cwd=tmp_path)
+    assert probe.returncode == 0, probe.stderr
+    assert probe.stdout.startswith(str(site)) and "8 nodes" in probe.stdout
