@@ -164,6 +164,18 @@ ComponentsFromObject(const py::handle & object, const std::string & what)
   return { sequence[0], sequence[1], sequence[2] };
 }
 
+py::dict
+LoadReportDict(const LoadReport & report)
+{
+  py::dict result;
+  result["used"] = report.usedPoints;
+  result["rejected"] = report.rejectedPoints;
+  result["max_correspondence_distance_mm"] = report.maxCorrespondenceDistance;
+  result["rms_correspondence_distance_mm"] = report.rmsCorrespondenceDistance;
+  result["warnings"] = report.warnings;
+  return result;
+}
+
 // ---------------------------------------------------------------------------
 // Images.
 // ---------------------------------------------------------------------------
@@ -543,18 +555,6 @@ std::string
 CurveName(const LoadCurve & curve)
 {
   return curve.shape == LoadCurve::Shape::Linear ? "linear" : (curve.shape == LoadCurve::Shape::Step ? "step" : "smooth");
-}
-
-py::dict
-LoadReportDict(const LoadReport & report)
-{
-  py::dict result;
-  result["used"] = report.usedPoints;
-  result["rejected"] = report.rejectedPoints;
-  result["max_correspondence_distance_mm"] = report.maxCorrespondenceDistance;
-  result["rms_correspondence_distance_mm"] = report.rmsCorrespondenceDistance;
-  result["warnings"] = report.warnings;
-  return result;
 }
 
 py::dict
@@ -1046,8 +1046,7 @@ BindFiles(py::module_ & module)
     },
     py::arg("path"), py::arg("label_array") = "material",
     "Reads a .vtu or .vtk volume mesh: a dict with 'model', 'cell_labels', 'point_data' and 'cell_data' (arrays by name).");
-  module.def("write_mesh", [](const std::filesystem::path & pathArgument, const Model & model) {
-      const std::string path = pathArgument.string(); WriteMesh(path, model); },
+  module.def("write_mesh", [](const std::filesystem::path & path, const Model & model) { WriteMesh(path.string(), model); },
              py::arg("path"), py::arg("model"), "Writes nodes, cells, materials and node sets (.vtu or .vtk), atomically.");
   module.def(
     "write_result", [](const std::filesystem::path & pathArgument, const Model & model, const SolveResult & result) {
@@ -1063,8 +1062,9 @@ BindFiles(py::module_ & module)
     py::arg("path"), py::arg("model"), py::arg("result"),
     "Writes a solve result as .vtu (point data 'displacement', 'reaction_force'), as `biomech solve` does.");
   module.def("read_surface", [](const std::filesystem::path & path) { return ReadSurface(path.string()); }, py::arg("path"), "Reads a triangulated surface (.stl, .obj, .vtp, .vtk).");
-  module.def("write_surface", [](const std::filesystem::path & pathArgument, const ContactSurface & surface) {
-      const std::string path = pathArgument.string(); WriteSurface(path, surface); },
+  module.def(
+    "write_surface",
+    [](const std::filesystem::path & path, const ContactSurface & surface) { WriteSurface(path.string(), surface); },
              py::arg("path"), py::arg("surface"), "Writes a surface (.vtp, .stl, .vtk), atomically.");
   module.def(
     "read_sparse_displacements",

@@ -266,11 +266,12 @@ BindFilters(py::module_ & module)
 {
   module.def(
     "atlas_brain_mask",
-    [](const py::object & image, const std::string & atlasImage, const std::string & atlasMask, bool bsplineStage) {
-      const auto   input = ItkImage(image, "image");
+    [](const py::object & image, const std::filesystem::path & atlasImage, const std::filesystem::path & atlasMask,
+       bool bsplineStage) {
+      const auto    input = ItkImage(image, "image");
       AtlasSettings settings;
-      settings.image = atlasImage;
-      settings.mask = atlasMask;
+      settings.image = atlasImage.string();
+      settings.mask = atlasMask.string();
       settings.bsplineStage = bsplineStage;
       RegistrationLabelImage::Pointer mask;
       {
@@ -612,15 +613,7 @@ BindRegistration(py::module_ & module)
     .def_property_readonly("brain_mask", [](const BrainModel & model) { return ImageFromVolume(model.brainMask); })
     .def_property_readonly("exposed_nodes", [](const BrainModel & model) { return ArrayFromIndices(model.exposedNodes); })
     .def_readonly("load", &BrainModel::load)
-    .def_property_readonly("load_report",
-                           [](const BrainModel & model) {
-                             py::dict report;
-                             report["used"] = model.loadReport.usedPoints;
-                             report["rejected"] = model.loadReport.rejectedPoints;
-                             report["max_correspondence_distance_mm"] = model.loadReport.maxCorrespondenceDistance;
-                             report["rms_correspondence_distance_mm"] = model.loadReport.rmsCorrespondenceDistance;
-                             return report;
-                           })
+    .def_property_readonly("load_report", [](const BrainModel & model) { return LoadReportDict(model.loadReport); })
     .def_readonly("warnings", &BrainModel::warnings);
 
   module.def(

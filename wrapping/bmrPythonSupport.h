@@ -13,6 +13,7 @@
 #include "bmrImageVolume.h"
 #include "bmrModel.h"
 #include "bmrSolver.h"
+#include "bmrSurfaceLoads.h"
 
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
@@ -53,6 +54,10 @@ ArrayFromIndices(const std::vector<Index> & indices);
 /** Node ids from a 1-D sequence of integers (no range check: the callee does it). */
 std::vector<Index>
 IndicesFromArray(const py::handle & object, const std::string & what);
+
+/** A load's report (bmr::LoadReport) as a dict: used, rejected, correspondence distances (mm), warnings. */
+py::dict
+LoadReportDict(const LoadReport & report);
 
 /** Three booleans (x, y, z components). */
 std::array<bool, 3>
