@@ -30,6 +30,7 @@
 
 #include <chrono>
 #include <functional>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -274,13 +275,26 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
                    const StageCallback &                  stageCallback = {},
                    const ProgressCallback &               solverProgress = {});
 
+/** Edge detection of the evaluation (itk::EdgeHausdorffDistanceImageFilter's
+ *  Canny settings); an empty value keeps the filter's default. Fixed
+ *  thresholds (both given) turn the automatic ones off. */
+struct EdgeDetectionSettings
+{
+  std::optional<double> variance;               // Gaussian variance, mm^2
+  std::optional<double> upperThresholdQuantile; // automatic thresholds
+  std::optional<double> lowerThresholdRatio;
+  std::optional<double> upperThreshold;         // fixed thresholds (gradient magnitude)
+  std::optional<double> lowerThreshold;
+};
+
 /** Edge-based Hausdorff between `fixed` and `moving` (same grid) inside `mask` (may be null). */
 EdgeEvaluation
 EvaluateEdges(const RegistrationImage *      fixed,
               const RegistrationImage *      moving,
               const RegistrationLabelImage * mask,
               int                            sliceAxis = 2,
-              double                         distanceThreshold = 1.7);
+              double                         distanceThreshold = 1.7,
+              const EdgeDetectionSettings &  edges = {});
 
 /** Grey range of edge overlays: the image's minimum and 99.5th percentile
  *  (a few very bright voxels would otherwise leave the anatomy dark). */

@@ -16,6 +16,8 @@
 
 #include "bmrBrainShiftRegistration.h"
 
+#include <optional>
+
 namespace bmr
 {
 
@@ -133,6 +135,15 @@ struct BaselineSettings
   std::vector<unsigned int> shrinkFactors{ 4, 2, 1 };
   std::vector<double>       smoothingSigmas{ 2.0, 1.0, 0.0 };
   unsigned int              iterations = 0; // per level; 0: the filter's default
+  // Empty: the filter's default (itkBSplineIntensityRegistrationFilter.h).
+  std::optional<double>       controlPointSpacing; // mm, finest level
+  std::optional<bool>         useTranslationStage;
+  std::optional<unsigned int> translationIterations;
+  std::optional<bool>         refineMeshPerLevel;
+  std::optional<unsigned int> histogramBins;
+  std::optional<double>       metricSamplingPercentage;
+  std::optional<double>       costFunctionConvergenceFactor;
+  std::optional<int>          randomSeed;
 };
 
 BaselineRegistration

@@ -410,18 +410,25 @@ BindFilters(py::module_ & module)
   module.def(
     "evaluate_edges",
     [](const py::object & fixed, const py::object & moving, const py::object & mask, int sliceAxis,
-       double distanceThreshold) {
-      const auto fixedImage = ItkImage(fixed, "fixed");
-      const auto movingImage = ItkImage(moving, "moving");
-      const auto maskImage = ItkLabelImage(mask, "mask");
+       double distanceThreshold, std::optional<double> variance, std::optional<double> upperThresholdQuantile,
+       std::optional<double> lowerThresholdRatio, std::optional<double> upperThreshold,
+       std::optional<double> lowerThreshold) {
+      const auto            fixedImage = ItkImage(fixed, "fixed");
+      const auto            movingImage = ItkImage(moving, "moving");
+      const auto            maskImage = ItkLabelImage(mask, "mask");
+      EdgeDetectionSettings edges{ variance, upperThresholdQuantile, lowerThresholdRatio, upperThreshold, lowerThreshold };
       py::gil_scoped_release release;
       return TranslateItkErrors(
-        [&] { return EvaluateEdges(fixedImage, movingImage, maskImage, sliceAxis, distanceThreshold); });
+        [&] { return EvaluateEdges(fixedImage, movingImage, maskImage, sliceAxis, distanceThreshold, edges); });
     },
     py::arg("fixed"), py::arg("moving"), py::arg("mask") = py::none(), py::kw_only(), py::arg("slice_axis") = 2,
-    py::arg("distance_threshold") = 1.7,
+    py::arg("distance_threshold") = 1.7, py::arg("variance") = py::none(),
+    py::arg("upper_threshold_quantile") = py::none(), py::arg("lower_threshold_ratio") = py::none(),
+    py::arg("upper_threshold") = py::none(), py::arg("lower_threshold") = py::none(),
     "Edge-based Hausdorff evaluation of two images on the same grid inside `mask` "
-    "(itk::EdgeHausdorffDistanceImageFilter): slice_axis 0..2 for slice by slice, -1 for the whole volume.");
+    "(itk::EdgeHausdorffDistanceImageFilter): slice_axis 0..2 for slice by slice, -1 for the whole volume; Canny "
+    "settings left None keep the filter's defaults (variance 2 mm^2, automatic thresholds at the 0.8 quantile and "
+    "0.4 of it).");
 
   py::class_<BaselineRegistration>(module, "BSplineRegistration")
     .def_property_readonly("transform",
@@ -434,7 +441,10 @@ BindFilters(py::module_ & module)
     "bspline_registration",
     [](const py::object & fixed, const py::object & moving, const py::object & fixedMask,
        const std::vector<unsigned int> & shrinkFactors, const std::vector<double> & smoothingSigmas,
-       unsigned int iterations) {
+       unsigned int iterations, std::optional<double> controlPointSpacing, std::optional<bool> useTranslationStage,
+       std::optional<unsigned int> translationIterations, std::optional<bool> refineMeshPerLevel,
+       std::optional<unsigned int> histogramBins, std::optional<double> metricSamplingPercentage,
+       std::optional<double> costFunctionConvergenceFactor, std::optional<int> randomSeed) {
       if (shrinkFactors.empty() || shrinkFactors.size() != smoothingSigmas.size())
       {
         throw py::value_error("shrink_factors and smoothing_sigmas must name the same number (>= 1) of levels");
@@ -446,6 +456,14 @@ BindFilters(py::module_ & module)
       settings.shrinkFactors = shrinkFactors;
       settings.smoothingSigmas = smoothingSigmas;
       settings.iterations = iterations;
+      settings.controlPointSpacing = controlPointSpacing;
+      settings.useTranslationStage = useTranslationStage;
+      settings.translationIterations = translationIterations;
+      settings.refineMeshPerLevel = refineMeshPerLevel;
+      settings.histogramBins = histogramBins;
+      settings.metricSamplingPercentage = metricSamplingPercentage;
+      settings.costFunctionConvergenceFactor = costFunctionConvergenceFactor;
+      settings.randomSeed = randomSeed;
       py::gil_scoped_release release;
       return TranslateItkErrors(
         [&] { return RegisterWithBSplineBaseline(fixedImage, movingImage, maskImage, settings); });
@@ -453,8 +471,13 @@ BindFilters(py::module_ & module)
     py::arg("fixed"), py::arg("moving"), py::arg("fixed_mask") = py::none(), py::kw_only(),
     py::arg("shrink_factors") = BaselineSettings{}.shrinkFactors,
     py::arg("smoothing_sigmas") = BaselineSettings{}.smoothingSigmas, py::arg("iterations") = 0,
+    py::arg("control_point_spacing") = py::none(), py::arg("use_translation_stage") = py::none(),
+    py::arg("translation_iterations") = py::none(), py::arg("refine_mesh_per_level") = py::none(),
+    py::arg("histogram_bins") = py::none(), py::arg("metric_sampling_percentage") = py::none(),
+    py::arg("cost_function_convergence_factor") = py::none(), py::arg("random_seed") = py::none(),
     "Intensity-based B-spline registration, the baseline (itk::BSplineIntensityRegistrationFilter: translation, then "
-    "B-spline, Mattes mutual information, L-BFGS-B); iterations 0 keeps the filter's default per level.");
+    "B-spline, Mattes mutual information, L-BFGS-B); iterations 0 and settings left None keep the filter's defaults "
+    "(control points 20 mm at the finest level, 50 histogram bins, 20 % of the voxels sampled, seed 121212).");
 }
 
 // ---------------------------------------------------------------------------

@@ -392,7 +392,8 @@ EvaluateEdges(const RegistrationImage *      fixed,
               const RegistrationImage *      moving,
               const RegistrationLabelImage * mask,
               int                            sliceAxis,
-              double                         distanceThreshold)
+              double                         distanceThreshold,
+              const EdgeDetectionSettings &  edges)
 {
   auto filter = itk::EdgeHausdorffDistanceImageFilter<RegistrationImage, RegistrationLabelImage>::New();
   filter->SetFixedImage(fixed);
@@ -403,6 +404,22 @@ EvaluateEdges(const RegistrationImage *      fixed,
   }
   filter->SetSliceAxis(sliceAxis);
   filter->SetDistanceThreshold(distanceThreshold);
+  if (edges.variance)
+    filter->SetVariance(*edges.variance);
+  if (edges.upperThresholdQuantile)
+    filter->SetUpperThresholdQuantile(*edges.upperThresholdQuantile);
+  if (edges.lowerThresholdRatio)
+    filter->SetLowerThresholdRatio(*edges.lowerThresholdRatio);
+  if (edges.upperThreshold.has_value() != edges.lowerThreshold.has_value())
+  {
+    throw Error("fixed edge thresholds need both the upper and the lower threshold (or neither, for automatic ones)");
+  }
+  if (edges.upperThreshold)
+  {
+    filter->SetAutomaticThresholds(false);
+    filter->SetUpperThreshold(*edges.upperThreshold);
+    filter->SetLowerThreshold(*edges.lowerThreshold);
+  }
   try
   {
     filter->Update();
@@ -411,14 +428,14 @@ EvaluateEdges(const RegistrationImage *      fixed,
   {
     throw Error(std::string("edge-based evaluation failed: ") + exception.GetDescription());
   }
-  const itk::EdgeHausdorffResult & edges = filter->GetResult();
+  const itk::EdgeHausdorffResult & result = filter->GetResult();
   EdgeEvaluation                   evaluation;
-  evaluation.valid = edges.valid;
-  evaluation.message = edges.message;
-  evaluation.symmetric = edges.symmetric;
-  evaluation.fractionWithinThreshold = edges.fractionWithinThreshold;
-  evaluation.fixedEdges = edges.fixedEdgePixels;
-  evaluation.movingEdges = edges.movingEdgePixels;
+  evaluation.valid = result.valid;
+  evaluation.message = result.message;
+  evaluation.symmetric = result.symmetric;
+  evaluation.fractionWithinThreshold = result.fractionWithinThreshold;
+  evaluation.fixedEdges = result.fixedEdgePixels;
+  evaluation.movingEdges = result.movingEdgePixels;
   evaluation.fixedEdgeImage = const_cast<RegistrationLabelImage *>(filter->GetFixedEdges());
   evaluation.movingEdgeImage = const_cast<RegistrationLabelImage *>(filter->GetMovingEdges());
   return evaluation;

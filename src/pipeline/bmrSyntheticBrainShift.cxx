@@ -354,6 +354,22 @@ RegisterWithBSplineBaseline(const RegistrationImage *      fixed,
   {
     filter->SetNumberOfIterations(settings.iterations);
   }
+  if (settings.controlPointSpacing)
+    filter->SetControlPointSpacing(*settings.controlPointSpacing);
+  if (settings.useTranslationStage)
+    filter->SetUseTranslationStage(*settings.useTranslationStage);
+  if (settings.translationIterations)
+    filter->SetTranslationNumberOfIterations(*settings.translationIterations);
+  if (settings.refineMeshPerLevel)
+    filter->SetRefineMeshPerLevel(*settings.refineMeshPerLevel);
+  if (settings.histogramBins)
+    filter->SetNumberOfHistogramBins(*settings.histogramBins);
+  if (settings.metricSamplingPercentage)
+    filter->SetMetricSamplingPercentage(*settings.metricSamplingPercentage);
+  if (settings.costFunctionConvergenceFactor)
+    filter->SetCostFunctionConvergenceFactor(*settings.costFunctionConvergenceFactor);
+  if (settings.randomSeed)
+    filter->SetRandomSeed(*settings.randomSeed);
   const auto start = std::chrono::steady_clock::now();
   try
   {

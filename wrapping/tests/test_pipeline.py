@@ -92,8 +92,13 @@ def test_edge_evaluation_measures_a_known_shift():
     assert moved.valid and len(moved.percentiles) == 100
     assert 1.0 <= moved.percentile(95) <= 3.5
     assert moved.fixed_edge_image.array.dtype == np.uint8 and moved.fixed_edge_image.same_grid(image)
+    # Canny settings reach the filter: thresholds above every gradient leave no edge to measure.
+    none = bmr.evaluate_edges(image, shifted, upper_threshold=1e9, lower_threshold=1e9, slice_axis=-1)
+    assert not none.valid and none.message and none.fixed_edges == 0
     with pytest.raises(bmr.Error, match="grid"):
         bmr.evaluate_edges(image, blob(32))
+    with pytest.raises(bmr.Error, match="both the upper and the lower"):
+        bmr.evaluate_edges(image, image, upper_threshold=3.0)
 
 
 def test_bspline_baseline_recovers_a_shift():
@@ -108,6 +113,11 @@ def test_bspline_baseline_recovers_a_shift():
     np.testing.assert_allclose(result.transform.transform_points(centre + [2, -1, 0]), centre, atol=0.3)
     with pytest.raises(ValueError, match="levels"):
         bmr.bspline_registration(moving_truth, fixed, shrink_factors=[2, 1], smoothing_sigmas=[1.0])
+    for setting, message in [({"control_point_spacing": -1}, "ControlPointSpacing"),
+                             ({"histogram_bins": 1}, "NumberOfHistogramBins"),
+                             ({"metric_sampling_percentage": 2.0}, "MetricSamplingPercentage")]:
+        with pytest.raises(bmr.Error, match=message):
+            bmr.bspline_registration(moving_truth, fixed, shrink_factors=[1], smoothing_sigmas=[0.0], iterations=2, **setting)
 
 
 def test_brain_surfaces_of_a_ball():
