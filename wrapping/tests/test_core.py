@@ -159,7 +159,7 @@ def scene_path():
 
 
 def test_solve_gives_what_the_command_line_tool_writes(tmp_path, biomech):
-    run = biomech("solve", scene_path(), "-d", tmp_path, "-q")
+    run = biomech("solve", scene_path(), "-d", tmp_path)
     assert run.returncode == 0, run.stderr
     written = bmr.read_mesh(tmp_path / "block-indentation-result.vtu")
     result = bmr.solve(scene_path())
@@ -170,6 +170,10 @@ def test_solve_gives_what_the_command_line_tool_writes(tmp_path, biomech):
     ours = bmr.report_json(scene, result)
     for key in ("converged", "steps", "max_displacement_mm", "estimated_error_mm", "strain_energy_J", "nodes"):
         assert ours[key] == report[key], key
+    # The summary table is the one biomech prints, but for the wall time (and the output files it names).
+    printed = run.stdout.splitlines()
+    table = [line for line in bmr.format_report(scene, result).splitlines() if "wall time" not in line]
+    assert len(table) > 5 and all(line in printed for line in table)
     # The same scene as a dict, with the mesh generated from its description.
     as_dict = json.loads(scene_path().read_text())
     np.testing.assert_array_equal(bmr.solve(as_dict).displacements, result.displacements)

@@ -164,6 +164,18 @@ def test_synthetic_brain_shift_needs_a_mask():
         bmr.make_synthetic_brain_shift(blob(16), None)
 
 
+def test_atlas_brain_mask_follows_a_moved_colin27(colin27):
+    """Colin27 at half resolution, moved by 6 mm: the atlas (Colin27 itself) must be registered to find its brain."""
+    image, mask = colin27
+    moved_origin = image.origin + [6.0, -4.0, 5.0]
+    small = bmr.image_from_array(image.array[::2, ::2, ::2], image.spacing * 2, moved_origin, image.direction)
+    found = bmr.atlas_brain_mask(small, bspline_stage=False)
+    assert found.same_grid(small) and found.array.dtype == np.uint8
+    expected = mask.array[::2, ::2, ::2] > 0
+    dice = 2 * np.count_nonzero(expected & (found.array > 0)) / (np.count_nonzero(expected) + np.count_nonzero(found.array))
+    assert dice > 0.95, dice
+
+
 def test_atlas_brain_mask_names_a_missing_atlas(tmp_path):
     with pytest.raises(bmr.Error, match="missing-atlas"):
         bmr.atlas_brain_mask(blob(16), atlas_image=str(tmp_path / "missing-atlas.nii.gz"))
@@ -171,6 +183,33 @@ def test_atlas_brain_mask_names_a_missing_atlas(tmp_path):
 
 def sparse_csv():
     return SOURCE_DIR / "examples" / "data" / "colin27-superior-craniotomy.csv"
+
+
+def test_surface_correspondence_and_mask_regions():
+    """A flat top moved down 1 mm everywhere: the surface-to-surface load is -1 mm at every exposed node."""
+    model = bmr.make_block_mesh((20, 20, 10), (4, 4, 2))
+    exposed = model.node_sets["zmax"]
+
+    def top(z, count=31):  # a plane over x, y in -5..25 mm with 1 mm triangles, normals up
+        axis = np.linspace(-5, 25, count)
+        x, y = np.meshgrid(axis, axis, indexing="ij")
+        vertices = np.column_stack([x.ravel(), y.ravel(), np.full(x.size, z)])
+        corner = (np.arange(count - 1)[:, None] * count + np.arange(count - 1)[None, :]).ravel()
+        triangles = np.concatenate([np.column_stack([corner, corner + count, corner + count + 1]),
+                                    np.column_stack([corner, corner + count + 1, corner + 1])])
+        return bmr.Surface(vertices, triangles)
+
+    load, report = bmr.displacements_between_surfaces(model, exposed, top(10.0), top(9.0), reach=5.0, spacing=5.0)
+    np.testing.assert_array_equal(np.sort(load.nodes), np.sort(exposed))
+    np.testing.assert_allclose(load.displacements, np.tile([0, 0, -1.0], (len(exposed), 1)), atol=1e-9)
+    with pytest.raises(TypeError):
+        bmr.displacements_between_surfaces(model, exposed, top(10.0), top(9.0))  # reach and spacing are required
+    # A mask over the block's top layer selects the top nodes.
+    region = np.zeros((12, 22, 22), np.uint8)  # 1 mm voxels from (-1, -1, -1): z 8..11 mm
+    region[9:, :, :] = 1
+    mask = bmr.image_from_array(region, origin=(-1.0, -1.0, -1.0))
+    selected = bmr.surface_nodes_in_mask(model, mask)
+    np.testing.assert_array_equal(np.sort(selected), np.sort(exposed))
 
 
 CRANIOTOMY = dict(craniotomy_centre=(-11, 43, 84), craniotomy_radius=30, element_size=8)
