@@ -24,6 +24,7 @@
 #include <pybind11/functional.h>
 
 #include <sstream>
+#include <type_traits>
 
 namespace bmr::python
 {
@@ -75,9 +76,14 @@ PythonImage(const RegistrationLabelImage * image)
   return ImageFromVolume(itk::MakeBiomechanicalVolume<std::uint8_t>(image));
 }
 
+/** uint8 or bool voxels; anything that is not an image is left to the conversions, which name the problem. */
 bool
 IsLabelImage(const py::handle & image)
 {
+  if (!py::hasattr(image, "array"))
+  {
+    return false;
+  }
   const py::array array = py::array::ensure(image.attr("array"));
   return array && (array.dtype().kind() == 'u' || array.dtype().kind() == 'b') && array.itemsize() == 1;
 }
@@ -158,8 +164,7 @@ BindFilesAndTransforms(py::module_ & module)
     [](const py::object & image, const std::filesystem::path & pathArgument) {
       const std::string path = pathArgument.string();
       TranslateItkErrors([&] {
-        const py::array     array = py::array::ensure(image.attr("array"));
-        if (array.ndim() == 4)
+        if (GeometryFromImage(image, "image").size[0] > 0 && py::array::ensure(image.attr("array")).ndim() == 4)
         {
           const ScalarVolume volume = ScalarVolumeFromImage(image, "image");
           auto               vectorImage = VectorImageType::New();
@@ -533,19 +538,44 @@ RegistrationSettingsFrom(const py::dict & values)
   const auto get = [&](const char * name) -> py::object {
     return values.contains(name) ? py::reinterpret_borrow<py::object>(values[name]) : py::object(known[name]);
   };
+  // A value of the wrong type is a TypeError that names the setting (pybind's own message does not).
+  const auto number = [&](const char * name, auto typed) {
+    const py::object value = get(name);
+    try
+    {
+      return value.cast<decltype(typed)>();
+    }
+    catch (const py::cast_error &)
+    {
+      throw py::type_error("setting '" + std::string(name) + "' must be " +
+                           (std::is_same_v<decltype(typed), bool> ? "True or False"
+                                                                  : std::is_integral_v<decltype(typed)> ? "an integer"
+                                                                                                        : "a number") +
+                           ", got " + std::string(py::repr(value)));
+    }
+  };
+  const auto text = [&](const char * name) {
+    const py::object value = get(name);
+    if (!py::isinstance<py::str>(value) && !py::hasattr(value, "__fspath__"))
+    {
+      throw py::type_error("setting '" + std::string(name) + "' must be a string or a path, got " +
+                           std::string(py::repr(value)));
+    }
+    return py::module_::import("os").attr("fspath")(value).cast<std::string>();
+  };
   BrainShiftRegistrationSettings settings;
   BrainModelSettings &           model = settings.model;
-  model.classifier.classes = get("classes").cast<int>();
-  model.classifier.fuzziness = get("fuzziness").cast<double>();
-  model.classifier.tolerance = get("classifier_tolerance").cast<double>();
-  model.classifier.maxIterations = get("classifier_max_iterations").cast<int>();
-  model.atlas.image = get("atlas").cast<std::string>();
-  model.atlas.mask = get("atlas_mask").cast<std::string>();
-  model.atlas.bsplineStage = !get("affine_only").cast<bool>();
-  model.grid.kind = ParseImageGridKind(get("grid").cast<std::string>());
-  model.grid.elementSize = get("element_size").cast<double>();
-  model.skullGap = get("skull_gap").cast<double>();
-  model.skullBase.height = get("skull_base_height").cast<double>();
+  model.classifier.classes = number("classes", int{});
+  model.classifier.fuzziness = number("fuzziness", double{});
+  model.classifier.tolerance = number("classifier_tolerance", double{});
+  model.classifier.maxIterations = number("classifier_max_iterations", int{});
+  model.atlas.image = text("atlas");
+  model.atlas.mask = text("atlas_mask");
+  model.atlas.bsplineStage = !number("affine_only", bool{});
+  model.grid.kind = ParseImageGridKind(text("grid"));
+  model.grid.elementSize = number("element_size", double{});
+  model.skullGap = number("skull_gap", double{});
+  model.skullBase.height = number("skull_base_height", double{});
   const py::object centre = get("craniotomy_centre");
   const py::object mask = get("craniotomy_mask");
   if (!centre.is_none() && !mask.is_none())
@@ -556,7 +586,7 @@ RegistrationSettingsFrom(const py::dict & values)
   if (!centre.is_none())
   {
     model.craniotomyCentre = VectorFromObject(centre, "craniotomy_centre");
-    model.craniotomyRadius = get("craniotomy_radius").cast<double>();
+    model.craniotomyRadius = number("craniotomy_radius", double{});
     if (!(model.craniotomyRadius > 0.0))
     {
       throw py::value_error("craniotomy_centre needs craniotomy_radius > 0 (mm)");
@@ -566,15 +596,16 @@ RegistrationSettingsFrom(const py::dict & values)
   {
     model.craniotomyMask = ItkLabelImage(mask, "craniotomy_mask");
   }
-  model.contact = get("contact").cast<bool>();
+  model.contact = number("contact", bool{});
   model.gravity = VectorFromObject(get("gravity"), "gravity");
-  model.threads = get("threads").cast<int>();
-  settings.solver.tolerance = get("solver_tolerance").cast<double>();
-  settings.solver.maxSteps = get("max_steps").cast<int>();
-  settings.fitTolerance = get("fit_tolerance").cast<double>();
-  settings.minimumControlPointSpacing = get("min_control_point_spacing").cast<double>();
-  settings.evaluationSliceAxis = get("evaluation_slice_axis").cast<int>();
-  settings.evaluationDistanceThreshold = get("evaluation_distance_threshold").cast<double>();
+  model.threads = number("threads", int{});
+  settings.solver.tolerance = number("solver_tolerance", double{});
+  settings.solver.maxSteps = number("max_steps", int{});
+  settings.fitTolerance = number("fit_tolerance", double{});
+  settings.minimumControlPointSpacing = number("min_control_point_spacing", double{});
+  settings.evaluationSliceAxis = number("evaluation_slice_axis", int{});
+  settings.evaluationDistanceThreshold = number("evaluation_distance_threshold", double{});
+  number("max_distance", double{}); // checked here, used by MaxDistanceFrom with the intraoperative data
   return settings;
 }
 

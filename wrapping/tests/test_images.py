@@ -113,6 +113,10 @@ def test_bad_images_are_named():
         bmr.make_grid(bmr.image_from_array(np.ones((4, 4, 4), np.float32)))
     with pytest.raises(ValueError, match="labels 0..255"):
         bmr.make_grid(bmr.image_from_array(np.full((4, 4, 4), 300, np.int32)))
+    with pytest.raises(TypeError, match="biomechanical_registration.Image"):
+        bmr.imwrite(np.zeros((2, 2, 2)), "never.nii.gz")
+    with pytest.raises(TypeError, match="biomechanical_registration.Image"):
+        bmr.warp_image(np.zeros((2, 2, 2)), bmr.identity_transform())
     with pytest.raises(TypeError, match="numbers"):
         bmr.imwrite(bmr.image_from_array(np.zeros((2, 2, 2), np.complex64)), "never.nii.gz")
 

@@ -259,6 +259,10 @@ def test_register_bad_arguments_are_named(colin27):
     points, displacements = bmr.read_sparse_displacements(sparse_csv())
     with pytest.raises(TypeError, match="element_sise"):
         bmr.register(image, brain_mask=mask, sparse_points=points, sparse_displacements=displacements, element_sise=8)
+    with pytest.raises(TypeError, match="'element_size' must be a number, got 'eight'"):
+        bmr.register(image, brain_mask=mask, sparse_points=points, sparse_displacements=displacements, element_size="eight")
+    with pytest.raises(bmr.Error, match="hexahedra"):
+        bmr.register(image, brain_mask=mask, sparse_points=points, sparse_displacements=displacements, grid="bricks")
     with pytest.raises(ValueError, match="both sparse_points and sparse_displacements"):
         bmr.register(image, brain_mask=mask, sparse_points=points, **CRANIOTOMY)
     with pytest.raises(ValueError, match="craniotomy_radius"):
