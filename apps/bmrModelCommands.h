@@ -20,6 +20,10 @@ namespace app
 std::function<int()>
 AddModelCommands(CLI::App & app);
 
+/** `simulate` (bmrSimulateCommand.cxx): explicit dynamics with moving tools, written as a time series. */
+std::function<int()>
+AddSimulateCommand(CLI::App & app);
+
 } // namespace app
 } // namespace bmr
 

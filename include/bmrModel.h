@@ -10,6 +10,8 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "bmrOgden.h"
+
 #include <array>
 #include <cstdint>
 #include <map>
@@ -115,6 +117,61 @@ struct ContactSurface
   std::string                 slaveNodeSet; // empty: all boundary nodes of the mesh
 };
 
+/** Where a rigid tool is at a time: the origin of the tool's frame (mm) and
+ *  its orientation as a rotation vector (axis times angle, radians), both in
+ *  the model's frame. */
+struct ToolPose
+{
+  double  time = 0.0; // s
+  Vector3 position = Vector3::Zero();
+  Vector3 rotation = Vector3::Zero();
+};
+
+/** A rigid surgical tool moved along a prescribed trajectory: frictionless
+ *  contact with separation, the body staying outside the tool. Explicit
+ *  dynamics moves it in time; dynamic relaxation ramps it from the first to
+ *  the last pose over the load steps and reports the steady state.
+ *  Shapes, in the tool's frame (the tip at the origin, the tool along +z):
+ *   - Probe: a sphere-ended cylinder of `radius`, the tip sphere centred at the
+ *     origin, the shaft `length` mm along +z;
+ *   - Spatula: a flat blade of thickness 2 radius with rounded edges around
+ *     the rectangle x in [-width/2, width/2], y = 0, z in [0, length];
+ *   - Surface: `surface` (a closed triangulated surface, any shape). */
+struct RigidTool
+{
+  enum class Shape
+  {
+    Probe,
+    Spatula,
+    Surface
+  };
+  std::string           name = "tool";
+  Shape                 shape = Shape::Probe;
+  double                radius = 2.0;  // mm
+  double                length = 50.0; // mm
+  double                width = 10.0;  // mm, spatula
+  ContactSurface        surface;       // Shape::Surface, tool frame
+  std::vector<ToolPose> trajectory;    // times increasing; linear in position, spherical-linear in rotation
+  std::string           slaveNodeSet;  // empty: the boundary nodes
+  /** Stresses near the tool (explicit dynamics): the cells whose reference
+   *  centroid comes within this distance (mm) of the tool anywhere along its
+   *  trajectory are re-evaluated every step with `stressMaterial`, Miller and
+   *  Chinzei's Ogden-type hyperviscoelastic law, from their deformation
+   *  gradients and time history; the tool force is corrected by the
+   *  difference of those cells' nodal forces. 0: no re-evaluation. The
+   *  re-evaluation does not feed back into the motion. */
+  double                    stressRegionRadius = 0.0;
+  OgdenViscoelasticMaterial stressMaterial;
+};
+
+const char *
+ToolShapeName(RigidTool::Shape shape);
+
+/** The tool's pose at `time`: interpolated between the trajectory's poses,
+ *  held at the first before it starts and at the last after it ends. */
+ToolPose
+ToolPoseAt(const RigidTool & tool, double time);
+
 /** Basis of the moving-least-squares shape functions of the meshless discretization. */
 enum class MlsBasis : std::uint8_t
 {
@@ -172,6 +229,7 @@ struct Model
   Vector3                             bodyAcceleration = Vector3::Zero(); // mm/s^2 (gravity: 0,0,-9810)
   LoadCurve                           bodyForceCurve;
   std::vector<ContactSurface>         contactSurfaces;
+  std::vector<RigidTool>              tools;
 
   Discretization         discretization = Discretization::FiniteElement;
   MeshlessDiscretization meshless; // used when discretization == Meshless

@@ -57,6 +57,10 @@ struct SolverSettings
   /** Dynamic relaxation: steps between updates of the lowest-eigenvalue estimate. */
   int adaptInterval = 20;
 
+  /** Explicit dynamics: seconds between frames passed to Solve's frame
+   *  callback (0: no frames). */
+  double outputInterval = 0.0;
+
   /** Compute Cauchy stress per cell at the end. */
   bool computeStress = false;
 
@@ -67,6 +71,38 @@ struct SolverSettings
 /** Progress report: fraction done in [0,1] (explicit dynamics) or -1 when
  *  unknown, and the current estimated error (mm) for dynamic relaxation. */
 using ProgressCallback = std::function<void(int step, double fraction, double estimatedError)>;
+
+/** A rigid tool's motion and the tissue's load on it (Model::tools): one
+ *  entry per time step in explicit dynamics, the steady state alone in
+ *  dynamic relaxation. */
+struct ToolHistory
+{
+  std::string          name;
+  std::vector<double>  time;         // s
+  std::vector<Vector3> position;     // mm, the tool frame's origin
+  std::vector<Vector3> force;        // N, on the tool
+  std::vector<Vector3> moment;       // N mm, on the tool about its origin
+  std::vector<int>     contactNodes; // nodes it touches
+  double               work = 0.0;   // J, done by the tool on the tissue over the solve
+
+  // With a stress region (RigidTool::stressRegionRadius > 0), explicit dynamics:
+  std::vector<Vector3>         correctedForce;   // N per step: `force` with the region's cells as Ogden tissue
+  std::vector<double>          peakStress;       // Pa per step: largest von Mises stress of the region (Ogden)
+  std::vector<Index>           stressCells;      // the region's cells
+  std::vector<Eigen::Matrix3d> ogdenStress;      // Pa, Cauchy, per region cell at the end
+  std::vector<Eigen::Matrix3d> neoHookeanStress; // Pa, Cauchy of the same deformation gradient
+};
+
+/** The state at an output time of explicit dynamics (SolverSettings::outputInterval). */
+struct SolveFrame
+{
+  double                       time = 0.0; // s
+  int                          step = 0;
+  const std::vector<Vector3> & displacements; // mm, per node
+  double                       strainEnergy = 0.0;  // J, hourglass energy included (as SolveResult::strainEnergy)
+  double                       kineticEnergy = 0.0; // J, from the velocity of the last half step
+};
+using FrameCallback = std::function<void(const SolveFrame & frame)>;
 
 struct SolveResult
 {
@@ -94,6 +130,7 @@ struct SolveResult
   int         contactNodes = 0;       // nodes on a contact surface at the end
   double      maxPenetration = 0.0;   // mm, after the last projection
   std::vector<std::string> activeComponents;
+  std::vector<ToolHistory> tools; // one per Model::tools entry
   std::string message; // why it stopped
 };
 
@@ -125,7 +162,10 @@ public:
   Solver(const Solver &) = delete;
   Solver & operator=(const Solver &) = delete;
 
-  SolveResult Solve(const ProgressCallback & progress = {});
+  /** `frames`: called at t = 0, at the first step at or after every
+   *  multiple of SolverSettings::outputInterval, and at the end time
+   *  (explicit dynamics with an output interval only). */
+  SolveResult Solve(const ProgressCallback & progress = {}, const FrameCallback & frames = {});
 
   /** Components built for this model (e.g. "hexahedra", "hourglass-control",
    *  "anp-tetrahedra", "contact", "dynamic-relaxation"). */

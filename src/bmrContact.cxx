@@ -158,10 +158,25 @@ RigidContact::IsClosed() const
 }
 
 void
-RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std::vector<char> & inContact, int threads)
+RigidContact::SetPose(const Eigen::Matrix3d & rotation, const Vector3 & translation)
+{
+  m_Rotation = rotation;
+  m_Translation = translation;
+}
+
+void
+RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std::vector<char> & inContact, int threads,
+                      std::vector<Vector3> * corrections)
 {
   const Tree & tree = *m_Tree;
   const auto   count = static_cast<Index>(m_SlaveNodes.size());
+  if (corrections != nullptr)
+  {
+    corrections->assign(m_SlaveNodes.size(), Vector3::Zero());
+  }
+  // Distances are measured in the surface's own frame, where they do not
+  // change when the surface moves rigidly: the query cache stays valid.
+  const auto toSurface = [&](const Vector3 & x) -> Vector3 { return m_Rotation.transpose() * (x - m_Translation); };
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 256)
   for (Index i = 0; i < count; ++i)
   {
@@ -172,7 +187,7 @@ RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std:
       continue;
     }
     double *      un = u + 3 * static_cast<std::size_t>(node);
-    const Vector3 x = m_Reference[i] + Vector3(un[0], un[1], un[2]);
+    const Vector3 x = toSurface(m_Reference[i] + Vector3(un[0], un[1], un[2]));
     // A node that was at distance d on the allowed side cannot have crossed the
     // surface while it stays within d of that position: no query needed.
     if ((x - m_LastQueried[i]).norm() < m_SafeDistance[i])
@@ -193,7 +208,7 @@ RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std:
     Vector3       position = x;
     for (int pass = 0; pass < kProjectionPasses; ++pass)
     {
-      Vector3 displacement = closest - m_Reference[i];
+      Vector3 displacement = m_Rotation * closest + m_Translation - m_Reference[i];
       for (int k = 0; k < 3; ++k)
       {
         if (held[k])
@@ -202,18 +217,29 @@ RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std:
         }
       }
       position = m_Reference[i] + displacement;
-      if (!(held[0] || held[1] || held[2]) || tree.sideSign * tree.SignedDistance(position, closest) >= 0.0)
+      if (!(held[0] || held[1] || held[2]) || tree.sideSign * tree.SignedDistance(toSurface(position), closest) >= 0.0)
       {
         break;
       }
     }
     const Vector3 projected = position - m_Reference[i];
+    if (corrections != nullptr)
+    {
+      (*corrections)[static_cast<std::size_t>(i)] = projected - held0;
+    }
     un[0] = projected.x();
     un[1] = projected.y();
     un[2] = projected.z();
     inContact[node] = 1;
     m_SafeDistance[i] = 0.0;
   }
+}
+
+double
+RigidContact::SignedDistance(const Vector3 & point) const
+{
+  Vector3 closest;
+  return m_Tree->sideSign * m_Tree->SignedDistance(m_Rotation.transpose() * (point - m_Translation), closest);
 }
 
 double
@@ -224,7 +250,8 @@ RigidContact::MaxPenetration(const double * u) const
   {
     const double * un = u + 3 * static_cast<std::size_t>(m_SlaveNodes[i]);
     Vector3        closest;
-    const double   s = m_Tree->sideSign * m_Tree->SignedDistance(m_Reference[i] + Vector3(un[0], un[1], un[2]), closest);
+    const Vector3  x = m_Rotation.transpose() * (m_Reference[i] + Vector3(un[0], un[1], un[2]) - m_Translation);
+    const double   s = m_Tree->sideSign * m_Tree->SignedDistance(x, closest);
     deepest = std::max(deepest, -s);
   }
   return deepest;

@@ -24,8 +24,18 @@ public:
 
   /** Moves penetrating slave nodes (u: 3 per node, mm) onto the surface and
    *  marks them in `inContact`. Components flagged in `dofConstrained` (3 per
-   *  node) keep their value; the node moves in its free components only. */
-  void Enforce(double * u, const std::vector<char> & dofConstrained, std::vector<char> & inContact, int threads);
+   *  node) keep their value; the node moves in its free components only.
+   *  `corrections` (when given): per slave node, the displacement the
+   *  projection added (zero for nodes it left alone). */
+  void Enforce(double * u, const std::vector<char> & dofConstrained, std::vector<char> & inContact, int threads,
+               std::vector<Vector3> * corrections = nullptr);
+
+  /** Places the surface: a point p of the surface's own frame is at
+   *  rotation p + translation (a moving tool); identity by default. */
+  void SetPose(const Eigen::Matrix3d & rotation, const Vector3 & translation);
+
+  /** Signed distance (mm) of a point (model frame) to the surface, positive on the body's side. */
+  double SignedDistance(const Vector3 & point) const;
 
   /** Largest penetration (mm) of any slave node at displacements u. */
   double MaxPenetration(const double * u) const;
@@ -38,7 +48,9 @@ private:
   std::unique_ptr<Tree>  m_Tree;
   std::vector<Index>     m_SlaveNodes;
   std::vector<Vector3>   m_Reference;     // reference positions of slave nodes
-  std::vector<Vector3>   m_LastQueried;   // position at the last exact query
+  Eigen::Matrix3d        m_Rotation = Eigen::Matrix3d::Identity();
+  Vector3                m_Translation = Vector3::Zero();
+  std::vector<Vector3>   m_LastQueried;   // position at the last exact query, in the surface's frame
   std::vector<double>    m_SafeDistance;  // distance to the surface at that query (allowed side), else 0
 };
 

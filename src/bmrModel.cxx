@@ -350,6 +350,113 @@ Model::Validate() const
       NodeSet(surface.slaveNodeSet);
     }
   }
+  for (const RigidTool & tool : tools)
+  {
+    const std::string label = "tool '" + tool.name + "'";
+    if (tool.trajectory.empty())
+    {
+      throw Error(label + " has no trajectory. Give at least one pose (time, position, rotation).");
+    }
+    for (std::size_t k = 0; k < tool.trajectory.size(); ++k)
+    {
+      const ToolPose & pose = tool.trajectory[k];
+      if (!std::isfinite(pose.time) || !pose.position.allFinite() || !pose.rotation.allFinite())
+      {
+        throw Error(label + " pose " + std::to_string(k) + " is not finite.");
+      }
+      if (k > 0 && !(pose.time > tool.trajectory[k - 1].time))
+      {
+        throw Error(label + " pose " + std::to_string(k) + " at t = " + std::to_string(pose.time) +
+                    " s does not come after the previous one: the trajectory's times must increase.");
+      }
+    }
+    if (tool.shape == RigidTool::Shape::Surface)
+    {
+      if (tool.surface.vertices.empty() || tool.surface.triangles.empty())
+      {
+        throw Error(label + " has no surface. Give a closed triangulated surface in the tool's frame.");
+      }
+    }
+    else
+    {
+      if (!(tool.radius > 0.0) || !std::isfinite(tool.radius))
+      {
+        throw Error(label + " has radius " + std::to_string(tool.radius) + " mm; it must be positive.");
+      }
+      if (!(tool.length >= 0.0) || !std::isfinite(tool.length))
+      {
+        throw Error(label + " has length " + std::to_string(tool.length) + " mm; it must be 0 or more.");
+      }
+      if (tool.shape == RigidTool::Shape::Spatula && (!(tool.width > 0.0) || !std::isfinite(tool.width)))
+      {
+        throw Error(label + " has width " + std::to_string(tool.width) + " mm; a spatula's must be positive.");
+      }
+    }
+    if (!tool.slaveNodeSet.empty())
+    {
+      NodeSet(tool.slaveNodeSet);
+    }
+    if (!(tool.stressRegionRadius >= 0.0) || !std::isfinite(tool.stressRegionRadius))
+    {
+      throw Error(label + " has stress region radius " + std::to_string(tool.stressRegionRadius) +
+                  " mm; it must be 0 (none) or positive.");
+    }
+    if (tool.stressRegionRadius > 0.0)
+    {
+      try
+      {
+        tool.stressMaterial.Validate();
+      }
+      catch (const Error & error)
+      {
+        throw Error(label + " stress material: " + error.what());
+      }
+    }
+  }
+}
+
+const char *
+ToolShapeName(RigidTool::Shape shape)
+{
+  switch (shape)
+  {
+    case RigidTool::Shape::Probe:
+      return "probe";
+    case RigidTool::Shape::Spatula:
+      return "spatula";
+    case RigidTool::Shape::Surface:
+      return "surface";
+  }
+  return "unknown";
+}
+
+ToolPose
+ToolPoseAt(const RigidTool & tool, double time)
+{
+  const std::vector<ToolPose> & poses = tool.trajectory;
+  if (poses.empty())
+  {
+    throw Error("tool '" + tool.name + "' has no trajectory.");
+  }
+  if (time <= poses.front().time)
+  {
+    return ToolPose{ time, poses.front().position, poses.front().rotation };
+  }
+  if (time >= poses.back().time)
+  {
+    return ToolPose{ time, poses.back().position, poses.back().rotation };
+  }
+  const auto   next = std::upper_bound(poses.begin(), poses.end(), time,
+                                     [](double t, const ToolPose & pose) { return t < pose.time; });
+  const auto & a = *(next - 1);
+  const auto & b = *next;
+  const double s = (time - a.time) / (b.time - a.time);
+  const auto   quaternion = [](const Vector3 & rotation) {
+    const double angle = rotation.norm();
+    return angle > 0.0 ? Eigen::Quaterniond(Eigen::AngleAxisd(angle, rotation / angle)) : Eigen::Quaterniond::Identity();
+  };
+  const Eigen::AngleAxisd between(quaternion(a.rotation).slerp(s, quaternion(b.rotation)));
+  return ToolPose{ time, (1.0 - s) * a.position + s * b.position, between.angle() * between.axis() };
 }
 
 namespace

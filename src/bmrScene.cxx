@@ -377,7 +377,7 @@ public:
     m_Root.AllowOnly({ "description", "mesh", "material_array", "materials", "material_fields", "discretization",
                        "meshless",
                        "node_sets", "fixed", "prescribed_displacements", "gravity", "gravity_curve", "contact",
-                       "solver", "output" });
+                       "tools", "solver", "output" });
     m_Scene.path = m_ScenePath;
     if (const auto description = m_Root.Optional("description"))
     {
@@ -391,6 +391,7 @@ public:
     ParsePrescribedDisplacements();
     ParseGravity();
     ParseContact();
+    ParseTools();
     ParseSolver();
     ParseOutput();
     ParseDiscretization();
@@ -1067,6 +1068,127 @@ private:
     }
   }
 
+  void ParseTools()
+  {
+    const auto list = m_Root.Optional("tools");
+    if (!list)
+    {
+      return;
+    }
+    for (std::size_t index = 0; index < list->ArraySize(); ++index)
+    {
+      const SceneValue entry = list->Element(index);
+      entry.AllowOnly(
+        { "name", "shape", "radius", "length", "width", "surface", "trajectory", "slave_node_set", "stress_region" });
+      RigidTool tool;
+      tool.name = entry.Has("name") ? entry.Child("name").NonEmptyString() : "tool[" + std::to_string(index) + "]";
+      const std::string shape = entry.Required("shape").Choice({ "probe", "spatula", "surface" });
+      tool.shape = shape == "probe" ? RigidTool::Shape::Probe
+                                    : (shape == "spatula" ? RigidTool::Shape::Spatula : RigidTool::Shape::Surface);
+      if (tool.shape == RigidTool::Shape::Surface)
+      {
+        for (const char * key : { "radius", "length", "width" })
+        {
+          if (entry.Has(key))
+          {
+            entry.Child(key).Fail("a surface tool takes its shape from 'surface'");
+          }
+        }
+        const SceneValue surfaceValue = entry.Required("surface");
+        try
+        {
+          tool.surface = ReadSurface(ResolvePath(m_SceneFolder, surfaceValue.NonEmptyString()));
+        }
+        catch (const Error & error)
+        {
+          surfaceValue.Fail(error.what());
+        }
+      }
+      else
+      {
+        if (entry.Has("surface"))
+        {
+          entry.Child("surface").Fail("only a tool of shape 'surface' takes a surface file");
+        }
+        tool.radius = entry.Required("radius").PositiveNumber();
+        if (const auto length = entry.Optional("length"))
+        {
+          tool.length = length->NonNegativeNumber();
+        }
+        if (tool.shape == RigidTool::Shape::Spatula)
+        {
+          tool.width = entry.Required("width").PositiveNumber();
+        }
+        else if (entry.Has("width"))
+        {
+          entry.Child("width").Fail("only a spatula has a width");
+        }
+      }
+      const SceneValue trajectory = entry.Required("trajectory");
+      if (trajectory.ArraySize() == 0)
+      {
+        trajectory.Fail("needs at least one pose {\"time\": s, \"position\": [x, y, z]}");
+      }
+      for (std::size_t k = 0; k < trajectory.ArraySize(); ++k)
+      {
+        const SceneValue poseValue = trajectory.Element(k);
+        poseValue.AllowOnly({ "time", "position", "rotation" });
+        ToolPose pose;
+        pose.time = poseValue.Required("time").NonNegativeNumber();
+        pose.position = poseValue.Required("position").Vector();
+        if (const auto rotation = poseValue.Optional("rotation"))
+        {
+          pose.rotation = rotation->Vector();
+        }
+        if (k > 0 && !(pose.time > tool.trajectory.back().time))
+        {
+          poseValue.Child("time").Fail("must be later than the previous pose's " +
+                                       std::to_string(tool.trajectory.back().time) + " s");
+        }
+        tool.trajectory.push_back(pose);
+      }
+      if (const auto slaves = entry.Optional("slave_node_set"))
+      {
+        tool.slaveNodeSet = NodeSetReference(*slaves);
+      }
+      if (const auto region = entry.Optional("stress_region"))
+      {
+        region->AllowOnly({ "radius", "mu0", "alpha", "g", "tau", "poisson_ratio" });
+        tool.stressRegionRadius = region->Required("radius").PositiveNumber();
+        OgdenViscoelasticMaterial & material = tool.stressMaterial;
+        if (const auto value = region->Optional("mu0"))
+          material.mu0 = value->PositiveNumber();
+        if (const auto value = region->Optional("alpha"))
+          material.alpha = value->Number();
+        if (const auto value = region->Optional("poisson_ratio"))
+          material.poissonRatio = value->Number();
+        if (region->Has("g") != region->Has("tau"))
+        {
+          region->Fail("give the Prony series as both 'g' and 'tau' (same length), or neither for Miller and Chinzei's");
+        }
+        if (region->Has("g"))
+        {
+          material.g.clear();
+          material.tau.clear();
+          const SceneValue g = region->Child("g"), tau = region->Child("tau");
+          for (std::size_t k = 0; k < g.ArraySize(); ++k)
+            material.g.push_back(g.Element(k).NonNegativeNumber());
+          for (std::size_t k = 0; k < tau.ArraySize(); ++k)
+            material.tau.push_back(tau.Element(k).PositiveNumber());
+        }
+        try
+        {
+          material.Validate();
+        }
+        catch (const Error & error)
+        {
+          region->Fail(error.what());
+        }
+      }
+      TheModel().tools.push_back(std::move(tool));
+    }
+  }
+
   void ParseSolver()
   {
     const auto solver = m_Root.Optional("solver");
@@ -1076,7 +1198,7 @@ private:
     }
     solver->AllowOnly({ "integrator", "tetrahedron", "tolerance", "max_steps", "load_steps", "adapt_interval",
                         "time_step", "safety_factor", "end_time", "damping", "hourglass_coefficient", "threads",
-                        "compute_stress" });
+                        "compute_stress", "output_interval" });
     SolverSettings & settings = m_Scene.settings;
     if (const auto value = solver->Optional("integrator"))
     {
@@ -1124,6 +1246,10 @@ private:
     if (const auto value = solver->Optional("damping"))
     {
       settings.dampingCoefficient = value->NonNegativeNumber();
+    }
+    if (const auto value = solver->Optional("output_interval"))
+    {
+      settings.outputInterval = value->PositiveNumber();
     }
     if (const auto value = solver->Optional("hourglass_coefficient"))
     {
@@ -1418,6 +1544,29 @@ MakeReportJson(const Scene & scene, const SolveResult & result, const std::strin
   report["materials"] = counts.materials;
   report["discretization"] = counts.integrationPoints > 0 ? "meshless" : "finite_element";
   report["integration_points"] = counts.integrationPoints;
+  if (!result.tools.empty())
+  {
+    json tools = json::array();
+    for (std::size_t k = 0; k < result.tools.size(); ++k)
+    {
+      const ToolHistory & history = result.tools[k];
+      double              largest = 0.0;
+      for (const Vector3 & force : history.force)
+      {
+        largest = std::max(largest, force.norm());
+      }
+      const Vector3 last = history.force.empty() ? Vector3::Zero() : history.force.back();
+      const Vector3 moment = history.moment.empty() ? Vector3::Zero() : history.moment.back();
+      tools.push_back({ { "name", history.name },
+                        { "shape", k < scene.model.tools.size() ? ToolShapeName(scene.model.tools[k].shape) : "" },
+                        { "final_force_N", { last.x(), last.y(), last.z() } },
+                        { "final_moment_N_mm", { moment.x(), moment.y(), moment.z() } },
+                        { "max_force_N", largest },
+                        { "work_J", history.work },
+                        { "records", history.time.size() } });
+    }
+    report["tools"] = tools;
+  }
   report["threads"] = scene.settings.threads > 0 ? scene.settings.threads : omp_get_max_threads();
   return report.dump(2) + "\n";
 }

@@ -1,6 +1,8 @@
 #include "bmrSolver.h"
 
 #include "bmrContact.h"
+#include "bmrToolContact.h"
+#include "bmrToolStress.h"
 #include "bmrEssentialBoundary.h"
 #include "bmrForceModel.h"
 #include "bmrMeshless.h"
@@ -139,6 +141,10 @@ struct Solver::Impl
   int                                        threads = 1;
   std::unique_ptr<ForceModel>                forces;
   std::vector<std::unique_ptr<RigidContact>> contacts;
+  std::vector<std::unique_ptr<ToolContact>>  tools;
+  std::vector<ToolLoad>                      toolLoads; // of the last step
+  std::vector<std::unique_ptr<ToolStressRegion>> stressRegions; // per tool; null without a region
+  std::vector<Vector3>                       correctedForces;   // of the last step, per tool
   std::vector<double>                        physicalMass;
   std::vector<ConstrainedDof>                constrained;
   std::vector<LoadCurve>                     curves;
@@ -168,6 +174,13 @@ struct Solver::Impl
   void        ApplyConstraints(double * u, const std::vector<double> & curveFactors);
   void        PrepareEssentialBoundary(const std::vector<double> & mass);
   void        EnforceContact(double * u, std::vector<char> & inContact);
+  void        EnforceTools(double * u, const double * previous, std::vector<char> & inContact,
+                           const std::vector<double> & inverseMass, double alpha, double time);
+  /** Dynamic relaxation sets it: the tool time passed to EnforceTools is then
+   *  the fraction of each tool's trajectory (a ramp from its first to its last pose). */
+  bool        rampTools = false;
+  /** Appends the tools' poses and last-step loads to their histories. */
+  void        RecordTools(std::vector<ToolHistory> & histories) const;
   void        EnforceMeshlessContact(double * u, std::vector<char> & inContact);
   std::vector<double> PhysicalDisplacements(const std::vector<double> & u) const;
   void        CentralDifferenceStep(const std::vector<double> & u,
@@ -179,7 +192,8 @@ struct Solver::Impl
                                     double                      gravityFactor,
                                     const std::vector<double> & curveFactors,
                                     std::vector<double> &       uNext,
-                                    std::vector<char> &         inContact);
+                                    std::vector<char> &         inContact,
+                                    double                      toolTime);
   void        CheckForces(Index inverted, int step, bool explicitDynamics, double timeStep) const;
   void        CheckIncrement(const std::vector<double> & next, const std::vector<double> & current, Index bad, int step,
                              bool explicitDynamics, double timeStep) const;
@@ -187,7 +201,7 @@ struct Solver::Impl
   SolveResult Finish(const std::vector<double> & u, const std::vector<char> & inContact, double gravityFactor, int steps);
   double      LargestEigenvalueEstimate(const std::vector<double> & mass);
   SolveResult SolveDynamicRelaxation(const ProgressCallback & progress);
-  SolveResult SolveExplicitDynamics(const ProgressCallback & progress);
+  SolveResult SolveExplicitDynamics(const ProgressCallback & progress, const FrameCallback & frames);
 };
 
 Solver::Impl::Impl(const Model & m, const SolverSettings & s)
@@ -274,9 +288,74 @@ Solver::Impl::Impl(const Model & m, const SolverSettings & s)
     std::sort(contactSlaves.begin(), contactSlaves.end());
     contactSlaves.erase(std::unique(contactSlaves.begin(), contactSlaves.end()), contactSlaves.end());
   }
+  if (!model.tools.empty())
+  {
+    if (meshless)
+    {
+      throw Error("tools need a finite-element model: tool contact acts on nodes, and the meshless discretization's "
+                  "nodes do not carry the physical displacement. Mesh the body with hexahedra or tetrahedra.");
+    }
+    components.push_back("tool-contact");
+    const std::vector<Index> boundary = model.BoundaryNodes();
+    for (const RigidTool & tool : model.tools)
+    {
+      tools.push_back(
+        std::make_unique<ToolContact>(tool, tool.slaveNodeSet.empty() ? boundary : model.NodeSet(tool.slaveNodeSet), model.nodes));
+      if (tool.stressRegionRadius > 0.0)
+      {
+        if (settings.integrator != Integrator::ExplicitDynamics)
+        {
+          throw Error("tool '" + tool.name + "' has a stress region: the Ogden stresses integrate the time history, "
+                      "so they need explicit dynamics (set stress_region_radius to 0 for a steady state)");
+        }
+        if (stressRegions.empty() || !stressRegions.back())
+        {
+          components.push_back("ogden-stress-region");
+        }
+      }
+      stressRegions.push_back(tool.stressRegionRadius > 0.0 ? std::make_unique<ToolStressRegion>(model, *tools.back())
+                                                             : nullptr);
+    }
+    toolLoads.resize(tools.size());
+    correctedForces.assign(tools.size(), Vector3::Zero());
+  }
   if (settings.computeStress)
   {
     components.push_back("stress-recovery");
+  }
+}
+
+void
+Solver::Impl::EnforceTools(double * u, const double * previous, std::vector<char> & inContact,
+                           const std::vector<double> & inverseMass, double alpha, double time)
+{
+  for (std::size_t k = 0; k < tools.size(); ++k)
+  {
+    const std::vector<ToolPose> & trajectory = tools[k]->Tool().trajectory;
+    tools[k]->MoveTo(rampTools ? trajectory.front().time + time * (trajectory.back().time - trajectory.front().time) : time);
+    toolLoads[k] = tools[k]->Enforce(u, previous, dofConstrained, inContact, inverseMass, alpha, threads);
+  }
+}
+
+void
+Solver::Impl::RecordTools(std::vector<ToolHistory> & histories) const
+{
+  histories.resize(tools.size());
+  for (std::size_t k = 0; k < tools.size(); ++k)
+  {
+    ToolHistory & history = histories[k];
+    history.name = tools[k]->Tool().name;
+    history.time.push_back(tools[k]->Pose().time);
+    history.position.push_back(tools[k]->Pose().position);
+    history.force.push_back(toolLoads[k].force);
+    history.moment.push_back(toolLoads[k].moment);
+    history.contactNodes.push_back(static_cast<int>(toolLoads[k].contactNodes));
+    history.work += toolLoads[k].work * units::InternalEnergyToJoule;
+    if (stressRegions[k])
+    {
+      history.correctedForce.push_back(correctedForces[k]);
+      history.peakStress.push_back(stressRegions[k]->PeakVonMises());
+    }
   }
 }
 
@@ -295,6 +374,8 @@ Solver::Impl::CheckSettings() const
           "hourglass_coefficient must lie in [0, 1]; 0.2 is the default.");
   require(settings.timeStep >= 0.0, "time_step must be 0 (automatic) or positive.");
   require(settings.dampingCoefficient >= 0.0, "damping must not be negative.");
+  require(settings.outputInterval >= 0.0 && std::isfinite(settings.outputInterval),
+          "output_interval must be 0 (no frames) or a positive number of seconds.");
   if (settings.integrator == Integrator::DynamicRelaxation)
   {
     require(settings.tolerance > 0.0, "tolerance must be positive (mm).");
@@ -501,7 +582,8 @@ Solver::Impl::CentralDifferenceStep(const std::vector<double> & u,
                                     double                      gravityFactor,
                                     const std::vector<double> & curveFactors,
                                     std::vector<double> &       uNext,
-                                    std::vector<char> &         inContact)
+                                    std::vector<char> &         inContact,
+                                    double                      toolTime)
 {
   // u+ = u + beta (u - u-) + alpha M^-1 (f_ext - f_int), then the constraints
   // and the contact projection (both integrators).
@@ -515,6 +597,10 @@ Solver::Impl::CentralDifferenceStep(const std::vector<double> & u,
   }
   ApplyConstraints(uNext.data(), curveFactors);
   EnforceContact(uNext.data(), inContact);
+  if (!tools.empty())
+  {
+    EnforceTools(uNext.data(), u.data(), inContact, inverseMass, alpha, toolTime);
+  }
 }
 
 void
@@ -710,6 +796,7 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   // the masses are then scaled globally to a power-iteration estimate of it:
   // fewer steps for the same stability margin (safety_factor).
   constexpr double    h = 1.0;
+  rampTools = true;
   const double        safety = settings.timeStepSafetyFactor;
   const double        omegaMax = 2.0 * safety / h;
   const Index         dofCount = static_cast<Index>(3 * model.nodes.size());
@@ -797,7 +884,8 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
       {
         curveFactors[k] = loadFactor(curves[k], step + 1);
       }
-      CentralDifferenceStep(u, uPrevious, f, inverseMass, alpha, beta, gravityFactor, curveFactors, uNext, inContact);
+      CentralDifferenceStep(u, uPrevious, f, inverseMass, alpha, beta, gravityFactor, curveFactors, uNext, inContact,
+                            LoadCurve{}.Factor(static_cast<double>(step + 1) / settings.loadSteps));
 
       const IncrementStatistics increment = MeasureIncrement(uNext, u, dofConstrained, lengthScale, threads);
       CheckIncrement(uNext, u, increment.firstBad, step, false, h);
@@ -877,6 +965,14 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   }
 
   SolveResult result = Finish(u, inContact, gravityFactor, step);
+  if (!tools.empty())
+  {
+    RecordTools(result.tools); // the steady state; the work of pseudo-time steps means nothing
+    for (ToolHistory & history : result.tools)
+    {
+      history.work = 0.0;
+    }
+  }
   result.converged = converged;
   result.steps = step;
   result.timeStep = h;
@@ -904,7 +1000,7 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
 }
 
 SolveResult
-Solver::Impl::SolveExplicitDynamics(const ProgressCallback & progress)
+Solver::Impl::SolveExplicitDynamics(const ProgressCallback & progress, const FrameCallback & frames)
 {
   const double requested = settings.timeStep > 0.0 ? settings.timeStep : settings.timeStepSafetyFactor * criticalTimeStep;
   const int    steps = static_cast<int>(std::ceil(settings.endTime / requested - 1e-9));
@@ -928,6 +1024,32 @@ Solver::Impl::SolveExplicitDynamics(const ProgressCallback & progress)
   };
   double gravityFactor = 0.0;
   const int reportEvery = std::max(1, steps / 200);
+  rampTools = false;
+  std::vector<ToolHistory> toolHistories;
+
+  // Frames at t = 0, every output interval, and at the end time.
+  const bool           framesWanted = frames && settings.outputInterval > 0.0;
+  int                  nextFrame = 1;
+  std::vector<Vector3> frameDisplacements(model.nodes.size());
+  auto                 emitFrame = [&](int step) {
+    for (std::size_t n = 0; n < model.nodes.size(); ++n)
+    {
+      frameDisplacements[n] = Vector3(u[3 * n], u[3 * n + 1], u[3 * n + 2]);
+    }
+    const Energies energies = forces->ComputeEnergies(u.data());
+    const double   kinetic = step == 0 ? 0.0
+                                       : 0.5 * DeterministicSum(dofCount, threads, [&](Index d) {
+                                           const double v = (u[d] - uPrevious[d]) / h;
+                                           return physicalMass[d / 3] * v * v;
+                                         });
+    frames(SolveFrame{ step * h, step, frameDisplacements,
+                       energies.strain * units::InternalEnergyToJoule,
+                       kinetic * units::InternalEnergyToJoule });
+  };
+  if (framesWanted)
+  {
+    emitFrame(0);
+  }
 
   for (int step = 0; step < steps; ++step)
   {
@@ -947,10 +1069,27 @@ Solver::Impl::SolveExplicitDynamics(const ProgressCallback & progress)
     {
       curveFactors[k] = loadFactor(curves[k], (step + 1) * h);
     }
-    CentralDifferenceStep(u, uPrevious, f, inverseMass, alpha, beta, gravityFactor, curveFactors, uNext, inContact);
+    CentralDifferenceStep(u, uPrevious, f, inverseMass, alpha, beta, gravityFactor, curveFactors, uNext, inContact,
+                          (step + 1) * h);
     CheckIncrement(uNext, u, MeasureIncrement(uNext, u, dofConstrained, lengthScale, threads).firstBad, step, true, h);
     std::swap(uPrevious, u);
     std::swap(u, uNext);
+    for (std::size_t k = 0; k < stressRegions.size(); ++k)
+    {
+      if (stressRegions[k])
+      {
+        correctedForces[k] = toolLoads[k].force + stressRegions[k]->Update(u.data(), h, tools[k]->TouchingNodes(), threads);
+      }
+    }
+    if (!tools.empty())
+    {
+      RecordTools(toolHistories);
+    }
+    if (framesWanted && (step + 1 == steps || (step + 1) * h >= nextFrame * settings.outputInterval - 1e-9 * h))
+    {
+      emitFrame(step + 1);
+      nextFrame = static_cast<int>(std::floor((step + 1) * h / settings.outputInterval + 1e-9)) + 1;
+    }
     if (progress && (step + 1) % reportEvery == 0)
     {
       progress(step + 1, static_cast<double>(step + 1) / steps, 0.0);
@@ -958,6 +1097,16 @@ Solver::Impl::SolveExplicitDynamics(const ProgressCallback & progress)
   }
 
   SolveResult result = Finish(u, inContact, gravityFactor, steps);
+  for (std::size_t k = 0; k < stressRegions.size() && k < toolHistories.size(); ++k)
+  {
+    if (stressRegions[k])
+    {
+      toolHistories[k].stressCells = stressRegions[k]->Cells();
+      toolHistories[k].ogdenStress = stressRegions[k]->OgdenStress();
+      toolHistories[k].neoHookeanStress = stressRegions[k]->NeoHookeanStress();
+    }
+  }
+  result.tools = std::move(toolHistories);
   result.converged = true;
   result.steps = steps;
   result.timeStep = h;
@@ -986,12 +1135,12 @@ Solver::Solver(const Model & model, const SolverSettings & settings)
 Solver::~Solver() = default;
 
 SolveResult
-Solver::Solve(const ProgressCallback & progress)
+Solver::Solve(const ProgressCallback & progress, const FrameCallback & frames)
 {
   const auto  start = std::chrono::steady_clock::now();
   SolveResult result = m_Impl->settings.integrator == Integrator::DynamicRelaxation
                          ? m_Impl->SolveDynamicRelaxation(progress)
-                         : m_Impl->SolveExplicitDynamics(progress);
+                         : m_Impl->SolveExplicitDynamics(progress, frames);
   result.wallSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;
 }

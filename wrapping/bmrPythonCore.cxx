@@ -12,6 +12,7 @@
 #include "bmrSurfaceLoads.h"
 
 #include <Python.h>
+#include <pybind11/eigen.h>
 #include <pybind11/functional.h>
 
 #include <cmath>
@@ -410,6 +411,32 @@ ProgressReporter::SolverCallback(const std::string & stage)
   };
 }
 
+FrameCallback
+ProgressReporter::FrameForwarder(py::object frames)
+{
+  if (frames.is_none())
+  {
+    return {};
+  }
+  m_Frames = std::move(frames);
+  return [this](const SolveFrame & frame) {
+    if (m_Error)
+    {
+      throw CallbackInterrupted{};
+    }
+    py::gil_scoped_acquire acquire;
+    try
+    {
+      m_Frames(frame.time, frame.step, ArrayFromPoints(frame.displacements), frame.strainEnergy, frame.kineticEnergy);
+    }
+    catch (py::error_already_set & error)
+    {
+      m_Error = std::make_unique<py::error_already_set>(std::move(error));
+      throw CallbackInterrupted{};
+    }
+  };
+}
+
 void
 ProgressReporter::Rethrow()
 {
@@ -753,6 +780,105 @@ BindModel(py::module_ & module)
       return "PrescribedDisplacement(" + std::to_string(load.nodes.size()) + " nodes)";
     });
 
+  py::class_<OgdenViscoelasticMaterial>(module, "OgdenMaterial",
+                                        "Miller and Chinzei's Ogden-type hyperviscoelastic law for stresses near a tool "
+                                        "(Pa, s): shear relaxation mu(t) = mu0 (1 - sum g_k (1 - exp(-t / tau_k))).")
+    .def(py::init([](double mu0, double alpha, const std::vector<double> & g, const std::vector<double> & tau,
+                     double poissonRatio) {
+           OgdenViscoelasticMaterial material{ mu0, alpha, g, tau, poissonRatio };
+           material.Validate();
+           return material;
+         }),
+         py::arg("mu0") = OgdenViscoelasticMaterial{}.mu0, py::arg("alpha") = OgdenViscoelasticMaterial{}.alpha,
+         py::arg("g") = OgdenViscoelasticMaterial{}.g, py::arg("tau") = OgdenViscoelasticMaterial{}.tau,
+         py::arg("poisson_ratio") = OgdenViscoelasticMaterial{}.poissonRatio)
+    .def_readonly("mu0", &OgdenViscoelasticMaterial::mu0)
+    .def_readonly("alpha", &OgdenViscoelasticMaterial::alpha)
+    .def_readonly("g", &OgdenViscoelasticMaterial::g)
+    .def_readonly("tau", &OgdenViscoelasticMaterial::tau)
+    .def_readonly("poisson_ratio", &OgdenViscoelasticMaterial::poissonRatio)
+    .def("cauchy_stress", [](const OgdenViscoelasticMaterial & material, const Eigen::Matrix3d & F) {
+      return OgdenElasticCauchy(material, F);
+    }, py::arg("F"), "The instantaneous (t = 0) Cauchy stress (Pa) of a deformation gradient.");
+
+  py::class_<RigidTool>(module, "Tool",
+                        "A rigid surgical tool moved along a trajectory (explicit dynamics; dynamic relaxation ramps it "
+                        "to its last pose). Tool frame: the tip at the origin, the tool along +z.")
+    .def(py::init([](const std::string & name, const std::string & shape, double radius, double length, double width,
+                     const std::optional<ContactSurface> & surface, const py::object & times, const py::object & positions,
+                     const py::object & rotations, const std::string & slaveNodeSet, double stressRegionRadius,
+                     const std::optional<OgdenViscoelasticMaterial> & stressMaterial) {
+           RigidTool tool;
+           tool.name = name;
+           if (shape == "probe")
+             tool.shape = RigidTool::Shape::Probe;
+           else if (shape == "spatula")
+             tool.shape = RigidTool::Shape::Spatula;
+           else if (shape == "surface")
+             tool.shape = RigidTool::Shape::Surface;
+           else
+             throw py::value_error("shape must be 'probe', 'spatula' or 'surface', not '" + shape + "'");
+           tool.radius = radius;
+           tool.length = length;
+           tool.width = width;
+           if (surface)
+             tool.surface = *surface;
+           const auto at = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(times);
+           if (!at || at.ndim() != 1 || at.size() == 0)
+             throw py::value_error("times must be a 1-D sequence of at least one time (s)");
+           const std::vector<Vector3> where = PointsFromArray(positions, "positions");
+           const std::vector<Vector3> turn = rotations.is_none() ? std::vector<Vector3>(where.size(), Vector3::Zero())
+                                                                 : PointsFromArray(rotations, "rotations");
+           if (where.size() != static_cast<std::size_t>(at.size()) || turn.size() != where.size())
+             throw py::value_error("times, positions and rotations need one entry per pose");
+           for (std::size_t k = 0; k < where.size(); ++k)
+             tool.trajectory.push_back(ToolPose{ at.at(static_cast<py::ssize_t>(k)), where[k], turn[k] });
+           tool.slaveNodeSet = slaveNodeSet;
+           tool.stressRegionRadius = stressRegionRadius;
+           if (stressMaterial)
+             tool.stressMaterial = *stressMaterial;
+           return tool;
+         }),
+         py::arg("name") = "tool", py::arg("shape") = "probe", py::arg("radius") = RigidTool{}.radius,
+         py::arg("length") = RigidTool{}.length, py::arg("width") = RigidTool{}.width,
+         py::arg("surface") = py::none(), py::kw_only(), py::arg("times"), py::arg("positions"),
+         py::arg("rotations") = py::none(), py::arg("slave_node_set") = "", py::arg("stress_region_radius") = 0.0,
+         py::arg("stress_material") = py::none(),
+         "Trajectory: times (s), positions (N, 3) of the tool frame's origin (mm) and rotations (N, 3) as rotation "
+         "vectors (axis times angle, rad).")
+    .def_readonly("name", &RigidTool::name)
+    .def_property_readonly("shape", [](const RigidTool & tool) { return std::string(ToolShapeName(tool.shape)); })
+    .def_readonly("radius", &RigidTool::radius)
+    .def_readonly("length", &RigidTool::length)
+    .def_readonly("width", &RigidTool::width)
+    .def_readonly("stress_region_radius", &RigidTool::stressRegionRadius)
+    .def(
+      "pose",
+      [](const RigidTool & tool, double time) {
+        const ToolPose pose = ToolPoseAt(tool, time);
+        return py::make_tuple(Vector3(pose.position), Vector3(pose.rotation));
+      },
+      py::arg("time"), "(position, rotation vector) at a time.");
+
+  py::class_<ToolHistory>(module, "ToolHistory", "A tool's motion and the tissue's load on it over a solve.")
+    .def_readonly("name", &ToolHistory::name)
+    .def_property_readonly("time", [](const ToolHistory & h) { return py::array_t<double>(static_cast<py::ssize_t>(h.time.size()), h.time.data()); })
+    .def_property_readonly("position", [](const ToolHistory & h) { return ArrayFromPoints(h.position); })
+    .def_property_readonly("force", [](const ToolHistory & h) { return ArrayFromPoints(h.force); }, "N, on the tool")
+    .def_property_readonly("moment", [](const ToolHistory & h) { return ArrayFromPoints(h.moment); },
+                           "N mm, on the tool about its origin")
+    .def_property_readonly("contact_nodes", [](const ToolHistory & h) {
+      return py::array_t<int>(static_cast<py::ssize_t>(h.contactNodes.size()), h.contactNodes.data());
+    })
+    .def_readonly("work", &ToolHistory::work, "J done by the tool on the tissue")
+    .def_property_readonly("corrected_force", [](const ToolHistory & h) { return ArrayFromPoints(h.correctedForce); })
+    .def_property_readonly("peak_stress", [](const ToolHistory & h) {
+      return py::array_t<double>(static_cast<py::ssize_t>(h.peakStress.size()), h.peakStress.data());
+    })
+    .def_property_readonly("stress_cells", [](const ToolHistory & h) { return ArrayFromIndices(h.stressCells); })
+    .def_property_readonly("ogden_stress", [](const ToolHistory & h) { return h.ogdenStress; })
+    .def_property_readonly("neo_hookean_stress", [](const ToolHistory & h) { return h.neoHookeanStress; });
+
   py::class_<Model>(module, "Model",
                     "A mechanical model: nodes (mm), cells, materials, node sets, constraints, loads, contact "
                     "surfaces. Arrays are copies: assign to change them.")
@@ -878,11 +1004,16 @@ BindModel(py::module_ & module)
       "add_contact_surface", [](Model & model, const ContactSurface & surface) { model.contactSurfaces.push_back(surface); },
       py::arg("surface"), "A rigid surface the body stays on one side of (frictionless, with separation).")
     .def_readonly("contact_surfaces", &Model::contactSurfaces)
+    .def(
+      "add_tool", [](Model & model, const RigidTool & tool) { model.tools.push_back(tool); }, py::arg("tool"),
+      "A rigid tool moved along its trajectory (frictionless contact, the body outside the tool).")
+    .def_readonly("tools", &Model::tools)
     .def("clear_loads",
          [](Model & model) {
            model.fixedConstraints.clear();
            model.prescribedDisplacements.clear();
            model.contactSurfaces.clear();
+           model.tools.clear();
            model.bodyAcceleration = Vector3::Zero();
          })
     .def_property_readonly("is_meshless",
@@ -943,6 +1074,7 @@ BindSolver(py::module_ & module)
     .def_readwrite("max_steps", &SolverSettings::maxSteps)
     .def_readwrite("adapt_interval", &SolverSettings::adaptInterval)
     .def_readwrite("compute_stress", &SolverSettings::computeStress)
+    .def_readwrite("output_interval", &SolverSettings::outputInterval)
     .def_readwrite("threads", &SolverSettings::threads)
     .def("copy", [](const SolverSettings & settings) { return SolverSettings(settings); })
     .def("__repr__", [](const SolverSettings & settings) {
@@ -987,6 +1119,7 @@ BindSolver(py::module_ & module)
     .def_readonly("contact_nodes", &SolveResult::contactNodes)
     .def_readonly("max_penetration", &SolveResult::maxPenetration)
     .def_readonly("active_components", &SolveResult::activeComponents)
+    .def_readonly("tools", &SolveResult::tools, "Per tool: its motion and the tissue's load on it (ToolHistory).")
     .def_readonly("message", &SolveResult::message)
     .def("__repr__", [](const SolveResult & result) {
       std::ostringstream text;
@@ -1012,14 +1145,15 @@ BindSolver(py::module_ & module)
 
   module.def(
     "_solve",
-    [](const Model & model, const SolverSettings & settings, const py::object & progress) {
-      ProgressReporter reporter(progress);
+    [](const Model & model, const SolverSettings & settings, const py::object & progress, const py::object & frames) {
+      ProgressReporter    reporter(progress);
+      const FrameCallback onFrame = reporter.FrameForwarder(frames);
       return RunWithoutGil(reporter, [&] {
         Solver solver(model, settings);
-        return solver.Solve(reporter.SolverCallback());
+        return solver.Solve(reporter.SolverCallback(), onFrame);
       });
     },
-    py::arg("model"), py::arg("settings"), py::arg("progress") = py::none());
+    py::arg("model"), py::arg("settings"), py::arg("progress") = py::none(), py::arg("frames") = py::none());
 
   module.def(
     "report_json", [](const Scene & scene, const SolveResult & result) {

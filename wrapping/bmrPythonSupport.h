@@ -120,6 +120,9 @@ public:
 
   /** The solver's callback, reporting stage `stage`. */
   ProgressCallback SolverCallback(const std::string & stage = "solve");
+  /** The solver's frame callback: `frames(time, step, displacements, strain_energy, kinetic_energy)`
+   *  with the displacements as an (N, 3) array; empty for None. */
+  FrameCallback FrameForwarder(py::object frames);
   /** The pipeline's stage callback (start: fraction 0; end: 1 and the seconds); never throws. */
   std::function<void(const std::string &, double)> StageCallback();
 
@@ -129,6 +132,7 @@ public:
 
 private:
   py::object                              m_Callback;
+  py::object                              m_Frames;
   std::unique_ptr<py::error_already_set> m_Error;
 };
 

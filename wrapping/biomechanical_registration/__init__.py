@@ -30,6 +30,7 @@ from ._bmr import (
     ImageGrid,
     Material,
     Model,
+    OgdenMaterial,
     PrescribedDisplacement,
     RegistrationResult,
     Scene,
@@ -39,6 +40,8 @@ from ._bmr import (
     Surface,
     SyntheticBrainShift,
     TissueClassification,
+    Tool,
+    ToolHistory,
     Transform,
     atlas_brain_mask,
     brain_surfaces,
@@ -97,6 +100,40 @@ def solve(scene, settings=None, progress=None, **overrides):
     says so (``converged``, ``message``). A failed solve (an inverted element)
     raises :class:`SolveError` with ``step`` and ``element``.
     """
+    model, chosen = _model_and_settings("solve", scene, settings, overrides)
+    return _bmr._solve(model, chosen, progress)
+
+
+def simulate(scene, settings=None, progress=None, frames=None, **overrides):
+    """Time-accurate explicit dynamics with moving tools, as ``biomech simulate``.
+
+    ``scene`` and the settings as for :func:`solve`; the integrator must be
+    ``explicit_dynamics``. ``frames``: a callable ``frames(time, step,
+    displacements, strain_energy, kinetic_energy)`` called at t = 0, at every
+    ``output_interval`` and at the end; None collects the frames. Returns
+    ``(result, frames)``: ``result.tools`` holds each tool's force, moment,
+    position (and, with a stress region, corrected force and Ogden stresses)
+    at every step; ``frames`` is the list of collected frames (dicts with
+    ``time``, ``step``, ``displacements``, ``strain_energy``,
+    ``kinetic_energy``), empty when a callable was given.
+    """
+    model, chosen = _model_and_settings("simulate", scene, settings, overrides)
+    if chosen.integrator != "explicit_dynamics":
+        raise ValueError("simulate runs time-accurate explicit dynamics; set integrator='explicit_dynamics' "
+                         "(and end_time, output_interval), or use solve() for a steady state")
+    collected = []
+    if frames is None:
+        if chosen.output_interval <= 0:
+            raise ValueError("give output_interval (s), the time between the frames collected")
+
+        def frames(time, step, displacements, strain_energy, kinetic_energy):
+            collected.append(dict(time=time, step=step, displacements=displacements, strain_energy=strain_energy,
+                                  kinetic_energy=kinetic_energy))
+
+    return _bmr._solve(model, chosen, progress, frames), collected
+
+
+def _model_and_settings(function, scene, settings, overrides):
     if isinstance(scene, Model):
         model = scene
         base = SolverSettings() if settings is None else settings
@@ -110,9 +147,9 @@ def solve(scene, settings=None, progress=None, **overrides):
     chosen = base.copy()
     for name, value in overrides.items():
         if name.startswith("_") or not hasattr(chosen, name) or callable(getattr(chosen, name)):
-            raise TypeError("solve() got an unknown solver setting '%s'" % name)
+            raise TypeError("%s() got an unknown solver setting '%s'" % (function, name))
         setattr(chosen, name, value)
-    return _bmr._solve(model, chosen, progress)
+    return model, chosen
 
 
 def _as_scene(scene):

@@ -288,3 +288,67 @@ def test_grid_kinds_and_bad_settings():
         bmr.make_grid(mask, element_size=0.1)
     with pytest.raises(bmr.Error):
         bmr.make_grid(bmr.image_from_array(np.zeros((8, 8, 8), np.uint8)))
+
+
+def probe_scene():
+    return SOURCE_DIR / "examples" / "scenes" / "probe-indentation.json"
+
+
+def test_simulate_gives_what_biomech_simulate_writes(tmp_path, biomech):
+    run = biomech("simulate", probe_scene(), "-d", tmp_path)
+    assert run.returncode == 0, run.stderr
+    result, frames = bmr.simulate(probe_scene())
+    assert [round(frame["time"], 9) for frame in frames][:3] == pytest.approx([0.0, 0.05, 0.1], abs=result.time_step)
+    collection = (tmp_path / "probe-indentation.pvd").read_text()
+    files = [line.split('file="')[1].split('"')[0] for line in collection.splitlines() if "file=" in line]
+    assert len(files) == len(frames)
+    for frame, name in zip(frames, files):
+        written = bmr.read_mesh(tmp_path / name)["point_data"]["displacement"]
+        np.testing.assert_array_equal(frame["displacements"], written)
+    probe = result.tools[0]
+    rows = np.genfromtxt(tmp_path / "probe-indentation-tool-forces.csv", delimiter=",", names=True, dtype=None,
+                         encoding="utf-8")
+    assert len(rows) == len(probe.time) == result.steps
+    np.testing.assert_allclose(rows["fz_N"], probe.force[:, 2], rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(rows["z_mm"], probe.position[:, 2], rtol=1e-9)
+    # The tissue pushes the probe back while it is in, and lets go once it is out.
+    assert probe.force[:, 2].max() > 0 and probe.contact_nodes[-1] == 0
+    assert len(probe.corrected_force) == result.steps and len(probe.stress_cells) > 0
+    report = json.loads((tmp_path / "probe-indentation-report.json").read_text())
+    assert report["tools"][0]["max_force_N"] == pytest.approx(np.linalg.norm(probe.force, axis=1).max(), rel=1e-12)
+    assert "ogden-stress-region" in report["active_components"]
+
+
+def test_tools_from_python():
+    model = bmr.make_block_mesh((10, 10, 10), (5, 5, 5), material=bmr.Material("brain", E, NU, 1000))
+    model.fix("zmin")
+    probe = bmr.Tool("probe", "probe", radius=2.0, times=[0.0, 1.0], positions=[[5, 5, 12], [5, 5, 11]],
+                     slave_node_set="zmax")
+    model.add_tool(probe)
+    assert model.tools[0].shape == "probe"
+    np.testing.assert_allclose(probe.pose(0.5)[0], [5, 5, 11.5])
+    steady = bmr.solve(model, tolerance=1e-5)
+    assert steady.converged and steady.tools[0].force[-1, 2] > 0
+    frames = []
+    result, collected = bmr.simulate(model, integrator="explicit_dynamics", end_time=0.02, output_interval=0.01,
+                                     frames=lambda *frame: frames.append(frame[0]))
+    assert collected == [] and len(frames) == 3 and len(result.tools[0].time) == result.steps
+    with pytest.raises(ValueError, match="explicit dynamics"):
+        bmr.simulate(model)
+    with pytest.raises(ValueError, match="shape"):
+        bmr.Tool("knife", "scalpel", times=[0], positions=[[0, 0, 0]])
+    with pytest.raises(ValueError, match="one entry per pose"):
+        bmr.Tool("probe", times=[0, 1], positions=[[0, 0, 0]])
+
+    class Stop(Exception):
+        pass
+
+    def stop(*frame):
+        raise Stop("frame")
+
+    with pytest.raises(Stop):
+        bmr.simulate(model, integrator="explicit_dynamics", end_time=0.02, output_interval=0.01, frames=stop)
+    inside = bmr.Tool("inside", times=[0.0], positions=[[5, 5, 9]], slave_node_set="zmax")
+    model.add_tool(inside)
+    with pytest.raises(bmr.Error, match="starts"):
+        bmr.solve(model)
