@@ -39,4 +39,7 @@ OMP_WAIT_POLICY=PASSIVE "${build}/apps/bmrImageBenchmark" --output docs/benchmar
 /usr/bin/python3 scripts/benchmark-model-building.py "${build}/apps/biomech"
 # The whole registration, end to end, with its error: docs/registration-benchmark.md.
 /usr/bin/python3 scripts/benchmark-registration.py
+# Surgical simulation on the generic brain (haptic rate): its section of docs/benchmarks.md.
+cmake --build "${build}" --target _bmr
+PYTHONPATH="${build}/python" /usr/bin/python3 scripts/benchmark-simulation.py
 echo "run-benchmarks: wrote docs/benchmarks.md, docs/model-building-benchmark.md and docs/registration-benchmark.md"
