@@ -308,7 +308,7 @@ Solver::Impl::Impl(const Model & m, const SolverSettings & s)
           throw Error("tool '" + tool.name + "' has a stress region: the Ogden stresses integrate the time history, "
                       "so they need explicit dynamics (set stress_region_radius to 0 for a steady state)");
         }
-        if (stressRegions.empty() || !stressRegions.back())
+        if (std::find(components.begin(), components.end(), "ogden-stress-region") == components.end())
         {
           components.push_back("ogden-stress-region");
         }

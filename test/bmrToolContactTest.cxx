@@ -204,6 +204,30 @@ TEST(ToolContact, SpatulaCompressesABlockUniaxially)
   EXPECT_NEAR(result.displacements[model.NodeSet("xmax")[0]].x(), side * (lateral - 1.0), 1e-7);
 }
 
+// The tool and a rigid contact surface at the same time: the block rests on a
+// frictionless rigid plane instead of a fixed base; pressed by the spatula it
+// is in the same uniaxial stress, and both contacts carry the same force.
+TEST(ToolContact, ToolAndRigidSupportActTogether)
+{
+  Model fixedBase = SpatulaCompression({}, 0.0);
+  Model onPlane = fixedBase;
+  onPlane.fixedConstraints.pop_back(); // zmin
+  ContactSurface plane = MakePlane(Vector3(2.0, 2.0, 0.0), Vector3::UnitZ(), 50.0);
+  plane.bodySide = ContactSurface::Side::Outside;
+  onPlane.contactSurfaces.push_back(plane);
+  const SolveResult a = Solver(fixedBase, Relaxation(1e-9)).Solve();
+  const SolveResult b = Solver(onPlane, Relaxation(1e-9)).Solve();
+  ASSERT_TRUE(a.converged && b.converged) << b.message;
+  EXPECT_NEAR(b.tools[0].force.back().z(), a.tools[0].force.back().z(), 1e-6 * a.tools[0].force.back().z());
+  double onSupport = 0.0;
+  for (const Index node : onPlane.NodeSet("zmin"))
+  {
+    onSupport += b.reactionForces[node].z();
+    EXPECT_NEAR(onPlane.nodes[node].z() + b.displacements[node].z(), 0.0, 1e-9) << "node " << node;
+  }
+  EXPECT_NEAR(std::abs(onSupport), b.tools[0].force.back().z(), 1e-6 * b.tools[0].force.back().z()); // balance
+}
+
 // A triangulated sphere as a tool gives the analytic probe's steady state to within its chord error.
 TEST(ToolContact, SurfaceToolMatchesTheAnalyticProbe)
 {

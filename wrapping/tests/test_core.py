@@ -352,3 +352,16 @@ def test_tools_from_python():
     model.add_tool(inside)
     with pytest.raises(bmr.Error, match="starts"):
         bmr.solve(model)
+
+
+def test_simulate_command_refuses_a_steady_state_scene_and_writes_nothing(tmp_path, biomech):
+    run = biomech("simulate", scene_path(), "-d", tmp_path)
+    assert run.returncode == 1
+    assert "explicit_dynamics" in run.stderr and "biomech solve" in run.stderr
+    assert list(tmp_path.iterdir()) == []
+    scene = json.loads(probe_scene().read_text())
+    scene["tools"][0]["trajectory"][0]["position"] = [15, 15, 14]  # starts inside the block
+    (tmp_path / "inside.json").write_text(json.dumps(scene))
+    run = biomech("simulate", tmp_path / "inside.json", "-d", tmp_path / "out")
+    assert run.returncode == 1 and "starts" in run.stderr and "'probe'" in run.stderr
+    assert not (tmp_path / "out" / "inside.pvd").exists() and not (tmp_path / "out" / "inside-frames").exists()
