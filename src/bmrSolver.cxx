@@ -174,11 +174,10 @@ struct Solver::Impl
   void        ApplyConstraints(double * u, const std::vector<double> & curveFactors);
   void        PrepareEssentialBoundary(const std::vector<double> & mass);
   void        EnforceContact(double * u, std::vector<char> & inContact);
+  /** `time`: seconds in explicit dynamics; in dynamic relaxation the fraction
+   *  of each tool's trajectory (a ramp from its first to its last pose). */
   void        EnforceTools(double * u, const double * previous, std::vector<char> & inContact,
                            const std::vector<double> & inverseMass, double alpha, double time);
-  /** Dynamic relaxation sets it: the tool time passed to EnforceTools is then
-   *  the fraction of each tool's trajectory (a ramp from its first to its last pose). */
-  bool        rampTools = false;
   /** Appends the tools' poses and last-step loads to their histories. */
   void        RecordTools(std::vector<ToolHistory> & histories) const;
   void        EnforceMeshlessContact(double * u, std::vector<char> & inContact);
@@ -332,7 +331,8 @@ Solver::Impl::EnforceTools(double * u, const double * previous, std::vector<char
   for (std::size_t k = 0; k < tools.size(); ++k)
   {
     const std::vector<ToolPose> & trajectory = tools[k]->Tool().trajectory;
-    tools[k]->MoveTo(rampTools ? trajectory.front().time + time * (trajectory.back().time - trajectory.front().time) : time);
+    const bool ramp = settings.integrator == Integrator::DynamicRelaxation;
+    tools[k]->MoveTo(ramp ? trajectory.front().time + time * (trajectory.back().time - trajectory.front().time) : time);
     toolLoads[k] = tools[k]->Enforce(u, previous, dofConstrained, inContact, inverseMass, alpha, threads);
   }
 }
@@ -796,7 +796,6 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   // the masses are then scaled globally to a power-iteration estimate of it:
   // fewer steps for the same stability margin (safety_factor).
   constexpr double    h = 1.0;
-  rampTools = true;
   const double        safety = settings.timeStepSafetyFactor;
   const double        omegaMax = 2.0 * safety / h;
   const Index         dofCount = static_cast<Index>(3 * model.nodes.size());
@@ -1024,7 +1023,6 @@ Solver::Impl::SolveExplicitDynamics(const ProgressCallback & progress, const Fra
   };
   double gravityFactor = 0.0;
   const int reportEvery = std::max(1, steps / 200);
-  rampTools = false;
   std::vector<ToolHistory> toolHistories;
 
   // Frames at t = 0, every output interval, and at the end time.

@@ -18,15 +18,14 @@ SampleTimes(const RigidTool & tool, double spacing)
 {
   const std::vector<ToolPose> & poses = tool.trajectory;
   std::vector<double>           times{ poses.front().time };
-  const double reach = tool.shape == RigidTool::Shape::Surface ? 0.0 : tool.length + tool.radius + 0.5 * tool.width;
+  // Rotation moves a point of the tool by at most angle x its distance from the origin.
+  double extent = tool.shape == RigidTool::Shape::Surface ? 0.0 : tool.length + tool.radius + 0.5 * tool.width;
+  for (const Vector3 & vertex : tool.surface.vertices)
+  {
+    extent = std::max(extent, vertex.norm());
+  }
   for (std::size_t k = 1; k < poses.size(); ++k)
   {
-    // Rotation moves a point of the tool by at most angle x its distance from the origin.
-    double extent = reach;
-    for (const Vector3 & vertex : tool.surface.vertices)
-    {
-      extent = std::max(extent, vertex.norm());
-    }
     const double moved = (poses[k].position - poses[k - 1].position).norm() +
                          (poses[k].rotation - poses[k - 1].rotation).norm() * extent;
     const int samples = std::max(1, static_cast<int>(std::ceil(moved / spacing)));

@@ -164,7 +164,8 @@ BindFilesAndTransforms(py::module_ & module)
     [](const py::object & image, const std::filesystem::path & pathArgument) {
       const std::string path = pathArgument.string();
       TranslateItkErrors([&] {
-        if (GeometryFromImage(image, "image").size[0] > 0 && py::array::ensure(image.attr("array")).ndim() == 4)
+        GeometryFromImage(image, "image"); // names a malformed image before its array is read
+        if (py::array::ensure(image.attr("array")).ndim() == 4)
         {
           const ScalarVolume volume = ScalarVolumeFromImage(image, "image");
           auto               vectorImage = VectorImageType::New();
