@@ -469,16 +469,26 @@ FiniteElementForceModel::FiniteElementForceModel(const Model & model, const Solv
   const std::size_t tetCount = m_TetNodes.size();
   m_TetB = ComponentMajor(tetGradients, 12);
 
-  m_NodalJacobian.assign(m_NodeCount, 1.0);
+  m_NodalPressure.assign(m_NodeCount, 0.0);
+  m_TetAveraged.assign(tetCount, 0.0);
   if (UsesAverageNodalPressure())
   {
+    // Only nearly incompressible cells lock, so only they share nodal
+    // pressures; a compressible cell (CSF) keeps its own J, so its volume
+    // change does not load the parenchyma beside it nor the reverse
+    // (Joldes et al. 2010 treat each material apart for the same reason).
+    for (Index t = 0; t < static_cast<Index>(tetCount); ++t)
+    {
+      const Index k = hexCount + t;
+      m_TetAveraged[t] = m_Kappa[k] > kNearlyIncompressible * m_Mu[k] ? 1.0 : 0.0;
+    }
     m_TetJacobian.assign(tetCount, 1.0);
     m_NodeTetOffsets.assign(m_NodeCount + 1, 0);
-    for (const auto & nodes : m_TetNodes)
+    for (Index t = 0; t < static_cast<Index>(tetCount); ++t)
     {
-      for (const Index n : nodes)
+      for (const Index n : m_TetNodes[t])
       {
-        ++m_NodeTetOffsets[n + 1];
+        m_NodeTetOffsets[n + 1] += m_TetAveraged[t] > 0.0 ? 1 : 0;
       }
     }
     for (Index n = 0; n < m_NodeCount; ++n)
@@ -493,15 +503,44 @@ FiniteElementForceModel::FiniteElementForceModel(const Model & model, const Solv
     {
       for (const Index n : m_TetNodes[t])
       {
-        m_NodeTets[fill[n]++] = t;
-        nodalVolume[n] += m_Volume[hexCount + t];
+        if (m_TetAveraged[t] > 0.0)
+        {
+          m_NodeTets[fill[n]++] = t;
+          nodalVolume[n] += m_Volume[hexCount + t];
+        }
       }
     }
+    // One bulk modulus and one pressure per node, so that the volumetric
+    // energy sum_n V_n kappa_n (J_n - 1)^2 / 2 is a potential: averaging J
+    // but keeping each cell's kappa gives a non-symmetric stiffness at
+    // material interfaces (CSF beside parenchyma: 5000 to 1), whose
+    // non-conservative forces sustain oscillations that dynamic relaxation
+    // cannot damp.
+    m_NodalVolume.assign(m_NodeCount, 0.0);
+    m_NodalBulkModulus.assign(m_NodeCount, 0.0);
     for (Index n = 0; n < m_NodeCount; ++n)
     {
+      m_NodalVolume[n] = 0.25 * nodalVolume[n];
       for (Index k = m_NodeTetOffsets[n]; k < m_NodeTetOffsets[n + 1]; ++k)
       {
         m_NodeTetWeights[k] = m_Volume[hexCount + m_NodeTets[k]] / nodalVolume[n];
+        m_NodalBulkModulus[n] += m_NodeTetWeights[k] * m_Kappa[hexCount + m_NodeTets[k]];
+      }
+    }
+    // The volumetric stiffness sum_n V_n kappa_n (J_n - 1)^2 is bounded cell
+    // by cell (Cauchy-Schwarz on the weighted mean) with the mean kappa_n of
+    // the cell's nodes in place of its own kappa.
+    for (Index t = 0; t < static_cast<Index>(tetCount); ++t)
+    {
+      const Index k = hexCount + t;
+      if (m_TetAveraged[t] > 0.0)
+      {
+        double kappa = 0.0;
+        for (const Index n : m_TetNodes[t])
+        {
+          kappa += 0.25 * m_NodalBulkModulus[n];
+        }
+        m_WaveBound[k] *= std::max(1.0, (kappa + 4.0 * m_Mu[k] / 3.0) / (m_Kappa[k] + 4.0 * m_Mu[k] / 3.0));
       }
     }
   }
@@ -546,12 +585,13 @@ FiniteElementForceModel::ComputeInternalForces(const double * u, double * f)
 #pragma omp for schedule(static)
       for (Index n = 0; n < m_NodeCount; ++n)
       {
-        double J = 0.0;
+        // The mean of J - 1, not of J: exactly 0 at rest, and no cancellation.
+        double dilatation = 0.0;
         for (Index k = m_NodeTetOffsets[n]; k < m_NodeTetOffsets[n + 1]; ++k)
         {
-          J += m_NodeTetWeights[k] * m_TetJacobian[m_NodeTets[k]];
+          dilatation += m_NodeTetWeights[k] * (m_TetJacobian[m_NodeTets[k]] - 1.0);
         }
-        m_NodalJacobian[n] = J;
+        m_NodalPressure[n] = m_NodalBulkModulus[n] * dilatation;
       }
     }
 
@@ -747,8 +787,8 @@ FiniteElementForceModel::AddTetrahedronForces(Index begin, Index end, const doub
   const double *    B = m_TetB.data();
   // 1 for ANP (the nodal average), 0 for the plain tetrahedron (the cell's J):
   // a multiplier rather than a branch keeps the loop vectorisable.
-  const double   averaged = UsesAverageNodalPressure() ? 1.0 : 0.0;
-  const double * nodalJacobian = m_NodalJacobian.data();
+  const double * averagedCell = m_TetAveraged.data();
+  const double * nodalPressure = m_NodalPressure.data();
   // Per-cell nodal forces of the block, component-major, then added serially.
   alignas(64) double forces[12][kCellsPerBlock];
   Index              firstInverted = std::numeric_limits<Index>::max();
@@ -770,17 +810,17 @@ FiniteElementForceModel::AddTetrahedronForces(Index begin, Index end, const doub
     {
       firstInverted = std::min(firstInverted, t);
     }
-    // Average nodal pressure: the dilatation is the mean of the nodal averages,
-    // so pressure stays continuous across cells (and across material interfaces,
-    // since J, not pressure, is averaged).
-    const double volumeRatio =
-      averaged * 0.25 * (nodalJacobian[i0] + nodalJacobian[i1] + nodalJacobian[i2] + nodalJacobian[i3]) +
-      (1.0 - averaged) * J;
+    // Average nodal pressure: the mean of the cell's nodal pressures, so
+    // pressure stays continuous across cells and material interfaces.
     const std::size_t k = static_cast<std::size_t>(hexCount + t);
-    const double      isochoric = m_Mu[k] * InverseCubeRootSquared(J);
-    const double      I1 = F[0][0] * F[0][0] + F[0][1] * F[0][1] + F[0][2] * F[0][2] + F[1][0] * F[1][0] +
+    const double      averaged = averagedCell[t];
+    const double      pressure =
+      averaged * 0.25 * (nodalPressure[i0] + nodalPressure[i1] + nodalPressure[i2] + nodalPressure[i3]) +
+      (1.0 - averaged) * m_Kappa[k] * (J - 1.0);
+    const double isochoric = m_Mu[k] * InverseCubeRootSquared(J);
+    const double I1 = F[0][0] * F[0][0] + F[0][1] * F[0][1] + F[0][2] * F[0][2] + F[1][0] * F[1][0] +
                       F[1][1] * F[1][1] + F[1][2] * F[1][2] + F[2][0] * F[2][0] + F[2][1] * F[2][1] + F[2][2] * F[2][2];
-    const double cofactorFactor = m_Kappa[k] * (volumeRatio - 1.0) - isochoric * I1 / (3.0 * J);
+    const double cofactorFactor = pressure - isochoric * I1 / (3.0 * J);
     const double V = m_Volume[k];
     double       A[3][3]; // V P
     for (int i = 0; i < 3; ++i)
@@ -900,32 +940,26 @@ FiniteElementForceModel::ComputeEnergies(const double * u) const
       energies.hourglass += 0.5 * m_HexHourglassStiffness[e] * (mode[0] * mode[0] + mode[1] * mode[1] + mode[2] * mode[2]);
     }
   }
-  // Nodal dilatations recomputed here so this stays const and independent of the last force call.
-  std::vector<double> tetJ(TetrahedronCount());
+  // ANP: the isochoric energy per cell, the volumetric one per node (the
+  // potential of the nodal pressures).
+  const bool averaged = UsesAverageNodalPressure();
   for (Index t = 0; t < TetrahedronCount(); ++t)
   {
-    tetJ[t] = DeformationGradient<4>(u, m_TetNodes[t], ComponentsOf<12>(m_TetB, t).data()).determinant();
+    const Eigen::Matrix3d F = DeformationGradient<4>(u, m_TetNodes[t], ComponentsOf<12>(m_TetB, t).data());
+    const double          J = F.determinant();
+    const Index           k = hexCount + t;
+    energies.strain += m_Volume[k] * StrainEnergyDensity(F, J, J, m_Mu[k], m_TetAveraged[t] > 0.0 ? 0.0 : m_Kappa[k]);
   }
-  std::vector<double> nodalJ;
-  if (UsesAverageNodalPressure())
+  if (averaged)
   {
-    nodalJ.assign(m_NodeCount, 0.0);
+    const std::vector<double> pressure = NodalPressures(u);
     for (Index n = 0; n < m_NodeCount; ++n)
     {
-      for (Index k = m_NodeTetOffsets[n]; k < m_NodeTetOffsets[n + 1]; ++k)
+      if (m_NodalBulkModulus[n] > 0.0)
       {
-        nodalJ[n] += m_NodeTetWeights[k] * tetJ[m_NodeTets[k]];
+        energies.strain += 0.5 * m_NodalVolume[n] * pressure[n] * pressure[n] / m_NodalBulkModulus[n];
       }
     }
-  }
-  for (Index t = 0; t < TetrahedronCount(); ++t)
-  {
-    const auto &          nodes = m_TetNodes[t];
-    const Eigen::Matrix3d F = DeformationGradient<4>(u, nodes, ComponentsOf<12>(m_TetB, t).data());
-    const double          volumeRatio =
-      nodalJ.empty() ? tetJ[t] : 0.25 * (nodalJ[nodes[0]] + nodalJ[nodes[1]] + nodalJ[nodes[2]] + nodalJ[nodes[3]]);
-    const Index k = hexCount + t;
-    energies.strain += m_Volume[k] * StrainEnergyDensity(F, tetJ[t], volumeRatio, m_Mu[k], m_Kappa[k]);
   }
   energies.strain += energies.hourglass;
   return energies;
@@ -936,20 +970,7 @@ FiniteElementForceModel::CauchyStress(const double * u) const
 {
   std::vector<Eigen::Matrix3d> stress(m_ModelCell.size());
   const Index                  hexCount = HexahedronCount();
-  std::vector<double>          nodalJ;
-  if (UsesAverageNodalPressure())
-  {
-    nodalJ.assign(m_NodeCount, 0.0);
-    for (Index n = 0; n < m_NodeCount; ++n)
-    {
-      for (Index k = m_NodeTetOffsets[n]; k < m_NodeTetOffsets[n + 1]; ++k)
-      {
-        const Index t = m_NodeTets[k];
-        nodalJ[n] += m_NodeTetWeights[k] *
-                     DeformationGradient<4>(u, m_TetNodes[t], ComponentsOf<12>(m_TetB, t).data()).determinant();
-      }
-    }
-  }
+  const std::vector<double>    nodalPressure = UsesAverageNodalPressure() ? NodalPressures(u) : std::vector<double>{};
   for (std::size_t k = 0; k < m_ModelCell.size(); ++k)
   {
     const Index     index = static_cast<Index>(k);
@@ -963,10 +984,9 @@ FiniteElementForceModel::CauchyStress(const double * u) const
     else
     {
       const Index t = index - hexCount;
-      const auto &nodes = m_TetNodes[t];
-      F = DeformationGradient<4>(u, nodes, ComponentsOf<12>(m_TetB, t).data());
-      volumeRatio = nodalJ.empty() ? F.determinant()
-                                   : 0.25 * (nodalJ[nodes[0]] + nodalJ[nodes[1]] + nodalJ[nodes[2]] + nodalJ[nodes[3]]);
+      F = DeformationGradient<4>(u, m_TetNodes[t], ComponentsOf<12>(m_TetB, t).data());
+      // FirstPiola's volumetric term kappa (volumeRatio - 1) is the cell's pressure.
+      volumeRatio = 1.0 + TetrahedronPressure(t, F.determinant(), nodalPressure) / m_Kappa[k];
     }
     const Eigen::Matrix3d cof = Cofactor(F);
     const double          J = F.col(0).dot(cof.col(0));
@@ -974,6 +994,38 @@ FiniteElementForceModel::CauchyStress(const double * u) const
     stress[m_ModelCell[k]] = (P * F.transpose() / J) * units::InternalToPascal;
   }
   return stress;
+}
+
+std::vector<double>
+FiniteElementForceModel::NodalPressures(const double * u) const
+{
+  std::vector<double> tetJ(TetrahedronCount());
+  for (Index t = 0; t < TetrahedronCount(); ++t)
+  {
+    tetJ[t] = DeformationGradient<4>(u, m_TetNodes[t], ComponentsOf<12>(m_TetB, t).data()).determinant();
+  }
+  std::vector<double> pressure(m_NodeCount, 0.0);
+  for (Index n = 0; n < m_NodeCount; ++n)
+  {
+    double dilatation = 0.0;
+    for (Index k = m_NodeTetOffsets[n]; k < m_NodeTetOffsets[n + 1]; ++k)
+    {
+      dilatation += m_NodeTetWeights[k] * (tetJ[m_NodeTets[k]] - 1.0);
+    }
+    pressure[n] = m_NodalBulkModulus[n] * dilatation;
+  }
+  return pressure;
+}
+
+double
+FiniteElementForceModel::TetrahedronPressure(Index t, double J, const std::vector<double> & nodalPressure) const
+{
+  if (nodalPressure.empty() || m_TetAveraged[t] == 0.0)
+  {
+    return m_Kappa[HexahedronCount() + t] * (J - 1.0);
+  }
+  const auto & nodes = m_TetNodes[t];
+  return 0.25 * (nodalPressure[nodes[0]] + nodalPressure[nodes[1]] + nodalPressure[nodes[2]] + nodalPressure[nodes[3]]);
 }
 
 std::string

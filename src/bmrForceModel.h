@@ -135,12 +135,25 @@ private:
   // Tetrahedra: nodes, dN/dX component-major: m_TetB[c * count + t], c = 3 a + j.
   std::vector<std::array<Index, 4>> m_TetNodes;
   std::vector<double>               m_TetB;
-  std::vector<double>               m_TetJacobian; // per step, ANP
-  std::vector<double>               m_NodalJacobian;
-  // Nodal averaging of J: per node, the tetrahedra around it and their weights V_e / sum V_e.
+  /** ANP shares nodal pressures among cells with kappa above this many times mu
+   *  (Poisson's ratio above 0.4); the others keep their own J. */
+  static constexpr double kNearlyIncompressible = 14.0 / 3.0;
+  std::vector<double>               m_TetAveraged;   // ANP: 1 for cells that share nodal pressures, else 0
+  std::vector<double>               m_TetJacobian;   // per step, ANP
+  std::vector<double>               m_NodalPressure; // per step, ANP: kappa_n (J_n - 1)
+  // Nodal averaging of J: per node, the tetrahedra around it and their weights
+  // V_e / sum V_e; the node's share of their volume (sum V_e / 4) and its bulk
+  // modulus (the same weighted mean of the cells').
   std::vector<Index>  m_NodeTetOffsets;
   std::vector<Index>  m_NodeTets;
   std::vector<double> m_NodeTetWeights;
+  std::vector<double> m_NodalVolume;
+  std::vector<double> m_NodalBulkModulus;
+
+  /** ANP: the nodal pressures kappa_n (J_n - 1) at displacements u. */
+  std::vector<double> NodalPressures(const double * u) const;
+  /** Tetrahedron t's pressure: the mean of its nodes' (ANP), or its own kappa (J - 1). */
+  double TetrahedronPressure(Index t, double J, const std::vector<double> & nodalPressure) const;
 
   // Per kernel cell (hexahedra first): reference volume, material constants
   // (internal units), characteristic wave-number bound q = n B:B (1 + hourglass).

@@ -825,7 +825,11 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   // of that mode, c = omega sqrt(4 - h^2 omega^2), double root sqrt(beta).
   double lowestEigenvalue = 0.01 * omegaMax * omegaMax;
   double alpha = 0.0, beta = 0.0;
-  auto   setDamping = [&](double lambda) {
+  auto   betaFor = [&](double lambda) {
+    const double c = std::sqrt(lambda) * std::sqrt(std::max(0.0, 4.0 - h * h * lambda));
+    return (2.0 - c * h) / (2.0 + c * h);
+  };
+  auto setDamping = [&](double lambda) {
     lowestEigenvalue = std::clamp(lambda, 1e-16 * omegaMax * omegaMax, omegaMax * omegaMax);
     const double omega = std::sqrt(lowestEigenvalue);
     const double c = omega * std::sqrt(std::max(0.0, 4.0 - h * h * lowestEigenvalue));
@@ -833,6 +837,11 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
     beta = (2.0 - c * h) / (2.0 + c * h);
   };
   setDamping(lowestEigenvalue);
+  // The smallest lowest-eigenvalue estimate since the loads were applied: the
+  // error estimate uses its rate, as the current estimate can jump up (to
+  // the higher modes that dominate right after a restart or a contact event)
+  // and would then declare convergence while the slowest mode still creeps.
+  double slowestEigenvalue = std::numeric_limits<double>::infinity();
 
   const int          window = settings.adaptInterval;
   std::deque<double> incrementNorms; // last window + 1 values of ||du||_2
@@ -875,6 +884,10 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
         if (numerator > 0.0 && denominator > 0.0)
         {
           setDamping(numerator / denominator);
+          if (step > settings.loadSteps)
+          {
+            slowestEigenvalue = std::min(slowestEigenvalue, lowestEigenvalue);
+          }
         }
       }
 
@@ -911,14 +924,16 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
       std::swap(f, fPrevious);
 
       // Termination (Joldes et al. 2009): distance to the solution estimated as
-      // rate / (1 - rate) * ||du||_inf, with the rate the larger of the observed
-      // decay and the lowest mode's theoretical rate sqrt(beta).
+      // rate / (1 - rate) * ||du||_inf, with the rate the largest of the observed
+      // decay and the theoretical rate sqrt(beta) of the current and of the
+      // slowest lowest-mode estimate.
       if (step + 1 >= settings.loadSteps && static_cast<int>(incrementNorms.size()) == window + 1)
       {
         const double observed = incrementNorms.front() > 0.0
                                   ? std::pow(incrementNorms.back() / incrementNorms.front(), 1.0 / window)
                                   : 0.0;
-        rate = std::max(observed, std::sqrt(std::max(beta, 0.0)));
+        const double slowest = std::isfinite(slowestEigenvalue) ? betaFor(slowestEigenvalue) : beta;
+        rate = std::max(observed, std::sqrt(std::max(std::max(beta, slowest), 0.0)));
         estimatedError = rate < 1.0 ? rate / (1.0 - rate) * increment.maxAbs : std::numeric_limits<double>::infinity();
         satisfied = estimatedError < settings.tolerance ? satisfied + 1 : 0;
         if (satisfied >= window)
@@ -950,6 +965,7 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
       ++restarts;
       scaleMasses(kRestartMassFactor);
       setDamping(lowestEigenvalue / kRestartMassFactor);
+      slowestEigenvalue /= kRestartMassFactor;
       u = checkpoint;
       uPrevious = checkpoint;
       step = checkpointStep - 1;

@@ -210,6 +210,51 @@ TEST_P(ExtremeCells, BrainSizedTwentyMillimetrePatchDisplacement)
   EXPECT_GT(centreZ, -20.0);
 }
 
+// Dynamic relaxation's estimated error against the true error: a half-size
+// brain (semi-axes 35, 42, 30 mm; 4 mm grid) with soft, compressible
+// "ventricles" (10 Pa, nu 0.1) inside nearly incompressible parenchyma, its
+// bottom held and the top surface sagging 5 mm. Solved to 0.01 mm and to
+// 1e-6 mm; the first solve's true error (its distance from the second) must
+// not exceed the tolerance it reports as met: a converged wrong answer is the
+// one failure a user cannot see.
+TEST_P(ExtremeCells, RelaxationErrorEstimateBoundsTheTrueError)
+{
+  Model model = MakeEllipsoidMesh(Vector3(35.0, 42.0, 30.0), 4.0, GetParam(), MakeMaterial(3000.0, 0.49));
+  model.materials.push_back(MakeMaterial(10.0, 0.1, 1000.0, "csf"));
+  for (Cell & cell : model.cells)
+  {
+    const Vector3 centre = CellCentre(model, cell);
+    if (std::hypot(std::abs(centre.x()) - 7.0, centre.y() / 2.0, centre.z()) < 6.0)
+      cell.material = 1; // two ventricles beside the mid-plane
+  }
+  std::vector<Index> top, base;
+  for (Index n : model.NodeSet("surface"))
+  {
+    const Vector3 & X = model.nodes[n];
+    if (X.z() > 18.0 && std::hypot(X.x(), X.y()) < 20.0)
+      top.push_back(n);
+    if (X.z() < -22.0)
+      base.push_back(n);
+  }
+  model.nodeSets["base"] = base;
+  model.fixedConstraints.push_back({ "base", { true, true, true } });
+  Prescribe(model, top, [](const Vector3 & X) {
+    return Vector3(0.0, 0.0, -5.0 * (1.0 - (X.x() * X.x() + X.y() * X.y()) / 400.0));
+  });
+  constexpr double  tolerance = 0.01;
+  const SolveResult loose = Solver(model, TightRelaxation(tolerance, 400000)).Solve();
+  const SolveResult tight = Solver(model, TightRelaxation(1e-6, 400000)).Solve();
+  ASSERT_TRUE(loose.converged) << loose.message;
+  ASSERT_TRUE(tight.converged) << tight.message;
+  double trueError = 0.0;
+  for (std::size_t n = 0; n < model.nodes.size(); ++n)
+    trueError = std::max(trueError, (loose.displacements[n] - tight.displacements[n]).cwiseAbs().maxCoeff());
+  RecordProperty("steps", loose.steps);
+  RecordProperty("estimatedError", Sci(loose.estimatedError));
+  RecordProperty("trueError", Sci(trueError));
+  EXPECT_LE(trueError, tolerance) << "estimated " << loose.estimatedError << " mm after " << loose.steps << " steps";
+}
+
 INSTANTIATE_TEST_SUITE_P(Cells,
                          ExtremeCells,
                          testing::Values(GridCells::Hexahedra, GridCells::Tetrahedra),

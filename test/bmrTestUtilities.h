@@ -140,6 +140,17 @@ RotationAboutAxis(const Vector3 & axis, double angleRadians)
 // Model set-up.
 // ---------------------------------------------------------------------------
 
+/** Mean of a cell's node positions (mm). */
+inline Vector3
+CellCentre(const Model & model, const Cell & cell)
+{
+  Vector3   centre = Vector3::Zero();
+  const int count = NodesPerCell(cell.type);
+  for (int a = 0; a < count; ++a)
+    centre += model.nodes[cell.nodes[a]] / count;
+  return centre;
+}
+
 inline Material
 MakeMaterial(double youngsModulus, double poissonRatio, double density = 1000.0, const std::string & name = "tissue")
 {
