@@ -106,8 +106,6 @@ READING = """
   registration. The study ran on the project's 2-core machine while other
   work (builds, tests) ran beside it, so times are upper bounds; quiet-machine
   end-to-end times are in [registration-benchmark.md](registration-benchmark.md).
-  The ANP tetrahedra (CGAL, 7 mm) need 10-30 times more dynamic-relaxation
-  steps than hexahedra (slivers beside soft CSF, docs/model-building.md).
 * **Meshless** is not in the study: the meshless Colin27 model does not
   solve in useful time (docs/model-building.md).
 * **Target: 95th percentile under 1 mm for a 10 mm shift: missed** by
