@@ -238,6 +238,15 @@ RunDemo(DemoOptions options)
     // The head's position gives gravity's direction in the operating room; its effective size is a model choice.
     settings.model.gravity = options.registrationGravity * 9810.0 * truth.down;
     settings.model.materials.tumour.youngsModulus = options.truth.tumourStiffness * ParenchymaMaterial().youngsModulus;
+    // The registration's CSF has the ground truth's Poisson's ratio (its stiffness stays the default).
+    settings.model.materials.classMaterials = DefaultClassMaterials(settings.model.classifier.classes);
+    for (Material & material : settings.model.materials.classMaterials)
+    {
+      if (material.name == CsfMaterial().name)
+      {
+        material.poissonRatio = options.truth.csfPoissonRatio;
+      }
+    }
     const BrainShiftRegistrationResult result = RegisterBrainShift(inputs, settings, stages);
     if (k == 0)
     {
@@ -315,6 +324,7 @@ RunDemo(DemoOptions options)
     { "fit_max_residual_mm", truth.truthFitMaxResidual },
     { "poisson_ratio", options.truth.poissonRatio },
     { "csf_youngs_modulus_pa", options.truth.csfYoungsModulus },
+    { "csf_poisson_ratio", options.truth.csfPoissonRatio },
     { "tumour_radius_mm", options.truth.tumourRadius },
     { "tumour_stiffness", options.truth.tumourStiffness },
     { "intraoperative_spacing_mm", { options.truth.intraoperativeSpacing.x(), options.truth.intraoperativeSpacing.y(),
@@ -364,6 +374,11 @@ AddDemoCommand(CLI::App & app)
     ->capture_default_str();
   demo->add_option("--csf-modulus", options->truth.csfYoungsModulus, "Young's modulus of the CSF class (Pa)")
     ->capture_default_str();
+  demo->add_option("--csf-poisson-ratio", options->truth.csfPoissonRatio,
+                   "Poisson's ratio of the CSF class (ground truth and registration); 0.49: fluid-like, keeps "
+                   "CSF cells from being crushed by shifts of 20 mm and more")
+    ->capture_default_str()
+    ->check(CLI::Range(0.0, 0.4999));
   demo->add_option("--tumour-centre", options->tumourCentre, "Synthetic spherical tumour centre X Y Z (mm)")->expected(3);
   demo->add_option("--tumour-radius", options->truth.tumourRadius, "Tumour radius (mm); 0: none")->capture_default_str();
   demo->add_option("--tumour-stiffness", options->truth.tumourStiffness, "Tumour Young's modulus / parenchyma's")

@@ -53,6 +53,11 @@ struct SyntheticBrainShiftSettings
    *  of the CSF class (ventricles; 10 Pa by default, "very soft" below). */
   double poissonRatio = ParenchymaMaterial().poissonRatio;
   double csfYoungsModulus = CsfMaterial().youngsModulus;
+  /** Poisson's ratio of the CSF class, in the ground truth and (biomech demo)
+   *  the registration. The default 0.1 lets CSF cells be crushed: shifts of
+   *  20 mm invert CSF tetrahedra. A nearly incompressible, fluid-like CSF
+   *  (0.49) keeps them: see docs/model-building.md, "Limits". */
+  double csfPoissonRatio = CsfMaterial().poissonRatio;
   /** The CSF has drained (that is why the brain sinks): its class carries
    *  almost no weight. With its full weight, 10 Pa CSF cells cannot carry
    *  themselves under gravity and fold (3 mm hexahedra diverge at 0.3 g). */

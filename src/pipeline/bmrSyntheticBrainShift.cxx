@@ -117,6 +117,7 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
     if (material.name == CsfMaterial().name)
     {
       material.youngsModulus = settings.csfYoungsModulus;
+      material.poissonRatio = settings.csfPoissonRatio;
       material.density = settings.csfDensity;
     }
     else
