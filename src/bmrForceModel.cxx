@@ -585,13 +585,7 @@ FiniteElementForceModel::ComputeInternalForces(const double * u, double * f)
 #pragma omp for schedule(static)
       for (Index n = 0; n < m_NodeCount; ++n)
       {
-        // The mean of J - 1, not of J: exactly 0 at rest, and no cancellation.
-        double dilatation = 0.0;
-        for (Index k = m_NodeTetOffsets[n]; k < m_NodeTetOffsets[n + 1]; ++k)
-        {
-          dilatation += m_NodeTetWeights[k] * (m_TetJacobian[m_NodeTets[k]] - 1.0);
-        }
-        m_NodalPressure[n] = m_NodalBulkModulus[n] * dilatation;
+        m_NodalPressure[n] = NodalPressure(n, m_TetJacobian.data());
       }
     }
 
@@ -1007,14 +1001,21 @@ FiniteElementForceModel::NodalPressures(const double * u) const
   std::vector<double> pressure(m_NodeCount, 0.0);
   for (Index n = 0; n < m_NodeCount; ++n)
   {
-    double dilatation = 0.0;
-    for (Index k = m_NodeTetOffsets[n]; k < m_NodeTetOffsets[n + 1]; ++k)
-    {
-      dilatation += m_NodeTetWeights[k] * (tetJ[m_NodeTets[k]] - 1.0);
-    }
-    pressure[n] = m_NodalBulkModulus[n] * dilatation;
+    pressure[n] = NodalPressure(n, tetJ.data());
   }
   return pressure;
+}
+
+double
+FiniteElementForceModel::NodalPressure(Index n, const double * tetJacobian) const
+{
+  // The mean of J - 1, not of J: exactly 0 at rest, and no cancellation.
+  double dilatation = 0.0;
+  for (Index k = m_NodeTetOffsets[n]; k < m_NodeTetOffsets[n + 1]; ++k)
+  {
+    dilatation += m_NodeTetWeights[k] * (tetJacobian[m_NodeTets[k]] - 1.0);
+  }
+  return m_NodalBulkModulus[n] * dilatation;
 }
 
 double

@@ -150,6 +150,8 @@ private:
   std::vector<double> m_NodalVolume;
   std::vector<double> m_NodalBulkModulus;
 
+  /** ANP: node n's pressure kappa_n (J_n - 1) from the tetrahedra's J. */
+  double NodalPressure(Index n, const double * tetJacobian) const;
   /** ANP: the nodal pressures kappa_n (J_n - 1) at displacements u. */
   std::vector<double> NodalPressures(const double * u) const;
   /** Tetrahedron t's pressure: the mean of its nodes' (ANP), or its own kappa (J - 1). */

@@ -413,6 +413,7 @@ TEST_F(ModelCommandTest, BadInputsExitOneNameTheProblemAndWriteNothing)
     { "model " + Quoted(m_Folder / "missing.nii.gz") + " --mask " + mask, "no such file" },
     { "model " + head + " --mask " + mask + " --sparse-displacements " + Quoted(m_Folder / "points.csv"),
       "craniotomy" },
+    { "demo --csf-poisson-ratio 0.5", "--csf-poisson-ratio" },
   };
   for (const auto & [arguments, expected] : cases)
   {
