@@ -447,8 +447,8 @@ RunBrainCase(double spacing, const std::string & kind, int threads, int throughp
   {
     // Size of the shape-function tables (after the peak-memory reading: this
     // evaluation repeats the solver's, only to count the neighbours).
-    const bmr::MovingLeastSquares  mls(model.nodes, model.meshless.shapeFunctions);
-    const bmr::ShapeFunctionTable table = mls.Evaluate(model.meshless.integrationPoints, false, threads);
+    const auto                    mls = bmr::MovingLeastSquares::ForModel(model);
+    const bmr::ShapeFunctionTable table = mls->Evaluate(model.meshless.integrationPoints, false, threads);
     const double entries = static_cast<double>(table.nodes.size());
     out["table_entries"] = entries;
     out["mean_neighbours"] = entries / std::max<Index>(1, table.PointCount());

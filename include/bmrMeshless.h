@@ -37,8 +37,20 @@ class MovingLeastSquares
 {
 public:
   /** Computes each node's local spacing and support radius. Throws bmr::Error
-   *  for fewer than 4 nodes, duplicate nodes, or settings out of range. */
-  MovingLeastSquares(std::vector<Vector3> nodes, const MlsSettings & settings);
+   *  for fewer than 4 nodes, duplicate nodes, or settings out of range.
+   *  With `integrationPoints`, a node's support radius is the dilatation times
+   *  the larger of its nodal spacing and its distance to the 4th nearest
+   *  integration point, so that every support holds several points (without
+   *  them a node can have mass but hardly any stiffness: see docs/solver.md).
+   *  The solver passes the model's integration points; so must anyone who
+   *  evaluates the solution's shape functions (or use ForModel). */
+  MovingLeastSquares(std::vector<Vector3>         nodes,
+                     const MlsSettings &          settings,
+                     const std::vector<Vector3> & integrationPoints = {});
+
+  /** The shape functions the solver uses for a meshless model: its nodes, its
+   *  MLS settings and its integration points. */
+  static std::unique_ptr<MovingLeastSquares> ForModel(const Model & model);
   ~MovingLeastSquares();
   MovingLeastSquares(const MovingLeastSquares &) = delete;
   MovingLeastSquares & operator=(const MovingLeastSquares &) = delete;

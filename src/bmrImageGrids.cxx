@@ -1020,7 +1020,9 @@ MakeMeshlessGrid(const Body & body, const ImageGridSettings & settings, std::vec
     {
       throw Error("no integration point lies inside the body");
     }
-    const ShapeFunctionTable table = mls.Evaluate(points.positions, false, settings.threads, "integration point");
+    // The supports the solver will use: widened where the points are sparser than the nodes.
+    const MovingLeastSquares covered(model.nodes, mlsSettings, points.positions);
+    const ShapeFunctionTable table = covered.Evaluate(points.positions, false, settings.threads, "integration point");
     double minimum = std::numeric_limits<double>::max(), sum = 0.0;
     for (Index p = 0; p < table.PointCount(); ++p)
     {

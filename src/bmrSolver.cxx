@@ -166,6 +166,8 @@ struct Solver::Impl
   std::vector<Index>                 contactSlaves;
   std::vector<double>                physicalBuffer;
   std::vector<double>                projectedBuffer;
+  std::vector<double>                contactTargets; // meshless contact: interpolated target per slave dof
+  std::vector<Index>                 activeSlaves;   // meshless contact: slaves in contact this step
   std::vector<double>                constraintTargets; // EBCIEM, per step
 
   Impl(const Model & m, const SolverSettings & s);
@@ -173,14 +175,14 @@ struct Solver::Impl
   void        BuildConstraints();
   void        ApplyConstraints(double * u, const std::vector<double> & curveFactors);
   void        PrepareEssentialBoundary(const std::vector<double> & mass);
-  void        EnforceContact(double * u, std::vector<char> & inContact);
+  void        EnforceContact(double * u, std::vector<char> & inContact, const std::vector<double> & inverseMass);
   /** `time`: seconds in explicit dynamics; in dynamic relaxation the fraction
    *  of each tool's trajectory (a ramp from its first to its last pose). */
   void        EnforceTools(double * u, const double * previous, std::vector<char> & inContact,
                            const std::vector<double> & inverseMass, double alpha, double time);
   /** Appends the tools' poses and last-step loads to their histories. */
   void        RecordTools(std::vector<ToolHistory> & histories) const;
-  void        EnforceMeshlessContact(double * u, std::vector<char> & inContact);
+  void        EnforceMeshlessContact(double * u, std::vector<char> & inContact, const std::vector<double> & inverseMass);
   std::vector<double> PhysicalDisplacements(const std::vector<double> & u) const;
   void        CentralDifferenceStep(const std::vector<double> & u,
                                     const std::vector<double> & uPrevious,
@@ -213,7 +215,7 @@ Solver::Impl::Impl(const Model & m, const SolverSettings & s)
   meshless = model.discretization == Discretization::Meshless;
   if (meshless)
   {
-    shapeFunctions = std::make_unique<MovingLeastSquares>(model.nodes, model.meshless.shapeFunctions);
+    shapeFunctions = MovingLeastSquares::ForModel(model);
     forces = std::make_unique<MeshlessForceModel>(
       model, shapeFunctions->Evaluate(model.meshless.integrationPoints, true, threads, "integration point"), threads);
     nodeShapes = shapeFunctions->Evaluate(model.nodes, false, threads, "node");
@@ -486,11 +488,11 @@ Solver::Impl::PrepareEssentialBoundary(const std::vector<double> & mass)
 }
 
 void
-Solver::Impl::EnforceContact(double * u, std::vector<char> & inContact)
+Solver::Impl::EnforceContact(double * u, std::vector<char> & inContact, const std::vector<double> & inverseMass)
 {
   if (meshless)
   {
-    EnforceMeshlessContact(u, inContact);
+    EnforceMeshlessContact(u, inContact, inverseMass);
     return;
   }
   std::fill(inContact.begin(), inContact.end(), 0);
@@ -501,22 +503,37 @@ Solver::Impl::EnforceContact(double * u, std::vector<char> & inContact)
 }
 
 void
-Solver::Impl::EnforceMeshlessContact(double * u, std::vector<char> & inContact)
+Solver::Impl::EnforceMeshlessContact(double * u, std::vector<char> & inContact, const std::vector<double> & inverseMass)
 {
   // Contact acts on the MLS-interpolated positions of the slave nodes. The
-  // projection's correction is added to the slaves' parameters; as the
-  // neighbours' parameters contribute too, this under-corrects and is
-  // repeated (it converges geometrically; what is left is taken up in the
-  // next step).
-  constexpr int kContactIterations = 8;
+  // shape functions do not interpolate: where nodes are close together a
+  // node's own parameter barely moves its interpolated position, and adding
+  // each slave's correction to its own parameter (a Jacobi iteration on the
+  // shape-function matrix) pumps neighbouring parameters apart in opposite
+  // directions, a mode with almost no stiffness that never settles (seen on
+  // Colin27). Instead the parameters change by the mass-weighted least amount
+  // that puts every penetrating slave's interpolated position onto its
+  // projection on the surface, as EBCIEM does for prescribed displacements:
+  // Kaczmarz sweeps over the slaves in contact, which converge whatever the
+  // coupling. A slave once in contact keeps its target for the rest of the
+  // step (a neighbour's correction must not release it and make the contact
+  // set flicker from step to step); slaves pushed into the surface by the
+  // corrections join the set, and the sweeps repeat.
+  constexpr int kDetections = 8;
+  constexpr int kSweeps = 64;
   if (contacts.empty())
   {
     return;
   }
   physicalBuffer.resize(3 * model.nodes.size(), 0.0);
   projectedBuffer.resize(3 * model.nodes.size(), 0.0);
+  contactTargets.resize(3 * model.nodes.size(), 0.0);
+  std::fill(inContact.begin(), inContact.end(), 0);
+  std::vector<Index> & active = activeSlaves;
+  active.clear();
   const Index slaveCount = static_cast<Index>(contactSlaves.size());
-  for (int iteration = 0; iteration < kContactIterations; ++iteration)
+  const double tolerance = 1e-9 * lengthScale;
+  for (int detection = 0; detection < kDetections; ++detection)
   {
 #pragma omp parallel for num_threads(threads) schedule(static)
     for (Index s = 0; s < slaveCount; ++s)
@@ -529,24 +546,68 @@ Solver::Impl::EnforceMeshlessContact(double * u, std::vector<char> & inContact)
         projectedBuffer[3 * node + i] = value[i];
       }
     }
-    std::fill(inContact.begin(), inContact.end(), 0);
+    std::vector<char> penetrating(model.nodes.size(), 0);
     for (auto & contact : contacts)
     {
-      contact->Enforce(projectedBuffer.data(), dofConstrained, inContact, threads);
+      contact->Enforce(projectedBuffer.data(), dofConstrained, penetrating, threads);
     }
-    double largest = 0.0;
+    bool added = false;
     for (const Index node : contactSlaves)
     {
+      if (!penetrating[node])
+      {
+        continue;
+      }
       for (int i = 0; i < 3; ++i)
       {
-        const double correction = projectedBuffer[3 * node + i] - physicalBuffer[3 * node + i];
-        u[3 * node + i] += correction;
-        largest = std::max(largest, std::abs(correction));
+        contactTargets[3 * node + i] = projectedBuffer[3 * node + i];
+      }
+      if (!inContact[node])
+      {
+        inContact[node] = 1;
+        active.push_back(node);
+        added = true;
       }
     }
-    if (largest <= 1e-9 * lengthScale)
+    if (!added && detection > 0)
     {
       break;
+    }
+    std::sort(active.begin(), active.end());
+    for (int sweep = 0; sweep < kSweeps; ++sweep)
+    {
+      double largest = 0.0;
+      for (const Index node : active)
+      {
+        const Vector3 current = nodeShapes.Interpolate(node, u);
+        for (int i = 0; i < 3; ++i)
+        {
+          const double correction = contactTargets[3 * node + i] - current[i];
+          largest = std::max(largest, std::abs(correction));
+          // Constrained parameters (nodal imposition) are not moved: zero weight.
+          double norm = 0.0;
+          for (Index k = nodeShapes.offsets[node]; k < nodeShapes.offsets[node + 1]; ++k)
+          {
+            const Index  d = 3 * nodeShapes.nodes[k] + i;
+            const double phi = nodeShapes.values[k];
+            norm += dofConstrained[d] ? 0.0 : phi * phi * inverseMass[d];
+          }
+          if (!(norm > 0.0))
+          {
+            continue;
+          }
+          const double multiplier = correction / norm;
+          for (Index k = nodeShapes.offsets[node]; k < nodeShapes.offsets[node + 1]; ++k)
+          {
+            const Index d = 3 * nodeShapes.nodes[k] + i;
+            u[d] += dofConstrained[d] ? 0.0 : multiplier * nodeShapes.values[k] * inverseMass[d];
+          }
+        }
+      }
+      if (largest <= tolerance)
+      {
+        break;
+      }
     }
   }
 }
@@ -596,7 +657,7 @@ Solver::Impl::CentralDifferenceStep(const std::vector<double> & u,
     uNext[d] = u[d] + beta * (u[d] - uPrevious[d]) + alpha * residual * inverseMass[d];
   }
   ApplyConstraints(uNext.data(), curveFactors);
-  EnforceContact(uNext.data(), inContact);
+  EnforceContact(uNext.data(), inContact, inverseMass);
   if (!tools.empty())
   {
     EnforceTools(uNext.data(), u.data(), inContact, inverseMass, alpha, toolTime);
