@@ -456,9 +456,7 @@ TEST(MeshlessContact, BlockPressedOntoAPlaneStaysAboveIt)
   ramp.rampTime = 0.5;
   Prescribe(model, model.NodeSet("zmax"), [](const Vector3 &) { return Vector3(0.0, 0.0, -1.0); }, { true, true, true },
             ramp);
-  // Heavily damped explicit dynamics to rest. (Dynamic relaxation settles to
-  // ~3e-5 mm here but its termination estimate does not: the contact set
-  // chatters at that level; see docs/solver.md.)
+  // Heavily damped explicit dynamics to rest (dynamic relaxation: next test).
   SolverSettings settings;
   settings.integrator = Integrator::ExplicitDynamics;
   settings.endTime = 2.0;
