@@ -164,10 +164,15 @@ struct Solver::Impl
   ShapeFunctionTable                 nodeShapes;
   std::unique_ptr<EssentialBoundary> essential;
   std::vector<Index>                 contactSlaves;
-  std::vector<double>                physicalBuffer;
+  // Meshless contact, per step: interpolated positions projected onto the
+  // surfaces, the slaves penetrating at the last detection, the targets of the
+  // slaves in contact (3 per node), those slaves (ascending) and, per slave
+  // and component, sum_K phi_K^2 / M_K over its unconstrained parameters.
   std::vector<double>                projectedBuffer;
-  std::vector<double>                contactTargets; // meshless contact: interpolated target per slave dof
-  std::vector<Index>                 activeSlaves;   // meshless contact: slaves in contact this step
+  std::vector<char>                  penetrating;
+  std::vector<double>                contactTargets;
+  std::vector<Index>                 activeSlaves;
+  std::vector<double>                activeNorms;
   std::vector<double>                constraintTargets; // EBCIEM, per step
 
   Impl(const Model & m, const SolverSettings & s);
@@ -525,12 +530,10 @@ Solver::Impl::EnforceMeshlessContact(double * u, std::vector<char> & inContact, 
   {
     return;
   }
-  physicalBuffer.resize(3 * model.nodes.size(), 0.0);
   projectedBuffer.resize(3 * model.nodes.size(), 0.0);
   contactTargets.resize(3 * model.nodes.size(), 0.0);
   std::fill(inContact.begin(), inContact.end(), 0);
-  std::vector<Index> & active = activeSlaves;
-  active.clear();
+  activeSlaves.clear();
   const Index slaveCount = static_cast<Index>(contactSlaves.size());
   const double tolerance = 1e-9 * lengthScale;
   for (int detection = 0; detection < kDetections; ++detection)
@@ -542,11 +545,10 @@ Solver::Impl::EnforceMeshlessContact(double * u, std::vector<char> & inContact, 
       const Vector3 value = nodeShapes.Interpolate(node, u);
       for (int i = 0; i < 3; ++i)
       {
-        physicalBuffer[3 * node + i] = value[i];
         projectedBuffer[3 * node + i] = value[i];
       }
     }
-    std::vector<char> penetrating(model.nodes.size(), 0);
+    penetrating.assign(model.nodes.size(), 0);
     for (auto & contact : contacts)
     {
       contact->Enforce(projectedBuffer.data(), dofConstrained, penetrating, threads);
@@ -565,7 +567,7 @@ Solver::Impl::EnforceMeshlessContact(double * u, std::vector<char> & inContact, 
       if (!inContact[node])
       {
         inContact[node] = 1;
-        active.push_back(node);
+        activeSlaves.push_back(node);
         added = true;
       }
     }
@@ -573,25 +575,34 @@ Solver::Impl::EnforceMeshlessContact(double * u, std::vector<char> & inContact, 
     {
       break;
     }
-    std::sort(active.begin(), active.end());
+    std::sort(activeSlaves.begin(), activeSlaves.end());
+    activeNorms.assign(3 * activeSlaves.size(), 0.0);
+    for (std::size_t a = 0; a < activeSlaves.size(); ++a)
+    {
+      const Index node = activeSlaves[a];
+      for (int i = 0; i < 3; ++i)
+      {
+        // Constrained parameters (nodal imposition) are not moved: zero weight.
+        for (Index k = nodeShapes.offsets[node]; k < nodeShapes.offsets[node + 1]; ++k)
+        {
+          const Index  d = 3 * nodeShapes.nodes[k] + i;
+          const double phi = nodeShapes.values[k];
+          activeNorms[3 * a + i] += dofConstrained[d] ? 0.0 : phi * phi * inverseMass[d];
+        }
+      }
+    }
     for (int sweep = 0; sweep < kSweeps; ++sweep)
     {
       double largest = 0.0;
-      for (const Index node : active)
+      for (std::size_t a = 0; a < activeSlaves.size(); ++a)
       {
+        const Index   node = activeSlaves[a];
         const Vector3 current = nodeShapes.Interpolate(node, u);
         for (int i = 0; i < 3; ++i)
         {
           const double correction = contactTargets[3 * node + i] - current[i];
           largest = std::max(largest, std::abs(correction));
-          // Constrained parameters (nodal imposition) are not moved: zero weight.
-          double norm = 0.0;
-          for (Index k = nodeShapes.offsets[node]; k < nodeShapes.offsets[node + 1]; ++k)
-          {
-            const Index  d = 3 * nodeShapes.nodes[k] + i;
-            const double phi = nodeShapes.values[k];
-            norm += dofConstrained[d] ? 0.0 : phi * phi * inverseMass[d];
-          }
+          const double norm = activeNorms[3 * a + i];
           if (!(norm > 0.0))
           {
             continue;
