@@ -26,8 +26,10 @@ struct RigidContact::Tree
   bool                                       closed = false;
   double                                     sideSign = -1.0; // -1: body inside, +1: body outside
 
-  // Signed distance of x to the surface (positive outside) and the closest point.
-  double SignedDistance(const Vector3 & x, Vector3 & closest) const
+  // Signed distance of x to the surface (positive outside), the closest point
+  // and (when asked) the unit outward normal there: the direction from the
+  // closest point to x, or the pseudo-normal where x is on the surface.
+  double SignedDistance(const Vector3 & x, Vector3 & closest, Vector3 * outwardNormal = nullptr) const
   {
     const auto   hit = surface->Closest(x);
     const auto   t = static_cast<std::size_t>(hit.triangle);
@@ -68,7 +70,16 @@ struct RigidContact::Tree
         normal = edge->second;
       }
     }
-    return (x - closest).dot(normal);
+    const double distance = (x - closest).dot(normal);
+    if (outwardNormal != nullptr)
+    {
+      // Below 1e-7 mm the difference of two positions ~100 mm from the origin has no direction left.
+      constexpr double kDirectionless = 1e-7;
+      const double     gap = (x - closest).norm();
+      *outwardNormal = gap > kDirectionless ? Vector3((distance < 0.0 ? -1.0 : 1.0) * (x - closest) / gap)
+                                            : normal.normalized();
+    }
+    return distance;
   }
 };
 
@@ -166,13 +177,17 @@ RigidContact::SetPose(const Eigen::Matrix3d & rotation, const Vector3 & translat
 
 void
 RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std::vector<char> & inContact, int threads,
-                      std::vector<Vector3> * corrections)
+                      std::vector<Vector3> * corrections, std::vector<Vector3> * normals)
 {
   const Tree & tree = *m_Tree;
   const auto   count = static_cast<Index>(m_SlaveNodes.size());
   if (corrections != nullptr)
   {
     corrections->assign(m_SlaveNodes.size(), Vector3::Zero());
+  }
+  if (normals != nullptr)
+  {
+    normals->assign(m_SlaveNodes.size(), Vector3::Zero());
   }
   // Distances are measured in the surface's own frame, where they do not
   // change when the surface moves rigidly: the query cache stays valid.
@@ -194,12 +209,16 @@ RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std:
     {
       continue;
     }
-    Vector3 closest;
-    if (tree.sideSign * tree.SignedDistance(x, closest) >= 0.0)
+    Vector3 closest, outward;
+    if (tree.sideSign * tree.SignedDistance(x, closest, &outward) >= 0.0)
     {
       m_LastQueried[i] = x;
       m_SafeDistance[i] = (x - closest).norm();
       continue;
+    }
+    if (normals != nullptr)
+    {
+      (*normals)[static_cast<std::size_t>(i)] = m_Rotation * (tree.sideSign * outward);
     }
     // Project onto the surface; a node held in some components (a symmetry
     // plane) moves in the others only: alternate projection and restoring the

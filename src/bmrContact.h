@@ -26,9 +26,11 @@ public:
    *  marks them in `inContact`. Components flagged in `dofConstrained` (3 per
    *  node) keep their value; the node moves in its free components only.
    *  `corrections` (when given): per slave node, the displacement the
-   *  projection added (zero for nodes it left alone). */
+   *  projection added (zero for nodes it left alone). `normals` (when given):
+   *  per projected slave node, the unit normal of the surface at its closest
+   *  point, towards the body's side (model frame; zero for nodes left alone). */
   void Enforce(double * u, const std::vector<char> & dofConstrained, std::vector<char> & inContact, int threads,
-               std::vector<Vector3> * corrections = nullptr);
+               std::vector<Vector3> * corrections = nullptr, std::vector<Vector3> * normals = nullptr);
 
   /** Places the surface: a point p of the surface's own frame is at
    *  rotation p + translation (a moving tool); identity by default. */

@@ -165,14 +165,19 @@ struct Solver::Impl
   std::unique_ptr<EssentialBoundary> essential;
   std::vector<Index>                 contactSlaves;
   // Meshless contact, per step: interpolated positions projected onto the
-  // surfaces, the slaves penetrating at the last detection, the targets of the
-  // slaves in contact (3 per node), those slaves (ascending) and, per slave
-  // and component, sum_K phi_K^2 / M_K over its unconstrained parameters.
+  // surfaces, the slaves penetrating at the last detection with the surface
+  // normals there (per contact), per node in contact its normal and target
+  // n . u, those slaves (ascending) and, per slave, sum_K phi_K^2 (n . M_K^-1 n)
+  // over its movable parameters; the parameters (dofs) that EBCIEM's
+  // constrained rows interpolate.
   std::vector<double>                projectedBuffer;
   std::vector<char>                  penetrating;
+  std::vector<Vector3>               slaveNormals;
+  std::vector<Vector3>               contactNormals;
   std::vector<double>                contactTargets;
   std::vector<Index>                 activeSlaves;
   std::vector<double>                activeNorms;
+  std::vector<char>                  essentialSupport;
   std::vector<double>                constraintTargets; // EBCIEM, per step
 
   Impl(const Model & m, const SolverSettings & s);
@@ -489,6 +494,15 @@ Solver::Impl::PrepareEssentialBoundary(const std::vector<double> & mass)
       dofs.push_back(c.dof);
     }
     essential = std::make_unique<EssentialBoundary>(nodeShapes, dofs, mass);
+    essentialSupport.assign(3 * model.nodes.size(), 0);
+    for (const Index dof : dofs)
+    {
+      const Index node = dof / 3;
+      for (Index k = nodeShapes.offsets[node]; k < nodeShapes.offsets[node + 1]; ++k)
+      {
+        essentialSupport[3 * nodeShapes.nodes[k] + dof % 3] = 1;
+      }
+    }
   }
 }
 
@@ -510,31 +524,47 @@ Solver::Impl::EnforceContact(double * u, std::vector<char> & inContact, const st
 void
 Solver::Impl::EnforceMeshlessContact(double * u, std::vector<char> & inContact, const std::vector<double> & inverseMass)
 {
-  // Contact acts on the MLS-interpolated positions of the slave nodes. The
-  // shape functions do not interpolate: where nodes are close together a
+  // Contact acts on the MLS-interpolated positions of the slave nodes. A
+  // slave in contact contributes one constraint, n . (Phi_s u) = n . c, with c
+  // its projection onto the surface and n the surface normal there: the
+  // linearised gap, so the tangential motion stays free (frictionless).
+  // Holding all three components at c instead lets the corrections carry
+  // tangential forces, a steady state that depends on the masses.
+  // The shape functions do not interpolate: where nodes are close together a
   // node's own parameter barely moves its interpolated position, and adding
   // each slave's correction to its own parameter (a Jacobi iteration on the
   // shape-function matrix) pumps neighbouring parameters apart in opposite
   // directions, a mode with almost no stiffness that never settles (seen on
   // Colin27). Instead the parameters change by the mass-weighted least amount
-  // that puts every penetrating slave's interpolated position onto its
-  // projection on the surface, as EBCIEM does for prescribed displacements:
+  // that meets every constraint, as EBCIEM does for prescribed displacements:
   // Kaczmarz sweeps over the slaves in contact, which converge whatever the
-  // coupling. A slave once in contact keeps its target for the rest of the
-  // step (a neighbour's correction must not release it and make the contact
-  // set flicker from step to step); slaves pushed into the surface by the
-  // corrections join the set, and the sweeps repeat.
+  // coupling. A slave once in contact keeps its constraint for the rest of
+  // the step (a neighbour's correction must not release it and make the
+  // contact set flicker from step to step); slaves pushed into the surface by
+  // the corrections join the set, and the sweeps repeat.
+  // With EBCIEM a sweep that moved parameters the constrained nodes
+  // interpolate ends with the essential boundary's projection: projecting
+  // onto the prescribed values and then the contact once each per step left
+  // a steady state that depends on the step's damping (on Colin27 every
+  // update of the damping jolted the solution by 2e-4 mm and the termination
+  // window never closed); projecting in turn within the step converges to
+  // the least change that meets both.
   constexpr int kDetections = 8;
   constexpr int kSweeps = 64;
   if (contacts.empty())
   {
     return;
   }
+  // Nodal imposition keeps constrained parameters fixed; EBCIEM restores the
+  // constrained interpolated values instead.
+  const auto weight = [&](Index dof) { return essential || !dofConstrained[dof] ? inverseMass[dof] : 0.0; };
   projectedBuffer.resize(3 * model.nodes.size(), 0.0);
-  contactTargets.resize(3 * model.nodes.size(), 0.0);
+  contactNormals.resize(model.nodes.size(), Vector3::Zero());
+  contactTargets.resize(model.nodes.size(), 0.0);
   std::fill(inContact.begin(), inContact.end(), 0);
   activeSlaves.clear();
-  const Index slaveCount = static_cast<Index>(contactSlaves.size());
+  activeNorms.clear();
+  const Index  slaveCount = static_cast<Index>(contactSlaves.size());
   const double tolerance = 1e-9 * lengthScale;
   for (int detection = 0; detection < kDetections; ++detection)
   {
@@ -549,26 +579,28 @@ Solver::Impl::EnforceMeshlessContact(double * u, std::vector<char> & inContact, 
       }
     }
     penetrating.assign(model.nodes.size(), 0);
+    bool added = false;
     for (auto & contact : contacts)
     {
-      contact->Enforce(projectedBuffer.data(), dofConstrained, penetrating, threads);
-    }
-    bool added = false;
-    for (const Index node : contactSlaves)
-    {
-      if (!penetrating[node])
+      contact->Enforce(projectedBuffer.data(), dofConstrained, penetrating, threads, nullptr, &slaveNormals);
+      const std::vector<Index> & slaves = contact->SlaveNodes();
+      for (std::size_t k = 0; k < slaves.size(); ++k)
       {
-        continue;
-      }
-      for (int i = 0; i < 3; ++i)
-      {
-        contactTargets[3 * node + i] = projectedBuffer[3 * node + i];
-      }
-      if (!inContact[node])
-      {
-        inContact[node] = 1;
-        activeSlaves.push_back(node);
-        added = true;
+        const Index     node = slaves[k];
+        const Vector3 & normal = slaveNormals[k];
+        if (!penetrating[node] || !(normal.norm() > 0.0)) // penetrating another surface
+        {
+          continue;
+        }
+        contactNormals[node] = normal;
+        contactTargets[node] = normal.dot(Vector3(projectedBuffer[3 * node], projectedBuffer[3 * node + 1],
+                                                  projectedBuffer[3 * node + 2]));
+        if (!inContact[node])
+        {
+          inContact[node] = 1;
+          activeSlaves.push_back(node);
+          added = true;
+        }
       }
     }
     if (!added && detection > 0)
@@ -576,48 +608,53 @@ Solver::Impl::EnforceMeshlessContact(double * u, std::vector<char> & inContact, 
       break;
     }
     std::sort(activeSlaves.begin(), activeSlaves.end());
-    activeNorms.assign(3 * activeSlaves.size(), 0.0);
+    activeNorms.assign(activeSlaves.size(), 0.0);
     for (std::size_t a = 0; a < activeSlaves.size(); ++a)
     {
-      const Index node = activeSlaves[a];
-      for (int i = 0; i < 3; ++i)
+      const Index    node = activeSlaves[a];
+      const Vector3 & n = contactNormals[node];
+      for (Index k = nodeShapes.offsets[node]; k < nodeShapes.offsets[node + 1]; ++k)
       {
-        // Constrained parameters (nodal imposition) are not moved: zero weight.
-        for (Index k = nodeShapes.offsets[node]; k < nodeShapes.offsets[node + 1]; ++k)
+        const double phi = nodeShapes.values[k];
+        for (int i = 0; i < 3; ++i)
         {
-          const Index  d = 3 * nodeShapes.nodes[k] + i;
-          const double phi = nodeShapes.values[k];
-          activeNorms[3 * a + i] += dofConstrained[d] ? 0.0 : phi * phi * inverseMass[d];
+          activeNorms[a] += phi * phi * n[i] * n[i] * weight(3 * nodeShapes.nodes[k] + i);
         }
       }
     }
     for (int sweep = 0; sweep < kSweeps; ++sweep)
     {
       double largest = 0.0;
+      bool   movedEssential = false;
       for (std::size_t a = 0; a < activeSlaves.size(); ++a)
       {
-        const Index   node = activeSlaves[a];
-        const Vector3 current = nodeShapes.Interpolate(node, u);
-        for (int i = 0; i < 3; ++i)
+        const Index     node = activeSlaves[a];
+        const Vector3 & n = contactNormals[node];
+        const double    gap = contactTargets[node] - n.dot(nodeShapes.Interpolate(node, u));
+        largest = std::max(largest, std::abs(gap));
+        if (!(activeNorms[a] > 0.0))
         {
-          const double correction = contactTargets[3 * node + i] - current[i];
-          largest = std::max(largest, std::abs(correction));
-          const double norm = activeNorms[3 * a + i];
-          if (!(norm > 0.0))
-          {
-            continue;
-          }
-          const double multiplier = correction / norm;
-          for (Index k = nodeShapes.offsets[node]; k < nodeShapes.offsets[node + 1]; ++k)
+          continue;
+        }
+        const double multiplier = gap / activeNorms[a];
+        for (Index k = nodeShapes.offsets[node]; k < nodeShapes.offsets[node + 1]; ++k)
+        {
+          for (int i = 0; i < 3; ++i)
           {
             const Index d = 3 * nodeShapes.nodes[k] + i;
-            u[d] += dofConstrained[d] ? 0.0 : multiplier * nodeShapes.values[k] * inverseMass[d];
+            const double change = multiplier * nodeShapes.values[k] * n[i] * weight(d);
+            u[d] += change;
+            movedEssential = movedEssential || (essential && change != 0.0 && essentialSupport[d]);
           }
         }
       }
       if (largest <= tolerance)
       {
         break;
+      }
+      if (movedEssential)
+      {
+        essential->Impose(u, constraintTargets);
       }
     }
   }

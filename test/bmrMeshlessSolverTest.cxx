@@ -518,6 +518,82 @@ TEST(MeshlessContact, DynamicRelaxationSettlesWithCloseSlaveNodes)
   EXPECT_NEAR(onPlane.z(), -onTop.z(), 0.02 * std::abs(onTop.z()));
 }
 
+TEST(MeshlessContact, SlidingIsUnresisted)
+{
+  // The block 0.1 mm above a frictionless plane, its top pressed 0.4 mm down,
+  // and once more also moved sideways: the problem is invariant under
+  // horizontal translation, so the second solution is the first translated
+  // and the plane carries no tangential force.
+  auto solve = [](const Vector3 & top) {
+    Model          model = MeshlessBlock(MakeMaterial(3000.0, 0.45));
+    ContactSurface plane = MakePlane(Vector3(5.0, 4.0, -0.1), Vector3(0.0, 0.0, 1.0), 50.0);
+    plane.bodySide = ContactSurface::Side::Outside;
+    plane.slaveNodeSet = "zmin";
+    model.contactSurfaces.push_back(plane);
+    Prescribe(model, model.NodeSet("zmax"), [&](const Vector3 &) { return top; });
+    Solver            solver(model, TightRelaxation(1e-8, 50000));
+    const SolveResult result = solver.Solve();
+    EXPECT_TRUE(result.converged) << result.message;
+    return std::make_pair(model, result);
+  };
+  const Vector3 slide(1.5, -0.7, 0.0);
+  const auto [pressedModel, pressed] = solve(Vector3(0.0, 0.0, -0.4));
+  const auto [model, slid] = solve(Vector3(1.5, -0.7, -0.4));
+  EXPECT_EQ(slid.contactNodes, static_cast<int>(model.NodeSet("zmin").size()));
+  const Vector3 onPlane = SumOver(slid.reactionForces, model.NodeSet("zmin"));
+  RecordProperty("tangentialOverNormal", Sci(std::hypot(onPlane.x(), onPlane.y()) / onPlane.z()));
+  ASSERT_GT(onPlane.z(), 0.0) << "the plane must push the body up";
+  EXPECT_LT(std::hypot(onPlane.x(), onPlane.y()), 1e-4 * onPlane.z()) << "tangential force on the plane";
+  double difference = 0.0;
+  for (std::size_t n = 0; n < model.nodes.size(); ++n)
+  {
+    difference = std::max(difference, (slid.displacements[n] - pressed.displacements[n] - slide).norm());
+  }
+  RecordProperty("maxDifferenceFromTranslatedSolution_mm", Sci(difference));
+  EXPECT_LT(difference, 1e-5);
+}
+
+TEST(MeshlessContact, UniaxialCompressionAgainstAPlaneBesideEbciemConstraints)
+{
+  // 10 % uniaxial compression whose x = 0 face rests on a rigid plane instead
+  // of a symmetry constraint: the slaves of that face share supports with the
+  // EBCIEM-constrained nodes of the y = 0 and z = 0 symmetry faces (and some
+  // are both). Projecting onto the essential boundary and then the contact
+  // once each per step left the prescribed values off by 1e-5 mm at the end
+  // of every step, and a steady state that moved with the damping (on
+  // Colin27 every update of the damping jolted the solution and dynamic
+  // relaxation did not terminate); projecting onto both together meets both
+  // and the analytic solution.
+  const Material   material = MakeMaterial(3000.0, 0.45);
+  const NeoHookean law(material);
+  // Two 2 mm cells along x: the supports (3.2 mm) of the slaves at x = 0 and
+  // of the loaded nodes at x = 4 share the middle layer's parameters.
+  Model model = MakeBlockMesh(Vector3(4.0, 8.0, 6.0), { 2, 4, 3 }, GridCells::Hexahedra, material);
+  MakeMeshlessFromCells(model, MlsSettings{}, IntegrationSettings{}, 1);
+  model.fixedConstraints.push_back({ "ymin", { false, true, false } });
+  model.fixedConstraints.push_back({ "zmin", { false, false, true } });
+  ContactSurface plane = MakePlane(Vector3(0.0, 4.0, 3.0), Vector3(1.0, 0.0, 0.0), 50.0);
+  plane.bodySide = ContactSurface::Side::Outside;
+  plane.slaveNodeSet = "xmin";
+  model.contactSurfaces.push_back(plane);
+  const Matrix3           F = UniaxialDeformationGradient(0.9, law);
+  const DisplacementField exact = HomogeneousField(F);
+  Prescribe(model, model.NodeSet("xmax"), exact, { true, false, false });
+
+  Solver            solver(model, TightRelaxation(1e-6, 20000));
+  const SolveResult result = solver.Solve();
+  ASSERT_TRUE(result.converged) << result.message;
+  RecordProperty("steps", result.steps);
+  const double scale = MaxFieldNorm(model, exact);
+  const double error = MaxNodalError(model, result.displacements, exact);
+  RecordProperty("relativeDisplacementError", Sci(error / scale));
+  // The linear basis's integration error on this block (MeshlessHomogeneousTest).
+  EXPECT_LT(error, 0.01 * scale);
+  EXPECT_LT(PrescribedMismatch(model, result), 1e-8);
+  EXPECT_LT(result.maxPenetration, 1e-6);
+  EXPECT_EQ(result.contactNodes, static_cast<int>(model.NodeSet("xmin").size()));
+}
+
 // ---------------------------------------------------------------------------
 // Supports cover integration points, not only nodes.
 // ---------------------------------------------------------------------------
