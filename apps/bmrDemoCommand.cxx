@@ -239,14 +239,9 @@ RunDemo(DemoOptions options)
     settings.model.gravity = options.registrationGravity * 9810.0 * truth.down;
     settings.model.materials.tumour.youngsModulus = options.truth.tumourStiffness * ParenchymaMaterial().youngsModulus;
     // The registration's CSF has the ground truth's Poisson's ratio (its stiffness stays the default).
-    settings.model.materials.classMaterials = DefaultClassMaterials(settings.model.classifier.classes);
-    for (Material & material : settings.model.materials.classMaterials)
-    {
-      if (material.name == CsfMaterial().name)
-      {
-        material.poissonRatio = options.truth.csfPoissonRatio;
-      }
-    }
+    Material csf = CsfMaterial();
+    csf.poissonRatio = options.truth.csfPoissonRatio;
+    settings.model.materials.classMaterials = DefaultClassMaterials(settings.model.classifier.classes, csf);
     const BrainShiftRegistrationResult result = RegisterBrainShift(inputs, settings, stages);
     if (k == 0)
     {

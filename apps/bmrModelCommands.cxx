@@ -318,6 +318,26 @@ DisplacementCsv(const PrescribedDisplacement & load)
 // The model pipeline: MRI (+ mask, tumour, craniotomy, measurements) -> scene.
 // ---------------------------------------------------------------------------
 
+/** The CSF class's material: the default (10 Pa, nu 0.1) is compressible; a
+ *  nearly incompressible, fluid-like CSF keeps its cells from being crushed by
+ *  large shifts and carries the brain's weight (docs/model-building.md). */
+struct CsfOptions
+{
+  Material csf = CsfMaterial();
+
+  void Add(CLI::App * command)
+  {
+    command->add_option("--csf-modulus", csf.youngsModulus, "Young's modulus of the CSF class (Pa)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+    command->add_option("--csf-poisson-ratio", csf.poissonRatio,
+                        "Poisson's ratio of the CSF class; 0.49: fluid-like, keeps CSF cells from being crushed "
+                        "by shifts of 20 mm and more")
+      ->check(CLI::Range(0.0, 0.4999))
+      ->capture_default_str();
+  }
+};
+
 /** The preoperative side of a patient model, shared by `model` and `register`:
  *  the image and its masks, and every setting of bmr::BuildBrainModel. */
 struct PatientModelOptions
@@ -330,6 +350,7 @@ struct PatientModelOptions
   ClassifierOptions   classifier;
   GridOptions         grid;
   RegionOptions       regions;
+  CsfOptions          csf;
   double              skullGap = BrainSurfaceSettings{}.skullGap;
   bool                noContact = false;
   std::vector<double> gravity;
@@ -346,6 +367,7 @@ struct PatientModelOptions
     classifier.Add(command);
     grid.Add(command);
     regions.Add(command);
+    csf.Add(command);
     command->add_option("--skull-gap", skullGap, "Gap between the brain surface and the rigid skull (mm)")
       ->capture_default_str();
     command->add_flag("--no-contact", noContact, "No brain-skull contact");
@@ -360,6 +382,7 @@ struct PatientModelOptions
     settings.classifier = classifier.Settings();
     settings.atlas = atlas.Settings();
     settings.grid = grid.Settings(threads);
+    settings.materials.classMaterials = DefaultClassMaterials(classifier.classes, csf.csf);
     settings.skullGap = skullGap;
     regions.Apply(settings);
     settings.contact = !noContact;
@@ -511,6 +534,8 @@ RunModel(const ModelOptions & options)
                         { "exposed_nodes", exposed.size() },
                         { "skull_base_nodes", model.NodeSet("skull_base").size() } };
   report["skull_gap_mm"] = patient.skullGap;
+  report["csf"] = { { "youngs_modulus_pa", patient.csf.csf.youngsModulus },
+                    { "poisson_ratio", patient.csf.csf.poissonRatio } };
   report["warnings"] = warnings;
 
   timer.Run("write", [&] {

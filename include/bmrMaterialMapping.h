@@ -28,13 +28,14 @@ Material
 TumourMaterial();
 
 /** Materials of fuzzy c-means classes ordered by ascending centroid on a T1
- *  image, where the darkest class is CSF: class 0 CsfMaterial() (name "csf"),
- *  every other class ParenchymaMaterial() (name "parenchyma"; grey and white
- *  matter share the parenchyma values in the literature). K = 2: [csf,
- *  parenchyma]; K = 3: [csf, parenchyma (grey), parenchyma (white)].
- *  Throws bmr::Error for classes < 1. */
+ *  image, where the darkest class is CSF: class 0 `csf` (default CsfMaterial(),
+ *  name "csf"), every other class `parenchyma` (default ParenchymaMaterial(),
+ *  name "parenchyma"; grey and white matter share the parenchyma values in the
+ *  literature). K = 2: [csf, parenchyma]; K = 3: [csf, parenchyma (grey),
+ *  parenchyma (white)]. Throws bmr::Error for classes < 1. */
 std::vector<Material>
-DefaultClassMaterials(int classes);
+DefaultClassMaterials(int classes, const Material & csf = CsfMaterial(),
+                      const Material & parenchyma = ParenchymaMaterial());
 
 /** How a cell or integration point samples the image. */
 struct MaterialSampling

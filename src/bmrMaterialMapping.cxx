@@ -481,14 +481,14 @@ TumourMaterial()
 }
 
 std::vector<Material>
-DefaultClassMaterials(int classes)
+DefaultClassMaterials(int classes, const Material & csf, const Material & parenchyma)
 {
   if (classes < 1)
   {
     throw Error("DefaultClassMaterials: " + std::to_string(classes) + " classes; give at least 1");
   }
-  std::vector<Material> materials(classes, ParenchymaMaterial());
-  materials[0] = CsfMaterial();
+  std::vector<Material> materials(classes, parenchyma);
+  materials[0] = csf;
   return materials;
 }
 

@@ -507,6 +507,8 @@ DefaultRegistrationSettings()
   settings["affine_only"] = !model.atlas.bsplineStage;
   settings["grid"] = std::string(ImageGridKindName(model.grid.kind));
   settings["element_size"] = model.grid.elementSize;
+  settings["csf_modulus"] = CsfMaterial().youngsModulus;
+  settings["csf_poisson_ratio"] = CsfMaterial().poissonRatio;
   settings["skull_gap"] = model.skullGap;
   settings["skull_base_height"] = model.skullBase.height;
   settings["craniotomy_centre"] = py::none();
@@ -575,6 +577,15 @@ RegistrationSettingsFrom(const py::dict & values)
   model.atlas.bsplineStage = !number("affine_only", bool{});
   model.grid.kind = ParseImageGridKind(text("grid"));
   model.grid.elementSize = number("element_size", double{});
+  Material csf = CsfMaterial();
+  csf.youngsModulus = number("csf_modulus", double{});
+  csf.poissonRatio = number("csf_poisson_ratio", double{});
+  if (!(csf.youngsModulus > 0.0) || !(csf.poissonRatio >= 0.0 && csf.poissonRatio < 0.5))
+  {
+    throw py::value_error("csf_modulus must be > 0 (Pa) and csf_poisson_ratio in [0, 0.5); got " +
+                          std::to_string(csf.youngsModulus) + " and " + std::to_string(csf.poissonRatio));
+  }
+  model.materials.classMaterials = DefaultClassMaterials(model.classifier.classes, csf);
   model.skullGap = number("skull_gap", double{});
   model.skullBase.height = number("skull_base_height", double{});
   const py::object centre = get("craniotomy_centre");

@@ -703,6 +703,8 @@ nlohmann::json
 RegistrationReportJson(const BrainShiftRegistrationResult & result, const BrainShiftRegistrationSettings & settings)
 {
   const ModelCounts counts = CountModel(result.model.model);
+  const auto &      classMaterials = settings.model.materials.classMaterials;
+  const Material    csf = classMaterials.empty() ? CsfMaterial() : classMaterials.front();
   nlohmann::json    report;
   report["seconds"] = result.timer.Json();
   report["model"] = { { "grid", ImageGridKindName(settings.model.grid.kind) },
@@ -719,7 +721,8 @@ RegistrationReportJson(const BrainShiftRegistrationResult & result, const BrainS
                                          ? result.model.model.nodeSets.at("skull_base").size()
                                          : 0 },
                       { "contact", !result.model.model.contactSurfaces.empty() },
-                      { "classes", settings.model.classifier.classes } };
+                      { "classes", settings.model.classifier.classes },
+                      { "csf", { { "youngs_modulus_pa", csf.youngsModulus }, { "poisson_ratio", csf.poissonRatio } } } };
   const LoadReport & load = result.model.loadReport;
   report["loads"] = { { "used", load.usedPoints },
                       { "rejected", load.rejectedPoints },

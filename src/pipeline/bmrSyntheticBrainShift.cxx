@@ -111,20 +111,13 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
   modelSettings.craniotomyCentre = settings.craniotomyCentre;
   modelSettings.craniotomyRadius = settings.craniotomyRadius;
   modelSettings.threads = settings.threads;
-  modelSettings.materials.classMaterials = DefaultClassMaterials(modelSettings.classifier.classes);
-  for (Material & material : modelSettings.materials.classMaterials)
-  {
-    if (material.name == CsfMaterial().name)
-    {
-      material.youngsModulus = settings.csfYoungsModulus;
-      material.poissonRatio = settings.csfPoissonRatio;
-      material.density = settings.csfDensity;
-    }
-    else
-    {
-      material.poissonRatio = settings.poissonRatio;
-    }
-  }
+  Material csf = CsfMaterial();
+  csf.youngsModulus = settings.csfYoungsModulus;
+  csf.poissonRatio = settings.csfPoissonRatio;
+  csf.density = settings.csfDensity;
+  Material parenchyma = ParenchymaMaterial();
+  parenchyma.poissonRatio = settings.poissonRatio;
+  modelSettings.materials.classMaterials = DefaultClassMaterials(modelSettings.classifier.classes, csf, parenchyma);
   modelSettings.materials.tumour.youngsModulus = settings.tumourStiffness * ParenchymaMaterial().youngsModulus;
   modelSettings.materials.tumour.poissonRatio = settings.poissonRatio;
   truth.model = BuildBrainModel(preoperativeImage, brainMask, truth.tumourMask, ContactSurface{}, nullptr,
