@@ -2,7 +2,8 @@
 # Builds the module in Release and runs the benchmark driver, then draws the
 # error-against-run-time plot, then times model building from an MRI. Writes
 # docs/benchmarks.md, docs/benchmark-error-vs-time.csv,
-# docs/benchmark-error-vs-time.png and docs/model-building-benchmark.md.
+# docs/benchmark-error-vs-time.png, docs/stability-matrix.md and
+# docs/model-building-benchmark.md.
 #
 #   scripts/run-benchmarks.sh [bmrBenchmark options, e.g. --quick or --threads 1,2]
 #
@@ -18,7 +19,7 @@ build="${BUILD_DIR:-${root}/build-bench}"
 jobs="${JOBS:-2}"
 
 cmake -S "${root}" -B "${build}" -DCMAKE_BUILD_TYPE=Release
-cmake --build "${build}" --target bmrBenchmark bmrImageBenchmark biomech -j "${jobs}"
+cmake --build "${build}" --target bmrBenchmark bmrImageBenchmark bmrStabilityBenchmark biomech -j "${jobs}"
 
 command -v ccx >/dev/null 2>&1 || echo "run-benchmarks: ccx (calculix-ccx) not found; the CalculiX-referenced part is skipped" >&2
 
@@ -33,6 +34,8 @@ if [ -f docs/benchmark-error-vs-time.csv ]; then
   # Debian's interpreter: the python3 first on PATH may not see python3-matplotlib.
   /usr/bin/python3 scripts/plot-benchmarks.py docs/benchmark-error-vs-time.csv docs/benchmark-error-vs-time.png
 fi
+# Stiff and extreme cases on every discretization: docs/stability-matrix.md.
+OMP_WAIT_POLICY=PASSIVE "${build}/apps/bmrStabilityBenchmark" --output docs/stability-matrix.md
 # Image stages (fit, warp, B-spline baseline): their own section of docs/benchmarks.md.
 OMP_WAIT_POLICY=PASSIVE "${build}/apps/bmrImageBenchmark" --output docs/benchmarks.md
 # Model building from an MRI (Colin27): docs/model-building-benchmark.md.
