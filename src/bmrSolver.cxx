@@ -611,7 +611,7 @@ Solver::Impl::EnforceMeshlessContact(double * u, std::vector<char> & inContact, 
     activeNorms.assign(activeSlaves.size(), 0.0);
     for (std::size_t a = 0; a < activeSlaves.size(); ++a)
     {
-      const Index    node = activeSlaves[a];
+      const Index     node = activeSlaves[a];
       const Vector3 & n = contactNormals[node];
       for (Index k = nodeShapes.offsets[node]; k < nodeShapes.offsets[node + 1]; ++k)
       {
@@ -641,7 +641,7 @@ Solver::Impl::EnforceMeshlessContact(double * u, std::vector<char> & inContact, 
         {
           for (int i = 0; i < 3; ++i)
           {
-            const Index d = 3 * nodeShapes.nodes[k] + i;
+            const Index  d = 3 * nodeShapes.nodes[k] + i;
             const double change = multiplier * nodeShapes.values[k] * n[i] * weight(d);
             u[d] += change;
             movedEssential = movedEssential || (essential && change != 0.0 && essentialSupport[d]);
