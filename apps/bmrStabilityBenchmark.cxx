@@ -33,6 +33,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <functional>
 #include <iomanip>
@@ -193,7 +194,7 @@ Solve(const bmr::Model & model, double tolerance, int threads)
   Outcome outcome;
   try
   {
-    bmr::Solver             solver(model, settings);
+    bmr::Solver            solver(model, settings);
     const bmr::SolveResult result = solver.Solve();
     outcome.state = result.converged ? "converged" : "not converged";
     outcome.message = result.message;
@@ -337,18 +338,32 @@ ParseOptions(int argc, char ** argv)
       return argv[++k];
     };
     if (argument == "--output")
+    {
       options.output = value();
+    }
     else if (argument == "--json")
+    {
       options.json = value();
+    }
     else if (argument == "--threads")
-      options.threads = std::stoi(value());
-    else if (argument == "--quick")
-      options.quick = true;
-    else if (argument == "--check")
-      options.check = true;
+    {
+      const std::string text = value();
+      char *            end = nullptr;
+      options.threads = static_cast<int>(std::strtol(text.c_str(), &end, 10));
+      if (text.empty() || *end != '\0' || options.threads < 0)
+      {
+        throw std::runtime_error("--threads needs a whole number >= 0 (0: all cores), got '" + text + "'");
+      }
+    }
+    else if (argument == "--quick" || argument == "--check")
+    {
+      (argument == "--quick" ? options.quick : options.check) = true;
+    }
     else
+    {
       throw std::runtime_error("unknown option " + argument +
                                "; use --output FILE, --json FILE, --threads N, --quick, --check");
+    }
   }
   return options;
 }
