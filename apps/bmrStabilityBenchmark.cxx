@@ -24,6 +24,7 @@
 #include "bmrBenchmarkSupport.h"
 #include "bmrCalculix.h"
 #include "bmrMeshGenerators.h"
+#include "bmrMeshIO.h"
 #include "bmrMeshless.h"
 #include "bmrModel.h"
 #include "bmrSolver.h"
@@ -34,7 +35,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <fstream>
+#include <filesystem>
 #include <functional>
 #include <iomanip>
 #include <iostream>
@@ -540,10 +541,19 @@ main(int argc, char ** argv)
 {
   try
   {
-    const Options           options = ParseOptions(argc, argv);
+    const Options options = ParseOptions(argc, argv);
+    for (const std::string & path : { options.output, options.json })
+    {
+      // Before minutes of solves, not after.
+      const std::filesystem::path folder = std::filesystem::absolute(path).parent_path();
+      if (!path.empty() && !std::filesystem::is_directory(folder))
+      {
+        throw std::runtime_error("cannot write '" + path + "': folder '" + folder.string() + "' does not exist");
+      }
+    }
     const std::vector<Cell> cells = RunMatrix(options);
     const std::string       report = Report(cells, options);
-    std::ofstream(options.output) << report;
+    bmr::WriteTextFileAtomically(options.output, report);
     if (!options.json.empty())
     {
       Json all = Json::array();
@@ -551,7 +561,7 @@ main(int argc, char ** argv)
       {
         all.push_back(CellJson(cell));
       }
-      std::ofstream(options.json) << all.dump(2) << "\n";
+      bmr::WriteTextFileAtomically(options.json, all.dump(2) + "\n");
     }
     std::cout << report;
     if (options.check)
