@@ -528,8 +528,9 @@ Solver::Impl::EnforceMeshlessContact(double * u, std::vector<char> & inContact, 
   // slave in contact contributes one constraint, n . (Phi_s u) = n . c, with c
   // its projection onto the surface and n the surface normal there: the
   // linearised gap, so the tangential motion stays free (frictionless).
-  // Holding all three components at c instead lets the corrections carry
-  // tangential forces, a steady state that depends on the masses.
+  // Holding all three components at c instead can, in principle, let the
+  // corrections carry tangential forces that depend on the masses (not seen
+  // on a flat plane: MeshlessContact.SlidingIsUnresisted passes with both).
   // The shape functions do not interpolate: where nodes are close together a
   // node's own parameter barely moves its interpolated position, and adding
   // each slave's correction to its own parameter (a Jacobi iteration on the
@@ -563,7 +564,6 @@ Solver::Impl::EnforceMeshlessContact(double * u, std::vector<char> & inContact, 
   contactTargets.resize(model.nodes.size(), 0.0);
   std::fill(inContact.begin(), inContact.end(), 0);
   activeSlaves.clear();
-  activeNorms.clear();
   const Index  slaveCount = static_cast<Index>(contactSlaves.size());
   const double tolerance = 1e-9 * lengthScale;
   for (int detection = 0; detection < kDetections; ++detection)
