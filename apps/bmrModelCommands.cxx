@@ -354,6 +354,8 @@ struct PatientModelOptions
   double              skullGap = BrainSurfaceSettings{}.skullGap;
   bool                noContact = false;
   std::vector<double> gravity;
+  double              csfDrainedDepth = 0.0;
+  CLI::Option *       csfDrainedDepthOption = nullptr;
   int                 threads = 0;
 
   void Add(CLI::App * command)
@@ -371,7 +373,15 @@ struct PatientModelOptions
     command->add_option("--skull-gap", skullGap, "Gap between the brain surface and the rigid skull (mm)")
       ->capture_default_str();
     command->add_flag("--no-contact", noContact, "No brain-skull contact");
-    command->add_option("--gravity", gravity, "Body acceleration X Y Z (mm/s^2), e.g. 0 0 -9810")->expected(3);
+    CLI::Option * gravityOption =
+      command->add_option("--gravity", gravity, "Body acceleration X Y Z (mm/s^2), e.g. 0 0 -9810")->expected(3);
+    csfDrainedDepthOption =
+      command
+        ->add_option("--csf-drained-depth", csfDrainedDepth,
+                     "CSF drained to this depth (mm) below the brain's top along gravity: only the tissue above "
+                     "the CSF's surface carries its weight (default: all of it)")
+        ->check(CLI::NonNegativeNumber)
+        ->needs(gravityOption);
     command->add_option("--threads", threads, "Worker threads (0: all)")->check(CLI::Range(0, 4096));
   }
 
@@ -389,6 +399,10 @@ struct PatientModelOptions
     if (!gravity.empty())
     {
       settings.gravity = ThreeValues(gravity, "--gravity");
+    }
+    if (csfDrainedDepthOption->count() > 0)
+    {
+      settings.csfDrainedDepth = csfDrainedDepth;
     }
     settings.threads = threads;
     return settings;
@@ -509,6 +523,10 @@ RunModel(const ModelOptions & options)
   {
     scene["gravity"] = { settings.gravity.x(), settings.gravity.y(), settings.gravity.z() };
   }
+  if (model.fluidSurface)
+  {
+    scene["fluid_surface"] = { model.fluidSurface->x(), model.fluidSurface->y(), model.fluidSurface->z() };
+  }
   if (!model.contactSurfaces.empty())
   {
     scene["node_sets"]["contact"] = { { "point_data", "contact" } };
@@ -536,6 +554,10 @@ RunModel(const ModelOptions & options)
   report["skull_gap_mm"] = patient.skullGap;
   report["csf"] = { { "youngs_modulus_pa", patient.csf.csf.youngsModulus },
                     { "poisson_ratio", patient.csf.csf.poissonRatio } };
+  if (settings.csfDrainedDepth)
+  {
+    report["csf"]["drained_depth_mm"] = *settings.csfDrainedDepth;
+  }
   report["warnings"] = warnings;
 
   timer.Run("write", [&] {

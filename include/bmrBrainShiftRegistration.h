@@ -153,6 +153,10 @@ struct BrainModelSettings
   bool contact = true;
   /** Body acceleration (mm/s^2); zero: none (registration loads by displacements only). */
   Vector3 gravity = Vector3::Zero();
+  /** CSF drainage under gravity: the CSF's surface lies this far (mm) below
+   *  the brain's highest node along gravity; only the tissue above it carries
+   *  its weight (Model::fluidSurface). Unset: the whole brain does. */
+  std::optional<double> csfDrainedDepth;
   /** Threads of the grid and material mapping; 0: OpenMP's default. */
   int threads = 0;
 };

@@ -15,6 +15,7 @@
 #include <array>
 #include <cstdint>
 #include <map>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -228,6 +229,12 @@ struct Model
   std::vector<PrescribedDisplacement> prescribedDisplacements;
   Vector3                             bodyAcceleration = Vector3::Zero(); // mm/s^2 (gravity: 0,0,-9810)
   LoadCurve                           bodyForceCurve;
+  /** CSF drainage (Miga et al. 1999): where set, the CSF still fills the skull
+   *  up to the plane through this point normal to bodyAcceleration. Nodes
+   *  below it stay buoyed (neutrally, as before drainage) and carry no body
+   *  force; nodes above it have lost that buoyancy and carry their weight.
+   *  Unset: every node carries its weight (the CSF fully drained). */
+  std::optional<Vector3>              fluidSurface; // mm
   std::vector<ContactSurface>         contactSurfaces;
   std::vector<RigidTool>              tools;
 

@@ -376,6 +376,12 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
   {
     throw Error("CalculiX deck: the CalculiX mesh was made for another model; call MakeCalculixMesh on this model.");
   }
+  if (model.fluidSurface)
+  {
+    // CalculiX's GRAV load acts on whole elements; the solver's drainage acts on nodes.
+    throw Error("CalculiX deck: the model has a CSF fluid surface (gravity on the drained part only), which the "
+                "CalculiX deck does not express; remove the fluid surface to compare under full gravity.");
+  }
 
   // Constraint per model node and component: constrained flag and value (mm).
   // Prescribed displacements override fixed constraints on the same component.

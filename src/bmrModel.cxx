@@ -327,6 +327,12 @@ Model::Validate() const
   {
     throw Error("the body acceleration (gravity) is not finite.");
   }
+  if (fluidSurface && (!fluidSurface->allFinite() || bodyAcceleration.isZero()))
+  {
+    throw Error(bodyAcceleration.isZero()
+                  ? "a CSF fluid surface is given without gravity; give the body acceleration it is level under."
+                  : "the CSF fluid surface point is not finite.");
+  }
   for (const ContactSurface & surface : contactSurfaces)
   {
     const std::string label = "contact surface '" + surface.name + "'";

@@ -376,7 +376,7 @@ public:
   {
     m_Root.AllowOnly({ "description", "mesh", "material_array", "materials", "material_fields", "discretization",
                        "meshless",
-                       "node_sets", "fixed", "prescribed_displacements", "gravity", "gravity_curve", "contact",
+                       "node_sets", "fixed", "prescribed_displacements", "gravity", "gravity_curve", "fluid_surface", "contact",
                        "tools", "solver", "output" });
     m_Scene.path = m_ScenePath;
     if (const auto description = m_Root.Optional("description"))
@@ -993,6 +993,14 @@ private:
         curve->Fail("needs 'gravity'");
       }
       TheModel().bodyForceCurve = ParseCurve(*curve);
+    }
+    if (const auto surface = m_Root.Optional("fluid_surface"))
+    {
+      if (!m_Root.Has("gravity"))
+      {
+        surface->Fail("needs 'gravity' (the CSF's surface is level under it)");
+      }
+      TheModel().fluidSurface = surface->Vector();
     }
   }
 

@@ -277,9 +277,14 @@ Solver::Impl::Impl(const Model & m, const SolverSettings & s)
   if (!model.bodyAcceleration.isZero())
   {
     components.push_back("body-force");
-    gravityForce.resize(3 * model.nodes.size());
+    gravityForce.assign(3 * model.nodes.size(), 0.0);
+    const Vector3 up = -model.bodyAcceleration.normalized();
     for (std::size_t n = 0; n < model.nodes.size(); ++n)
     {
+      if (model.fluidSurface && (model.nodes[n] - *model.fluidSurface).dot(up) <= 0.0)
+      {
+        continue; // still buoyed by the CSF
+      }
       for (int i = 0; i < 3; ++i)
       {
         gravityForce[3 * n + i] = physicalMass[n] * model.bodyAcceleration[i];

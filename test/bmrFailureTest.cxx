@@ -150,6 +150,20 @@ TEST(Failure, MissingNodeSetIsNamed)
   EXPECT_TRUE(Contains(message, "'cortex'")) << message;
 }
 
+TEST(Failure, FluidSurfaceNeedsGravityAndAFinitePoint)
+{
+  Model model = TwoTetrahedra();
+  model.fluidSurface = Vector3(0.0, 0.0, 0.5);
+  std::string message = ValidationMessage(model);
+  EXPECT_TRUE(Contains(message, "without gravity")) << message;
+
+  model.bodyAcceleration = Vector3(0.0, 0.0, -9810.0);
+  EXPECT_EQ(ValidationMessage(model), "");
+  model.fluidSurface->z() = std::nan("");
+  message = ValidationMessage(model);
+  EXPECT_TRUE(Contains(message, "fluid surface point is not finite")) << message;
+}
+
 TEST(Failure, MaterialIndexOutOfRangeIsNamed)
 {
   Model model = TwoTetrahedra();

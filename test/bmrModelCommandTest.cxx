@@ -234,6 +234,11 @@ TEST_F(ModelCommandTest, Colin27GivesASolvableModelLoadedBySparseDisplacements)
 // parenchyma of the brain's height would under its own weight,
 // rho g H^2 / (2 E), 37 mm for Colin27's 150 mm (the skull's support can
 // only reduce the sag). Measured: 1,685 steps, largest 13.5 mm, mean -6.5 mm.
+// Fluid-like CSF and partial drainage (the CSF's surface 50 mm below the top,
+// the tissue below it buoyed: Miga et al. 1999) must sag less; the latter
+// also less than a free column loaded on its top 50 mm only (20 mm).
+// Measured: fluid-like 2,441 steps, 10.2 mm; drained to 50 mm 1,167 steps,
+// largest 9.2 mm, mean -3.6 mm.
 TEST_F(ModelCommandTest, Colin27SagsUnderGravityAgainstTheSkull)
 {
   if (!fs::exists(Colin27Folder / "ch2.nii.gz"))
@@ -245,6 +250,7 @@ TEST_F(ModelCommandTest, Colin27SagsUnderGravityAgainstTheSkull)
     double largest = 0.0;         // mm
     double largestVertical = 0.0; // mm, of the largest displacement
     double mean = 0.0;            // mm, mean vertical displacement of the nodes
+    double height = 0.0;          // mm, the brain's extent along gravity
     double freeColumn = 0.0;      // mm, sag of a free column of the brain's height
   };
   // 1 g after CSF drainage (no buoyancy), head upright, skull contact, 5 mm hexahedra.
@@ -278,13 +284,16 @@ TEST_F(ModelCommandTest, Colin27SagsUnderGravityAgainstTheSkull)
         sag.largestVertical = u.z();
       }
     }
-    const double height = (highest - lowest) * 1e-3;                                // m
+    sag.height = highest - lowest;
+    const double height = sag.height * 1e-3;                                        // m
     sag.freeColumn = 1000.0 * 9.81 * height * height / (2.0 * 3000.0) * 1e3;       // mm
     RecordProperty(name + "_largest_mm", std::to_string(sag.largest));
     RecordProperty(name + "_mean_vertical_mm", std::to_string(sag.mean));
     return sag;
   };
   const Sag compressible = sag("csf-default", "");
+  // Drained to 50 mm below the top: the tissue below the CSF's surface stays buoyed.
+  const Sag partlyDrained = sag("csf-drained-50mm", "--csf-drained-depth 50");
   // Fluid-like CSF (nearly incompressible, still 10 Pa): the brain cannot squeeze it out of the closed skull.
   const Sag fluidLike = sag("csf-fluid-like", "--csf-poisson-ratio 0.49");
   const json report = json::parse(ReadText(m_Folder / "csf-fluid-like" / "model-report.json"));
@@ -299,6 +308,27 @@ TEST_F(ModelCommandTest, Colin27SagsUnderGravityAgainstTheSkull)
   }
   // Fluid-like CSF carries part of the weight: the brain sags less (measured 10.2 against 13.5 mm).
   EXPECT_LT(fluidLike.largest, 0.9 * compressible.largest);
+
+  // Partial drainage: the scene's CSF surface lies 50 mm below the brain's top.
+  const json drainedReport = json::parse(ReadText(m_Folder / "csf-drained-50mm" / "model-report.json"));
+  EXPECT_EQ(drainedReport["csf"]["drained_depth_mm"].get<double>(), 50.0);
+  const bmr::Scene drained = bmr::ReadScene((m_Folder / "csf-drained-50mm" / "scene.json").string());
+  ASSERT_TRUE(drained.model.fluidSurface.has_value());
+  double top = -1e9;
+  for (const bmr::Vector3 & node : drained.model.nodes)
+  {
+    top = std::max(top, node.z());
+  }
+  EXPECT_NEAR(drained.model.fluidSurface->z(), top - 50.0, 1e-9);
+  // It sinks, less than the fully drained brain and less than a free column of
+  // the brain's height H loaded only on its top D = 50 mm would:
+  // rho g (D^2 / 2 + D (H - D)) / E.
+  EXPECT_LT(partlyDrained.mean, -0.2);
+  EXPECT_LT(partlyDrained.largestVertical, -0.9 * partlyDrained.largest) << "the largest displacement is not downwards";
+  EXPECT_GT(partlyDrained.largest, 1.0);
+  EXPECT_LT(partlyDrained.largest, 0.9 * compressible.largest);
+  const double depth = 0.050, height = partlyDrained.height * 1e-3; // m
+  EXPECT_LT(partlyDrained.largest, 1000.0 * 9.81 * (0.5 * depth * depth + depth * (height - depth)) / 3000.0 * 1e3);
 }
 
 TEST_F(ModelCommandTest, EveryGridKindGivesAParsableScene)
@@ -438,6 +468,9 @@ TEST_F(ModelCommandTest, BadInputsExitOneNameTheProblemAndWriteNothing)
     { "demo --csf-poisson-ratio 0.5", "--csf-poisson-ratio" },
     { "model " + head + " --mask " + mask + craniotomy + " --csf-poisson-ratio 0.5", "--csf-poisson-ratio" },
     { "model " + head + " --mask " + mask + craniotomy + " --csf-modulus 0", "--csf-modulus" },
+    { "model " + head + " --mask " + mask + craniotomy + " --csf-drained-depth 20", "--gravity" },
+    { "model " + head + " --mask " + mask + craniotomy + " --gravity 0 0 -9810 --csf-drained-depth -1",
+      "--csf-drained-depth" },
   };
   for (const auto & [arguments, expected] : cases)
   {

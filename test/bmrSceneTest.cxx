@@ -92,6 +92,7 @@ TEST_F(SceneTest, EveryFieldIsMapped)
      "curve": {"shape": "linear", "ramp_time": 0.25}}])");
   scene["gravity"] = { 0, 0, -9810 };
   scene["gravity_curve"] = json::parse(R"({"shape": "step"})");
+  scene["fluid_surface"] = { 0, 0, 12.5 };
   scene["contact"] = json::parse(R"([{"name": "skull",
     "surface": {"generate": "ellipsoid", "semi_axes": [30, 20, 20], "subdivisions": 2, "centre": [20, 10, 10]},
     "body_side": "outside", "flip_normals": true, "slave_node_set": "skin"}])");
@@ -161,6 +162,8 @@ TEST_F(SceneTest, EveryFieldIsMapped)
 
   EXPECT_EQ(model.bodyAcceleration, bmr::Vector3(0, 0, -9810));
   EXPECT_EQ(model.bodyForceCurve.shape, bmr::LoadCurve::Shape::Step);
+  ASSERT_TRUE(model.fluidSurface.has_value());
+  EXPECT_EQ(*model.fluidSurface, bmr::Vector3(0, 0, 12.5));
 
   ASSERT_EQ(model.contactSurfaces.size(), 1u);
   const bmr::ContactSurface & contact = model.contactSurfaces[0];
@@ -205,6 +208,7 @@ TEST_F(SceneTest, DefaultsFollowTheDocumentation)
   EXPECT_FALSE(parsed.settings.computeStress);
   EXPECT_EQ(parsed.model.materials[0].density, 1000.0);
   EXPECT_EQ(parsed.model.bodyAcceleration, bmr::Vector3::Zero());
+  EXPECT_FALSE(parsed.model.fluidSurface.has_value());
   EXPECT_TRUE(parsed.model.contactSurfaces.empty());
   EXPECT_EQ(parsed.model.prescribedDisplacements[0].components, (std::array<bool, 3>{ true, true, true }));
   EXPECT_EQ(parsed.model.prescribedDisplacements[0].curve.shape, bmr::LoadCurve::Shape::Smooth);
@@ -420,6 +424,8 @@ TEST_F(SceneTest, BadInputsNameTheOffendingKey)
     { "zero ramp", [](json & s) { s["prescribed_displacements"][0]["curve"] = { { "ramp_time", 0 } }; }, { "prescribed_displacements[0].curve.ramp_time" } },
     { "short gravity", [](json & s) { s["gravity"] = { 0, -9810 }; }, { "gravity", "3 values" } },
     { "gravity curve alone", [](json & s) { s["gravity_curve"] = { { "shape", "linear" } }; }, { "gravity_curve", "gravity" } },
+    { "fluid surface alone", [](json & s) { s["fluid_surface"] = { 0, 0, 1 }; }, { "fluid_surface", "gravity" } },
+    { "short fluid surface", [](json & s) { s["gravity"] = { 0, 0, -9810 }; s["fluid_surface"] = { 0, 1 }; }, { "fluid_surface", "3 values" } },
     { "missing contact surface file", [](json & s) { s["contact"] = { { { "surface", "skull.stl" } } }; }, { "contact[0].surface", "skull.stl" } },
     { "bad body side",
       [](json & s) { s["contact"] = { { { "surface", { { "generate", "ellipsoid" }, { "semi_axes", { 50, 50, 50 } } } }, { "body_side", "above" } } }; },

@@ -976,6 +976,19 @@ BindModel(py::module_ & module)
       "gravity", [](const Model & model) { return py::make_tuple(model.bodyAcceleration.x(), model.bodyAcceleration.y(), model.bodyAcceleration.z()); },
       [](Model & model, const py::object & value) { model.bodyAcceleration = VectorFromObject(value, "gravity"); },
       "Body acceleration (mm/s^2), e.g. (0, 0, -9810).")
+    .def_property(
+      "fluid_surface",
+      [](const Model & model) -> py::object {
+        return model.fluidSurface ? py::object(py::make_tuple(model.fluidSurface->x(), model.fluidSurface->y(),
+                                                              model.fluidSurface->z()))
+                                  : py::object(py::none());
+      },
+      [](Model & model, const py::object & value) {
+        model.fluidSurface = value.is_none() ? std::nullopt
+                                             : std::optional<Vector3>(VectorFromObject(value, "fluid_surface"));
+      },
+      "A point (mm) on the surface of the CSF left after drainage: nodes below its level plane carry no weight; "
+      "None: every node carries its weight.")
     .def(
       "fix",
       [](Model & model, const std::string & nodeSet, const py::object & components) {

@@ -516,6 +516,7 @@ DefaultRegistrationSettings()
   settings["craniotomy_mask"] = py::none();
   settings["contact"] = model.contact;
   settings["gravity"] = py::make_tuple(0.0, 0.0, 0.0);
+  settings["csf_drained_depth"] = py::none();
   settings["max_distance"] = IntraoperativeData{}.maxDistance;
   settings["solver_tolerance"] = defaults.solver.tolerance;
   settings["max_steps"] = defaults.solver.maxSteps;
@@ -610,6 +611,10 @@ RegistrationSettingsFrom(const py::dict & values)
   }
   model.contact = number("contact", bool{});
   model.gravity = VectorFromObject(get("gravity"), "gravity");
+  if (!get("csf_drained_depth").is_none())
+  {
+    model.csfDrainedDepth = number("csf_drained_depth", double{});
+  }
   model.threads = number("threads", int{});
   settings.solver.tolerance = number("solver_tolerance", double{});
   settings.solver.maxSteps = number("max_steps", int{});

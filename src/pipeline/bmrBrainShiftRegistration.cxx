@@ -347,6 +347,23 @@ BuildBrainModel(const RegistrationImage *      image,
     model.prescribedDisplacements = { result.load };
   }
   model.bodyAcceleration = settings.gravity;
+  if (settings.csfDrainedDepth)
+  {
+    if (settings.gravity.isZero() || !(*settings.csfDrainedDepth >= 0.0))
+    {
+      throw Error(settings.gravity.isZero() ? "a CSF drained depth is given without gravity; give the gravity the CSF "
+                                              "drains under."
+                                            : "the CSF drained depth is " + std::to_string(*settings.csfDrainedDepth) +
+                                                " mm; give a depth of 0 mm or more below the brain's top.");
+    }
+    const Vector3 up = -settings.gravity.normalized();
+    Index         top = 0;
+    for (std::size_t n = 1; n < model.nodes.size(); ++n)
+    {
+      top = model.nodes[n].dot(up) > model.nodes[top].dot(up) ? static_cast<Index>(n) : top;
+    }
+    model.fluidSurface = model.nodes[top] - *settings.csfDrainedDepth * up;
+  }
 
   // Contact: every surface node that is neither fixed nor loaded may touch the skull.
   if (settings.contact)
@@ -723,6 +740,10 @@ RegistrationReportJson(const BrainShiftRegistrationResult & result, const BrainS
                       { "contact", !result.model.model.contactSurfaces.empty() },
                       { "classes", settings.model.classifier.classes },
                       { "csf", { { "youngs_modulus_pa", csf.youngsModulus }, { "poisson_ratio", csf.poissonRatio } } } };
+  if (settings.model.csfDrainedDepth)
+  {
+    report["model"]["csf"]["drained_depth_mm"] = *settings.model.csfDrainedDepth;
+  }
   const LoadReport & load = result.model.loadReport;
   report["loads"] = { { "used", load.usedPoints },
                       { "rejected", load.rejectedPoints },

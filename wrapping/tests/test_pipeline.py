@@ -273,6 +273,21 @@ def test_csf_material_settings_reach_the_model(colin27):
                               csf_poisson_ratio=0.5, **CRANIOTOMY)
 
 
+def test_csf_drainage_places_the_fluid_surface_below_the_top(colin27):
+    image, mask = colin27
+    points, displacements = bmr.read_sparse_displacements(sparse_csv())
+    assert bmr.default_registration_settings()["csf_drained_depth"] is None
+    brain = bmr.build_brain_model(image, mask, sparse_points=points, sparse_displacements=displacements,
+                                  gravity=(0, 0, -9810), csf_drained_depth=40.0, **CRANIOTOMY)
+    top = max(node[2] for node in brain.model.nodes)
+    assert brain.model.fluid_surface[2] == pytest.approx(top - 40.0)
+    assert bmr.build_brain_model(image, mask, sparse_points=points, sparse_displacements=displacements,
+                                 gravity=(0, 0, -9810), **CRANIOTOMY).model.fluid_surface is None
+    with pytest.raises(bmr.Error, match="without gravity"):
+        bmr.build_brain_model(image, mask, sparse_points=points, sparse_displacements=displacements,
+                              csf_drained_depth=40.0, **CRANIOTOMY)
+
+
 def test_register_bad_arguments_are_named(colin27):
     image, mask = colin27
     points, displacements = bmr.read_sparse_displacements(sparse_csv())
