@@ -3,6 +3,7 @@
 
 #include "bmrImageGrids.h"
 
+#include "itkBiomechanicalModelObject.h"
 #include "itkImageToMeshFilter.h"
 #include "itkMesh.h"
 
@@ -26,6 +27,8 @@ namespace itk
  * 0.49, rho = 1000 kg/m^3), node sets "all" and "surface", and for a meshless
  * grid the integration points and weights (model.meshless). It can be
  * written with bmr::WriteMesh (.vtu, node sets as point-data masks).
+ * GetModelOutput() (output 1) carries the same model down the pipeline
+ * (BiomechanicalModelObject), e.g. to BiomechanicalDeformationFilter.
  *
  * Grid kinds and parameters: see bmr::MakeGridFromLabels and
  * bmr::ImageGridSettings (bmrImageGrids.h). Defaults: hexahedra, element
@@ -142,14 +145,23 @@ public:
 
   /** The core model of the last update. */
   const bmr::Model & GetModel() const { return m_Grid.model; }
+  /** The same model as a pipeline output (output 1), e.g. the input of
+   *  BiomechanicalDeformationFilter after material mapping. */
+  BiomechanicalModelObject * GetModelOutput()
+  {
+    return itkDynamicCastInDebugMode<BiomechanicalModelObject *>(this->ProcessObject::GetOutput(1));
+  }
   /** Image label of each cell of the last update (empty for meshless). */
   const std::vector<int> & GetCellLabels() const { return m_Grid.cellLabels; }
   /** Size and quality figures of the last update. */
   const bmr::GridQuality & GetQuality() const { return m_Grid.quality; }
 
 protected:
-  BiomechanicalGridImageFilter() = default;
+  BiomechanicalGridImageFilter();
   ~BiomechanicalGridImageFilter() override = default;
+
+  using Superclass::MakeOutput;
+  DataObject::Pointer MakeOutput(ProcessObject::DataObjectPointerArraySizeType index) override;
 
   void GenerateData() override;
   void PrintSelf(std::ostream & os, Indent indent) const override;

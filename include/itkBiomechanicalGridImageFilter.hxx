@@ -14,6 +14,24 @@ namespace itk
 {
 
 template <typename TLabelImage>
+BiomechanicalGridImageFilter<TLabelImage>::BiomechanicalGridImageFilter()
+{
+  this->SetNumberOfRequiredOutputs(2);
+  this->SetNthOutput(1, this->MakeOutput(1));
+}
+
+template <typename TLabelImage>
+DataObject::Pointer
+BiomechanicalGridImageFilter<TLabelImage>::MakeOutput(ProcessObject::DataObjectPointerArraySizeType index)
+{
+  if (index == 1)
+  {
+    return BiomechanicalModelObject::New().GetPointer();
+  }
+  return Superclass::MakeOutput(index);
+}
+
+template <typename TLabelImage>
 void
 BiomechanicalGridImageFilter<TLabelImage>::SetGridKindByName(const std::string & name)
 {
@@ -108,6 +126,7 @@ BiomechanicalGridImageFilter<TLabelImage>::GenerateData()
     output->SetCell(c, element);
     output->SetCellData(c, c < m_Grid.cellLabels.size() ? m_Grid.cellLabels[c] : 0);
   }
+  this->GetModelOutput()->SetModel(m_Grid.model);
 }
 
 template <typename TLabelImage>

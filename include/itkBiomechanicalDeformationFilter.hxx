@@ -1,0 +1,345 @@
+#ifndef itkBiomechanicalDeformationFilter_hxx
+#define itkBiomechanicalDeformationFilter_hxx
+
+#include "itkBiomechanicalDeformationFilter.h"
+
+#include "bmrMeshless.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <map>
+
+namespace itk
+{
+
+template <typename TDisplacementPointSet, typename TSurfaceMesh>
+BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::BiomechanicalDeformationFilter()
+{
+  // Named inputs; the model is the primary one.
+  this->SetPrimaryInputName("ModelInput");
+  this->AddOptionalInputName("PrescribedDisplacements");
+  this->AddOptionalInputName("ContactSurface");
+  this->SetNumberOfRequiredOutputs(1);
+  this->SetNthOutput(0, this->MakeOutput(0));
+}
+
+template <typename TDisplacementPointSet, typename TSurfaceMesh>
+DataObject::Pointer
+BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::MakeOutput(DataObjectPointerArraySizeType)
+{
+  return DisplacementPointSetType::New().GetPointer();
+}
+
+template <typename TDisplacementPointSet, typename TSurfaceMesh>
+auto
+BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::GetOutput() -> DisplacementPointSetType *
+{
+  return itkDynamicCastInDebugMode<DisplacementPointSetType *>(this->GetPrimaryOutput());
+}
+
+template <typename TDisplacementPointSet, typename TSurfaceMesh>
+auto
+BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::GetOutput() const
+  -> const DisplacementPointSetType *
+{
+  return itkDynamicCastInDebugMode<const DisplacementPointSetType *>(this->GetPrimaryOutput());
+}
+
+template <typename TDisplacementPointSet, typename TSurfaceMesh>
+void
+BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::SetModel(const bmr::Model & model)
+{
+  auto object = ModelObjectType::New();
+  object->SetModel(model);
+  this->SetModelInput(object);
+}
+
+template <typename TDisplacementPointSet, typename TSurfaceMesh>
+void
+BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::SetSolverSettings(
+  const bmr::SolverSettings & settings)
+{
+  m_SolverSettings = settings;
+  this->Modified();
+}
+
+template <typename TDisplacementPointSet, typename TSurfaceMesh>
+void
+BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::SetTolerance(double tolerance)
+{
+  if (m_SolverSettings.tolerance != tolerance)
+  {
+    m_SolverSettings.tolerance = tolerance;
+    this->Modified();
+  }
+}
+
+template <typename TDisplacementPointSet, typename TSurfaceMesh>
+void
+BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::SetMaximumNumberOfSteps(int steps)
+{
+  if (m_SolverSettings.maxSteps != steps)
+  {
+    m_SolverSettings.maxSteps = steps;
+    this->Modified();
+  }
+}
+
+template <typename TDisplacementPointSet, typename TSurfaceMesh>
+bmr::Model
+BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::AssembleModel() const
+{
+  const ModelObjectType * input = this->GetModelInput();
+  if (input == nullptr)
+  {
+    itkExceptionMacro(<< "no model: call SetModelInput (e.g. with BiomechanicalGridImageFilter::GetModelOutput()) "
+                         "or SetModel.");
+  }
+  bmr::Model model = input->GetModel();
+  if (model.nodes.empty())
+  {
+    itkExceptionMacro(<< "the model has no nodes; update the filter that makes it first.");
+  }
+
+  if (const DisplacementPointSetType * prescribed = this->GetPrescribedDisplacements())
+  {
+    // Each point must be a node: the nearest node within 1e-6 of the model's size.
+    using LocatorType = PointsLocator<VectorContainer<IdentifierType, Point<double, 3>>>;
+    auto    nodes = LocatorType::PointsContainer::New();
+    bmr::Vector3 lowest = model.nodes.front(), highest = model.nodes.front();
+    nodes->Reserve(model.nodes.size());
+    for (std::size_t n = 0; n < model.nodes.size(); ++n)
+    {
+      Point<double, 3> point;
+      for (unsigned int d = 0; d < 3; ++d)
+      {
+        point[d] = model.nodes[n][d];
+      }
+      nodes->SetElement(n, point);
+      lowest = lowest.cwiseMin(model.nodes[n]);
+      highest = highest.cwiseMax(model.nodes[n]);
+    }
+    const double matchDistance = 1e-6 * std::max((highest - lowest).norm(), 1.0);
+    auto         locator = LocatorType::New();
+    locator->SetPoints(nodes);
+    locator->Initialize();
+
+    const auto * points = prescribed->GetPoints();
+    const auto * data = prescribed->GetPointData();
+    if (points == nullptr || data == nullptr || data->Size() != points->Size())
+    {
+      itkExceptionMacro(<< "the prescribed displacements need one displacement (point data) per point; they have "
+                        << (points ? points->Size() : 0) << " points and " << (data ? data->Size() : 0)
+                        << " displacements.");
+    }
+    bmr::PrescribedDisplacement load;
+    for (auto it = points->Begin(); it != points->End(); ++it)
+    {
+      Point<double, 3> point;
+      for (unsigned int d = 0; d < 3; ++d)
+      {
+        point[d] = it.Value()[d];
+      }
+      const IdentifierType node = locator->FindClosestPoint(point);
+      const double         distance = point.EuclideanDistanceTo(nodes->ElementAt(node));
+      if (!(distance <= matchDistance))
+      {
+        itkExceptionMacro(<< "prescribed displacement point " << it.Index() << " at " << point
+                          << " is not a model node (the nearest, node " << node << ", is " << distance
+                          << " mm away); prescribe displacements at the model's nodes, e.g. from the loads of its "
+                             "exposed surface.");
+      }
+      const auto &  displacement = data->ElementAt(it.Index());
+      bmr::Vector3 u;
+      for (unsigned int d = 0; d < 3; ++d)
+      {
+        u[d] = displacement[d];
+      }
+      load.nodes.push_back(static_cast<bmr::Index>(node));
+      load.displacements.push_back(u);
+    }
+    if (!load.nodes.empty())
+    {
+      model.prescribedDisplacements.push_back(std::move(load));
+    }
+  }
+
+  if (const SurfaceMeshType * surface = this->GetContactSurface())
+  {
+    bmr::ContactSurface contact;
+    contact.name = "contact-surface-input";
+    contact.bodySide = m_ContactBodySideInside ? bmr::ContactSurface::Side::Inside : bmr::ContactSurface::Side::Outside;
+    contact.slaveNodeSet = model.nodeSets.count("contact") > 0 ? "contact" : "";
+    const auto * vertices = surface->GetPoints();
+    if (vertices == nullptr || surface->GetNumberOfCells() == 0)
+    {
+      itkExceptionMacro(<< "the contact surface has no triangles; give a closed triangle mesh, e.g. "
+                           "BrainSurfaceMeshSource::GetSkullOutput().");
+    }
+    // Points may carry any identifiers: number them in order.
+    std::map<IdentifierType, bmr::Index> index;
+    for (auto it = vertices->Begin(); it != vertices->End(); ++it)
+    {
+      index[it.Index()] = static_cast<bmr::Index>(contact.vertices.size());
+      contact.vertices.emplace_back(it.Value()[0], it.Value()[1], it.Value()[2]);
+    }
+    for (auto it = surface->GetCells()->Begin(); it != surface->GetCells()->End(); ++it)
+    {
+      const auto * cell = it.Value();
+      if (cell->GetType() != CellGeometryEnum::TRIANGLE_CELL)
+      {
+        itkExceptionMacro(<< "contact surface cell " << it.Index()
+                          << " is not a triangle; the contact surface must be a triangle mesh.");
+      }
+      std::array<bmr::Index, 3> triangle{};
+      auto                      id = cell->PointIdsBegin();
+      for (int v = 0; v < 3; ++v, ++id)
+      {
+        triangle[v] = index.at(*id);
+      }
+      contact.triangles.push_back(triangle);
+    }
+    model.contactSurfaces.push_back(std::move(contact));
+  }
+
+  if (m_Gravity.GetNorm() > 0.0)
+  {
+    model.bodyAcceleration = bmr::Vector3(m_Gravity[0], m_Gravity[1], m_Gravity[2]);
+  }
+  return model;
+}
+
+template <typename TDisplacementPointSet, typename TSurfaceMesh>
+void
+BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::GenerateData()
+{
+  DisplacementPointSetType * output = this->GetOutput();
+  output->Initialize();
+  m_Result = bmr::SolveResult{};
+  m_SolvedModel = bmr::Model{};
+
+  const bmr::Model    model = this->AssembleModel();
+  bmr::SolverSettings settings = m_SolverSettings;
+  settings.threads = static_cast<int>(this->GetNumberOfWorkUnits());
+
+  // Dynamic relaxation reports no fraction: progress is how far the estimated
+  // error has fallen, on a log scale, from the first report to the tolerance.
+  double firstError = std::numeric_limits<double>::quiet_NaN();
+  float  progress = 0.0f;
+  const auto report = [&](int, double fraction, double estimatedError) {
+    double done = fraction;
+    if (fraction < 0.0 && std::isfinite(estimatedError) && estimatedError > 0.0)
+    {
+      if (!std::isfinite(firstError))
+      {
+        firstError = estimatedError;
+      }
+      done = firstError > settings.tolerance
+               ? std::log(firstError / estimatedError) / std::log(firstError / settings.tolerance)
+               : 1.0;
+    }
+    progress = std::max(progress, static_cast<float>(std::clamp(done, 0.0, 0.99)));
+    this->UpdateProgress(progress);
+    if (this->GetAbortGenerateData())
+    {
+      ProcessAborted aborted(__FILE__, __LINE__);
+      aborted.SetDescription("BiomechanicalDeformationFilter: the solve was aborted (AbortGenerateData).");
+      throw aborted;
+    }
+  };
+  try
+  {
+    bmr::Solver solver(model, settings);
+    m_Result = solver.Solve(report);
+  }
+  catch (const bmr::Error & error)
+  {
+    itkExceptionMacro(<< error.what());
+  }
+  if (!m_Result.converged)
+  {
+    itkWarningMacro(<< "the solve did not converge: " << m_Result.message);
+  }
+
+  auto points = DisplacementPointSetType::PointsContainer::New();
+  auto data = DisplacementPointSetType::PointDataContainer::New();
+  points->Reserve(model.nodes.size());
+  data->Reserve(model.nodes.size());
+  for (std::size_t n = 0; n < model.nodes.size(); ++n)
+  {
+    PointType                                     point;
+    typename DisplacementPointSetType::PixelType displacement;
+    for (unsigned int d = 0; d < 3; ++d)
+    {
+      point[d] = model.nodes[n][d];
+      displacement[d] = m_Result.displacements[n][d];
+    }
+    points->SetElement(n, point);
+    data->SetElement(n, displacement);
+  }
+  output->SetPoints(points);
+  output->SetPointData(data);
+  // The whole point set is produced: without this a PointSet reports its
+  // requested region outside the buffered one and the next Update() solves again.
+  output->SetBufferedRegion(output->GetRequestedRegion());
+  if (model.discretization == bmr::Discretization::Meshless)
+  {
+    m_SolvedModel = model;
+  }
+  this->UpdateProgress(1.0f);
+}
+
+template <typename TDisplacementPointSet, typename TSurfaceMesh>
+auto
+BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::EvaluateDisplacements(
+  const std::vector<PointType> & points) const -> std::vector<VectorType>
+{
+  if (m_SolvedModel.discretization != bmr::Discretization::Meshless || m_Result.nodalParameters.empty())
+  {
+    itkExceptionMacro(<< "EvaluateDisplacements needs a solved meshless model; update the filter with one first "
+                         "(a finite-element solution is given at its nodes: fit a transform to them for other points).");
+  }
+  std::vector<bmr::Vector3> at(points.size());
+  for (std::size_t p = 0; p < points.size(); ++p)
+  {
+    at[p] = bmr::Vector3(points[p][0], points[p][1], points[p][2]);
+  }
+  std::vector<bmr::Vector3> values;
+  try
+  {
+    const auto shapeFunctions = bmr::MovingLeastSquares::ForModel(m_SolvedModel);
+    values = bmr::InterpolateDisplacements(*shapeFunctions, m_Result.nodalParameters, at,
+                                           static_cast<int>(this->GetNumberOfWorkUnits()));
+  }
+  catch (const bmr::Error & error)
+  {
+    itkExceptionMacro(<< error.what());
+  }
+  std::vector<VectorType> displacements(values.size());
+  for (std::size_t p = 0; p < values.size(); ++p)
+  {
+    for (unsigned int d = 0; d < 3; ++d)
+    {
+      displacements[p][d] = values[p][d];
+    }
+  }
+  return displacements;
+}
+
+template <typename TDisplacementPointSet, typename TSurfaceMesh>
+void
+BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::PrintSelf(std::ostream & os, Indent indent) const
+{
+  Superclass::PrintSelf(os, indent);
+  os << indent << "ContactBodySideInside: " << m_ContactBodySideInside << std::endl;
+  os << indent << "Gravity: " << m_Gravity << std::endl;
+  os << indent << "Tolerance: " << m_SolverSettings.tolerance << " mm" << std::endl;
+  os << indent << "MaximumNumberOfSteps: " << m_SolverSettings.maxSteps << std::endl;
+  os << indent << "Converged: " << m_Result.converged << ", steps: " << m_Result.steps << std::endl;
+}
+
+} // namespace itk
+
+#endif

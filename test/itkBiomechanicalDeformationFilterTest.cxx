@@ -1,0 +1,353 @@
+// itk::BiomechanicalDeformationFilter: the solver as an ITK pipeline filter.
+// It must give bitwise the solver's results (hexahedra, ANP tetrahedra,
+// meshless), follow ITK's pipeline conventions (progress, abort, no second
+// solve without a change, a solve again after one), report failures and
+// non-convergence as stated, and compose with the grid, surface and fitter
+// filters.
+//
+// ITK headers first: ITK's bundled Eigen must come before the system Eigen.
+#include "itkBiomechanicalDeformationFilter.h"
+#include "itkBiomechanicalGridImageFilter.h"
+#include "itkBrainSurfaceMeshSource.h"
+#include "itkCommand.h"
+#include "itkDisplacementPointSetToBSplineTransformFilter.h"
+#include "itkImage.h"
+#include "itkImageRegionIteratorWithIndex.h"
+
+#include "bmrMeshless.h"
+#include "bmrTestUtilities.h"
+
+#include <gtest/gtest.h>
+
+#include <string>
+#include <vector>
+
+namespace
+{
+using namespace bmr;
+using namespace bmr::test;
+
+using FilterType = itk::BiomechanicalDeformationFilter<>;
+using PointSetType = FilterType::DisplacementPointSetType;
+
+/** A 10 x 8 x 6 mm block, bottom fixed, top pressed down 1 mm: the kind of
+ *  grid given; the top's load is left out (the filter's point-set input
+ *  carries it). */
+Model
+PressedBlock(const std::string & kind, const std::array<int, 3> & divisions = { 5, 4, 3 })
+{
+  const Material material = MakeMaterial(3000.0, 0.45);
+  Model          model = MakeBlockMesh(Vector3(10.0, 8.0, 6.0), divisions,
+                              kind == "tetrahedra" ? GridCells::Tetrahedra : GridCells::Hexahedra, material);
+  if (kind == "meshless")
+  {
+    MakeMeshlessFromCells(model, {}, {}, 1);
+  }
+  model.fixedConstraints.push_back({ "zmin", { true, true, true } });
+  return model;
+}
+
+PrescribedDisplacement
+TopLoad(const Model & model)
+{
+  PrescribedDisplacement load;
+  load.nodes = model.NodeSet("zmax");
+  load.displacements.assign(load.nodes.size(), Vector3(0.2, 0.0, -1.0));
+  return load;
+}
+
+PointSetType::Pointer
+PointSetOf(const Model & model, const PrescribedDisplacement & load)
+{
+  std::vector<Vector3> points;
+  for (const Index node : load.nodes)
+  {
+    points.push_back(model.nodes[node]);
+  }
+  return itk::MakeDisplacementPointSet<PointSetType>(points, load.displacements);
+}
+
+SolverSettings
+Settings()
+{
+  SolverSettings settings;
+  settings.tolerance = 1e-6;
+  return settings;
+}
+
+class DeformationFilterKinds : public testing::TestWithParam<std::string>
+{};
+
+// The filter's output is the solver's result, bit for bit, whatever the discretization.
+TEST_P(DeformationFilterKinds, MatchesTheSolverBitwise)
+{
+  const Model                  model = PressedBlock(GetParam());
+  const PrescribedDisplacement load = TopLoad(model);
+
+  Model withLoad = model;
+  withLoad.prescribedDisplacements.push_back(load);
+  SolverSettings settings = Settings();
+  settings.threads = 2;
+  const SolveResult expected = Solver(withLoad, settings).Solve();
+  ASSERT_TRUE(expected.converged) << expected.message;
+
+  auto filter = FilterType::New();
+  filter->SetModel(model);
+  filter->SetPrescribedDisplacements(PointSetOf(model, load));
+  filter->SetSolverSettings(Settings());
+  filter->SetNumberOfWorkUnits(2);
+  filter->Update();
+  const PointSetType * output = filter->GetOutput();
+  ASSERT_EQ(output->GetNumberOfPoints(), model.nodes.size());
+  EXPECT_TRUE(filter->GetConverged());
+  EXPECT_EQ(filter->GetSolveResult().steps, expected.steps);
+  for (std::size_t n = 0; n < model.nodes.size(); ++n)
+  {
+    const auto point = output->GetPoints()->ElementAt(n);
+    const auto displacement = output->GetPointData()->ElementAt(n);
+    for (unsigned int d = 0; d < 3; ++d)
+    {
+      EXPECT_EQ(point[d], model.nodes[n][d]);
+      EXPECT_EQ(displacement[d], expected.displacements[n][d]) << "node " << n << " component " << d;
+    }
+  }
+
+  if (GetParam() == "meshless")
+  {
+    // Anywhere in the body: at the nodes it gives the output again.
+    std::vector<FilterType::PointType> at(3);
+    std::vector<Vector3>               expectedAt(3);
+    for (std::size_t k = 0; k < at.size(); ++k)
+    {
+      const Index node = static_cast<Index>(7 * k + 3);
+      for (unsigned int d = 0; d < 3; ++d)
+      {
+        at[k][d] = model.nodes[node][d];
+      }
+      expectedAt[k] = expected.displacements[node];
+    }
+    const std::vector<FilterType::VectorType> values = filter->EvaluateDisplacements(at);
+    for (std::size_t k = 0; k < at.size(); ++k)
+    {
+      for (unsigned int d = 0; d < 3; ++d)
+      {
+        EXPECT_NEAR(values[k][d], expectedAt[k][d], 1e-12);
+      }
+    }
+  }
+  else
+  {
+    EXPECT_THROW(filter->EvaluateDisplacements({ FilterType::PointType() }), itk::ExceptionObject);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Grids, DeformationFilterKinds, testing::Values("hexahedra", "tetrahedra", "meshless"),
+                         [](const testing::TestParamInfo<std::string> & info) { return info.param; });
+
+// Pipeline conventions: one solve per change, progress reported, abort honoured.
+TEST(DeformationFilter, SolvesOncePerChangeReportsProgressAndAborts)
+{
+  const Model model = PressedBlock("hexahedra", { 15, 12, 9 }); // enough steps for several reports
+  auto        filter = FilterType::New();
+  filter->SetModel(model);
+  filter->SetPrescribedDisplacements(PointSetOf(model, TopLoad(model)));
+  filter->SetTolerance(1e-9);
+  int   starts = 0, reports = 0;
+  float lastProgress = -1.0f;
+  bool  progressFell = false;
+  filter->AddObserver(itk::StartEvent(), [&](const itk::EventObject &) { ++starts; });
+  filter->AddObserver(itk::ProgressEvent(), [&](const itk::EventObject &) {
+    ++reports;
+    progressFell = progressFell || filter->GetProgress() < lastProgress;
+    lastProgress = filter->GetProgress();
+  });
+  filter->Update();
+  const int steps = filter->GetSolveResult().steps;
+  ASSERT_GT(steps, 400) << "too few steps to see progress reports";
+  EXPECT_EQ(starts, 1);
+  EXPECT_GE(reports, steps / 200); // every 200 steps, and the end
+  EXPECT_FALSE(progressFell);
+  EXPECT_EQ(lastProgress, 1.0f);
+
+  filter->Update();
+  EXPECT_EQ(starts, 1) << "a second Update() without a change solved again";
+  filter->SetTolerance(1e-9);
+  filter->Update();
+  EXPECT_EQ(starts, 1) << "setting the same tolerance is no change";
+  filter->SetTolerance(1e-7);
+  filter->Update();
+  EXPECT_EQ(starts, 2) << "a new tolerance must solve again";
+  EXPECT_LT(filter->GetSolveResult().steps, steps);
+  // A changed input solves again.
+  filter->SetPrescribedDisplacements(PointSetOf(model, TopLoad(model)));
+  filter->Update();
+  EXPECT_EQ(starts, 3);
+
+  // Abort at the first report: ProcessAborted, and no partial output.
+  auto aborting = FilterType::New();
+  aborting->SetModel(model);
+  aborting->SetPrescribedDisplacements(PointSetOf(model, TopLoad(model)));
+  aborting->SetTolerance(1e-9);
+  aborting->AddObserver(itk::ProgressEvent(), [&](const itk::EventObject &) { aborting->AbortGenerateDataOn(); });
+  EXPECT_THROW(aborting->Update(), itk::ProcessAborted);
+  EXPECT_EQ(aborting->GetOutput()->GetNumberOfPoints(), 0u);
+}
+
+TEST(DeformationFilter, FailuresThrowNonConvergenceIsReported)
+{
+  const Model model = PressedBlock("tetrahedra");
+
+  // No model.
+  auto empty = FilterType::New();
+  EXPECT_THROW(empty->Update(), itk::ExceptionObject);
+
+  // A prescribed point that is not a node is named.
+  PrescribedDisplacement load = TopLoad(model);
+  auto                   offNode = PointSetOf(model, load);
+  auto                   moved = offNode->GetPoints()->ElementAt(2);
+  moved[0] += 0.5;
+  offNode->GetPoints()->SetElement(2, moved);
+  auto filter = FilterType::New();
+  filter->SetModel(model);
+  filter->SetPrescribedDisplacements(offNode);
+  try
+  {
+    filter->Update();
+    ADD_FAILURE() << "a point 0.5 mm off a node was accepted";
+  }
+  catch (const itk::ExceptionObject & error)
+  {
+    EXPECT_NE(std::string(error.GetDescription()).find("point 2"), std::string::npos) << error.GetDescription();
+    EXPECT_NE(std::string(error.GetDescription()).find("not a model node"), std::string::npos);
+  }
+
+  // Pressing the top through the bottom inverts an element: the exception names it.
+  load.displacements.assign(load.nodes.size(), Vector3(0.0, 0.0, -12.0));
+  filter->SetPrescribedDisplacements(PointSetOf(model, load));
+  try
+  {
+    filter->Update();
+    ADD_FAILURE() << "a 200 % compression solved";
+  }
+  catch (const itk::ExceptionObject & error)
+  {
+    EXPECT_NE(std::string(error.GetDescription()).find("inverted"), std::string::npos) << error.GetDescription();
+  }
+
+  // Too few steps: not an exception, reported.
+  filter->SetPrescribedDisplacements(PointSetOf(model, TopLoad(model)));
+  filter->SetMaximumNumberOfSteps(30);
+  filter->SetTolerance(1e-9);
+  filter->Update();
+  EXPECT_FALSE(filter->GetConverged());
+  EXPECT_NE(filter->GetStopConditionDescription().find("NOT CONVERGED"), std::string::npos)
+    << filter->GetStopConditionDescription();
+  EXPECT_EQ(filter->GetOutput()->GetNumberOfPoints(), model.nodes.size());
+}
+
+// The filters compose: label image -> grid -> (model) -> deformation, with the
+// skull from the surface source as contact -> B-spline fit. The filter's
+// result is the solver's on the model it assembles from its inputs.
+TEST(DeformationFilter, ComposesWithGridSurfaceAndFitterFilters)
+{
+  using LabelImageType = itk::Image<unsigned char, 3>;
+  auto         image = LabelImageType::New();
+  const double spacing[3] = { 1.0, 1.0, 1.0 };
+  const double origin[3] = { -20.0, -20.0, -20.0 };
+  image->SetRegions(LabelImageType::SizeType{ { 41, 41, 41 } });
+  image->SetSpacing(spacing);
+  image->SetOrigin(origin);
+  image->Allocate();
+  itk::ImageRegionIteratorWithIndex<LabelImageType> it(image, image->GetBufferedRegion());
+  for (; !it.IsAtEnd(); ++it)
+  {
+    LabelImageType::PointType x;
+    image->TransformIndexToPhysicalPoint(it.GetIndex(), x);
+    it.Set(x.GetVectorFromOrigin().GetNorm() <= 14.0 ? 1 : 0);
+  }
+
+  auto grid = itk::BiomechanicalGridImageFilter<LabelImageType>::New();
+  grid->SetInput(image);
+  grid->SetGridKind(bmr::ImageGridKind::Tetrahedra);
+  grid->SetElementSize(5.0);
+  auto skull = itk::BrainSurfaceMeshSource<LabelImageType>::New();
+  skull->SetInput(image);
+  skull->SetSkullGap(1.0);
+
+  // The ball's top cap is pressed down 2 mm; its bottom node is held.
+  grid->Update();
+  Model model = grid->GetModel();
+  ASSERT_GT(model.nodes.size(), 50u);
+  std::vector<Vector3> capPoints, capDisplacements;
+  Index                bottom = 0;
+  for (std::size_t n = 0; n < model.nodes.size(); ++n)
+  {
+    if (model.nodes[n].z() > 12.0)
+    {
+      capPoints.push_back(model.nodes[n]);
+      capDisplacements.emplace_back(0.0, 0.0, -2.0);
+    }
+    bottom = model.nodes[n].z() < model.nodes[bottom].z() ? static_cast<Index>(n) : bottom;
+  }
+  ASSERT_GE(capPoints.size(), 3u);
+  // Fixed nodes come with the model: the grid's model plus a node set, as material mapping would add data.
+  model.nodeSets["bottom"] = { bottom };
+  model.fixedConstraints.push_back({ "bottom", { true, true, true } });
+  auto modelWithSupport = itk::BiomechanicalModelObject::New();
+  modelWithSupport->SetModel(model);
+
+  auto deformation = FilterType::New();
+  deformation->SetModelInput(modelWithSupport);
+  deformation->SetPrescribedDisplacements(itk::MakeDisplacementPointSet<PointSetType>(capPoints, capDisplacements));
+  deformation->SetContactSurface(skull->GetSkullOutput());
+  deformation->SetTolerance(1e-4);
+  deformation->SetNumberOfWorkUnits(1);
+
+  auto fitter = itk::DisplacementPointSetToBSplineTransformFilter<PointSetType>::New();
+  fitter->SetInput(deformation->GetOutput());
+  fitter->SetReferenceImage(image);
+  fitter->SetTolerance(0.05);
+  fitter->Update();
+  ASSERT_TRUE(deformation->GetConverged()) << deformation->GetStopConditionDescription();
+  const auto & components = deformation->GetSolveResult().activeComponents;
+  EXPECT_NE(std::find(components.begin(), components.end(), "contact"), components.end());
+  EXPECT_LT(fitter->GetReport().maximumResidual, 0.05);
+
+  // The same model solved directly.
+  Model direct = model;
+  PrescribedDisplacement cap;
+  for (std::size_t k = 0; k < capPoints.size(); ++k)
+  {
+    for (std::size_t n = 0; n < direct.nodes.size(); ++n)
+    {
+      if (direct.nodes[n] == capPoints[k])
+      {
+        cap.nodes.push_back(static_cast<Index>(n));
+      }
+    }
+  }
+  cap.displacements = capDisplacements;
+  direct.prescribedDisplacements.push_back(cap);
+  skull->Update();
+  ContactSurface contact = skull->GetSkullSurface();
+  contact.name = "contact-surface-input";
+  contact.slaveNodeSet = "";
+  direct.contactSurfaces.push_back(contact);
+  SolverSettings settings;
+  settings.tolerance = 1e-4;
+  settings.threads = 1;
+  const SolveResult expected = Solver(direct, settings).Solve();
+  ASSERT_EQ(deformation->GetOutput()->GetNumberOfPoints(), direct.nodes.size());
+  for (std::size_t n = 0; n < direct.nodes.size(); ++n)
+  {
+    const auto displacement = deformation->GetOutput()->GetPointData()->ElementAt(n);
+    for (unsigned int d = 0; d < 3; ++d)
+    {
+      EXPECT_EQ(displacement[d], expected.displacements[n][d]) << "node " << n;
+    }
+  }
+  // The grid's model output is its model.
+  EXPECT_EQ(grid->GetModelOutput()->GetModel().nodes, grid->GetModel().nodes);
+}
+
+} // namespace
