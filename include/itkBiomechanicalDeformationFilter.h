@@ -1,13 +1,11 @@
 #ifndef itkBiomechanicalDeformationFilter_h
 #define itkBiomechanicalDeformationFilter_h
 
-// ITK headers first: ITK's bundled Eigen (pulled in by the points locator)
-// must be seen before the system Eigen of the core.
+// ITK headers first: ITK's bundled Eigen (the fitter's header) must be seen
+// before the system Eigen of the core.
 #include "itkDisplacementPointSetToBSplineTransformFilter.h"
 #include "itkMesh.h"
-#include "itkPointsLocator.h"
 #include "itkProcessObject.h"
-#include "itkTriangleCell.h"
 
 #include "itkBiomechanicalModelObject.h"
 
@@ -29,7 +27,7 @@ namespace itk
  *    or SetModel() with a bmr::Model. Its fixed and prescribed displacements,
  *    contact surfaces and gravity are used as they are.
  *  - "PrescribedDisplacements" (optional): a point set whose points are
- *    model nodes (matched by position within 1e-6 of the model's size) and
+ *    model nodes (the nearest node, within 1e-6 of the model's size) and
  *    whose point data are their displacements (mm), e.g. from a loads filter.
  *    They are added to the model's prescribed displacements (all three
  *    components). A point that is not a node is an error naming it.
@@ -59,7 +57,8 @@ namespace itk
  *
  * Progress: ProgressEvent every 200 steps (dynamic relaxation: how far the
  * estimated error has fallen towards the tolerance, on a log scale; explicit
- * dynamics: the fraction of the end time). AbortGenerateData stops the solve
+ * dynamics: the fraction of the end time); GetCurrentStep() and
+ * GetCurrentEstimatedError() give the solver's state in an observer. AbortGenerateData stops the solve
  * at the next report with itk::ProcessAborted. A second Update() without a
  * change of an input or a setting does not solve again.
  *
@@ -139,6 +138,10 @@ public:
   const DisplacementPointSetType *
   GetOutput() const;
 
+  /** During a ProgressEvent: the solver's step and its estimated error (mm, dynamic relaxation). */
+  itkGetConstMacro(CurrentStep, int);
+  itkGetConstMacro(CurrentEstimatedError, double);
+
   /** The last solve's report. */
   const bmr::SolveResult &
   GetSolveResult() const
@@ -187,6 +190,8 @@ private:
   AssembleModel() const;
 
   bool                m_ContactBodySideInside{ true };
+  int                 m_CurrentStep{ 0 };
+  double              m_CurrentEstimatedError{ 0.0 };
   VectorType          m_Gravity{ 0.0 };
   bmr::SolverSettings m_SolverSettings;
   bmr::SolveResult    m_Result;

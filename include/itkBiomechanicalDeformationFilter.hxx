@@ -105,26 +105,38 @@ BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::AssembleMod
 
   if (const DisplacementPointSetType * prescribed = this->GetPrescribedDisplacements())
   {
-    // Each point must be a node: the nearest node within 1e-6 of the model's size.
-    using LocatorType = PointsLocator<VectorContainer<IdentifierType, Point<double, 3>>>;
-    auto    nodes = LocatorType::PointsContainer::New();
+    // Each point must be a node: the nearest node within 1e-6 of the model's
+    // size, searched among the nodes sorted by x (ITK's PointsLocator would
+    // bring ITK's bundled Eigen into every includer, before the core's).
     bmr::Vector3 lowest = model.nodes.front(), highest = model.nodes.front();
-    nodes->Reserve(model.nodes.size());
-    for (std::size_t n = 0; n < model.nodes.size(); ++n)
+    for (const bmr::Vector3 & node : model.nodes)
     {
-      Point<double, 3> point;
-      for (unsigned int d = 0; d < 3; ++d)
-      {
-        point[d] = model.nodes[n][d];
-      }
-      nodes->SetElement(n, point);
-      lowest = lowest.cwiseMin(model.nodes[n]);
-      highest = highest.cwiseMax(model.nodes[n]);
+      lowest = lowest.cwiseMin(node);
+      highest = highest.cwiseMax(node);
     }
-    const double matchDistance = 1e-6 * std::max((highest - lowest).norm(), 1.0);
-    auto         locator = LocatorType::New();
-    locator->SetPoints(nodes);
-    locator->Initialize();
+    const double             matchDistance = 1e-6 * std::max((highest - lowest).norm(), 1.0);
+    std::vector<bmr::Index> byX(model.nodes.size());
+    for (std::size_t n = 0; n < byX.size(); ++n)
+    {
+      byX[n] = static_cast<bmr::Index>(n);
+    }
+    std::sort(byX.begin(), byX.end(), [&](bmr::Index a, bmr::Index b) { return model.nodes[a].x() < model.nodes[b].x(); });
+    const auto nearestNode = [&](const bmr::Vector3 & x) {
+      double distance = std::numeric_limits<double>::infinity();
+      auto first = std::lower_bound(byX.begin(), byX.end(), x.x() - matchDistance,
+                                    [&](bmr::Index n, double value) { return model.nodes[n].x() < value; });
+      bmr::Index nearest = -1;
+      for (auto it = first; it != byX.end() && model.nodes[*it].x() <= x.x() + matchDistance; ++it)
+      {
+        const double d = (model.nodes[*it] - x).norm();
+        if (d <= matchDistance && d < distance)
+        {
+          distance = d;
+          nearest = *it;
+        }
+      }
+      return nearest;
+    };
 
     const auto * points = prescribed->GetPoints();
     const auto * data = prescribed->GetPointData();
@@ -137,17 +149,17 @@ BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::AssembleMod
     bmr::PrescribedDisplacement load;
     for (auto it = points->Begin(); it != points->End(); ++it)
     {
-      Point<double, 3> point;
-      for (unsigned int d = 0; d < 3; ++d)
+      const bmr::Vector3 x(it.Value()[0], it.Value()[1], it.Value()[2]);
+      const bmr::Index   node = nearestNode(x);
+      if (node < 0)
       {
-        point[d] = it.Value()[d];
-      }
-      const IdentifierType node = locator->FindClosestPoint(point);
-      const double         distance = point.EuclideanDistanceTo(nodes->ElementAt(node));
-      if (!(distance <= matchDistance))
-      {
-        itkExceptionMacro(<< "prescribed displacement point " << it.Index() << " at " << point
-                          << " is not a model node (the nearest, node " << node << ", is " << distance
+        double closest = std::numeric_limits<double>::infinity();
+        for (const bmr::Vector3 & other : model.nodes)
+        {
+          closest = std::min(closest, (other - x).norm());
+        }
+        itkExceptionMacro(<< "prescribed displacement point " << it.Index() << " at " << it.Value()
+                          << " is not a model node (the nearest node is " << closest
                           << " mm away); prescribe displacements at the model's nodes, e.g. from the loads of its "
                              "exposed surface.");
       }
@@ -157,7 +169,7 @@ BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::AssembleMod
       {
         u[d] = displacement[d];
       }
-      load.nodes.push_back(static_cast<bmr::Index>(node));
+      load.nodes.push_back(node);
       load.displacements.push_back(u);
     }
     if (!load.nodes.empty())
@@ -228,7 +240,9 @@ BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::GenerateDat
   // error has fallen, on a log scale, from the first report to the tolerance.
   double firstError = std::numeric_limits<double>::quiet_NaN();
   float  progress = 0.0f;
-  const auto report = [&](int, double fraction, double estimatedError) {
+  const auto report = [&](int step, double fraction, double estimatedError) {
+    m_CurrentStep = step;
+    m_CurrentEstimatedError = estimatedError;
     double done = fraction;
     if (fraction < 0.0 && std::isfinite(estimatedError) && estimatedError > 0.0)
     {

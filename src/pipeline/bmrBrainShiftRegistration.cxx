@@ -2,6 +2,7 @@
 
 // ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.
 #include "itkAtlasBrainMaskImageFilter.h"
+#include "itkBiomechanicalDeformationFilter.h"
 #include "itkBiomechanicalImageConversion.h"
 #include "itkBiomechanicalImageIO.h"
 #include "itkBrainSurfaceMeshSource.h"
@@ -535,23 +536,37 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
   result.warnings = result.model.warnings;
   const Model & model = result.model.model;
 
+  // The solve and the fit are one ITK pipeline: the deformation filter's
+  // output (the nodes carrying their displacements) is the fitter's input.
+  using PointSetType = itk::DisplacementPointSetType<3>;
+  using DeformationType = itk::BiomechanicalDeformationFilter<PointSetType>;
+  auto deformation = DeformationType::New();
+  deformation->SetModel(model);
+  deformation->SetSolverSettings(settings.solver);
+  const int threads = settings.solver.threads != 0 ? settings.solver.threads : settings.model.threads;
+  if (threads > 0)
+  {
+    deformation->SetNumberOfWorkUnits(static_cast<itk::ThreadIdType>(threads));
+  }
+  if (solverProgress)
+  {
+    deformation->AddObserver(itk::ProgressEvent(), [&](const itk::EventObject &) {
+      if (deformation->GetCurrentStep() > 0)
+      {
+        solverProgress(deformation->GetCurrentStep(), -1.0, deformation->GetCurrentEstimatedError());
+      }
+    });
+  }
   result.solve = timer.Run("solve", [&] {
-    SolverSettings solverSettings = settings.solver;
-    if (solverSettings.threads == 0)
-    {
-      solverSettings.threads = settings.model.threads;
-    }
     try
     {
-      Solver solver(model, solverSettings);
-      return solver.Solve(solverProgress);
+      deformation->Update();
     }
-    catch (const SolveError & error)
+    catch (const itk::ExceptionObject & exception)
     {
-      throw Error(std::string("the solve failed") +
-                  (error.Element() >= 0 ? " (element " + std::to_string(error.Element()) + ")" : std::string()) +
-                  ": " + error.what());
+      throw Error(std::string("the solve failed: ") + exception.GetDescription());
     }
+    return deformation->GetSolveResult();
   });
   if (!result.solve.converged)
   {
@@ -559,11 +574,10 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
                               "; the transform and the warped image come from the last state");
   }
 
-  using PointSetType = itk::DisplacementPointSetType<3>;
   using FitterType = itk::DisplacementPointSetToBSplineTransformFilter<PointSetType>;
   timer.Run("fit", [&] {
     auto fitter = FitterType::New();
-    fitter->SetInput(itk::MakeDisplacementPointSet<PointSetType>(model.nodes, result.solve.displacements));
+    fitter->SetInput(deformation->GetOutput());
     fitter->SetReferenceImage(inputs.preoperativeImage);
     fitter->SetTolerance(settings.fitTolerance);
     fitter->SetMinimumControlPointSpacing(settings.minimumControlPointSpacing);
