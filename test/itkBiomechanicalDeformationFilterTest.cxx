@@ -1,4 +1,5 @@
-// itk::BiomechanicalDeformationFilter: the solver as an ITK pipeline filter.
+// itk::BiomechanicalDeformationFilter: the solver as an ITK pipeline filter,
+// and itk::BiomechanicalMaterialMappingFilter, which gives its model materials.
 // It must give bitwise the solver's results (hexahedra, ANP tetrahedra,
 // meshless), follow ITK's pipeline conventions (progress, abort, no second
 // solve without a change, a solve again after one), report failures and
@@ -10,10 +11,13 @@
 #include "itkBiomechanicalGridImageFilter.h"
 #include "itkBrainSurfaceMeshSource.h"
 #include "itkCommand.h"
+#include "itkBiomechanicalMaterialMappingFilter.h"
 #include "itkDisplacementPointSetToBSplineTransformFilter.h"
+#include "itkFuzzyCMeansClassifierImageFilter.h"
 #include "itkImage.h"
 #include "itkImageRegionIteratorWithIndex.h"
 
+#include "bmrMaterialMapping.h"
 #include "bmrMeshless.h"
 #include "bmrTestUtilities.h"
 
@@ -348,6 +352,117 @@ TEST(DeformationFilter, ComposesWithGridSurfaceAndFitterFilters)
   }
   // The grid's model output is its model.
   EXPECT_EQ(grid->GetModelOutput()->GetModel().nodes, grid->GetModel().nodes);
+}
+
+// Image to displacements as one ITK pipeline: classifier -> grid (model) ->
+// material mapping -> deformation. The mapping equals the core's on the same
+// memberships, bitwise; the deformation sees the mapped materials.
+TEST(MaterialMappingFilter, ClassifierGridMappingAndDeformationCompose)
+{
+  using ImageType = itk::Image<float, 3>;
+  using MaskType = itk::Image<unsigned char, 3>;
+  auto         image = ImageType::New();
+  auto         mask = MaskType::New();
+  const double spacing[3] = { 1.0, 1.0, 1.0 };
+  const double origin[3] = { -20.0, -20.0, -20.0 };
+  image->SetRegions(ImageType::SizeType{ { 41, 41, 41 } });
+  image->SetSpacing(spacing);
+  image->SetOrigin(origin);
+  image->Allocate();
+  mask->CopyInformation(image);
+  mask->SetRegions(image->GetLargestPossibleRegion());
+  mask->Allocate();
+  // A ball of radius 14 mm: dark (CSF-like) below z = -4 mm, bright above.
+  itk::ImageRegionIteratorWithIndex<ImageType> it(image, image->GetBufferedRegion());
+  for (; !it.IsAtEnd(); ++it)
+  {
+    ImageType::PointType x;
+    image->TransformIndexToPhysicalPoint(it.GetIndex(), x);
+    const bool inside = x.GetVectorFromOrigin().GetNorm() <= 14.0;
+    it.Set(inside ? (x[2] < -4.0 ? 20.0f : 100.0f) : 0.0f);
+    mask->SetPixel(it.GetIndex(), inside ? 1 : 0);
+  }
+
+  auto classifier = itk::FuzzyCMeansClassifierImageFilter<ImageType, MaskType>::New();
+  classifier->SetInput(image);
+  classifier->SetMaskImage(mask);
+  classifier->SetNumberOfClasses(2);
+  auto grid = itk::BiomechanicalGridImageFilter<MaskType>::New();
+  grid->SetInput(mask);
+  grid->SetGridKind(bmr::ImageGridKind::Hexahedra);
+  grid->SetElementSize(4.0);
+  auto mapping = itk::BiomechanicalMaterialMappingFilter<>::New();
+  mapping->SetModelInput(grid->GetModelOutput());
+  mapping->SetMemberships(classifier->GetOutput());
+  mapping->Update();
+  const Model & mapped = mapping->GetOutput()->GetModel();
+
+  // The core on the same memberships.
+  Model direct = grid->GetModel();
+  MapMaterialsFromMemberships(direct, itk::MakeBiomechanicalVolume<float>(classifier->GetOutput()),
+                              [] {
+                                MaterialMappingSettings settings;
+                                settings.classMaterials = DefaultClassMaterials(2);
+                                return settings;
+                              }());
+  ASSERT_EQ(mapped.cells.size(), direct.cells.size());
+  ASSERT_EQ(mapped.materials.size(), direct.materials.size());
+  EXPECT_GT(mapped.materials.size(), 2u) << "boundary cells between the classes mix them";
+  for (std::size_t m = 0; m < mapped.materials.size(); ++m)
+  {
+    EXPECT_EQ(mapped.materials[m].youngsModulus, direct.materials[m].youngsModulus);
+    EXPECT_EQ(mapped.materials[m].poissonRatio, direct.materials[m].poissonRatio);
+  }
+  for (std::size_t c = 0; c < mapped.cells.size(); ++c)
+  {
+    EXPECT_EQ(mapped.cells[c].material, direct.cells[c].material);
+  }
+  // The dark lower part is CSF (10 Pa), the bright upper part parenchyma (3000 Pa).
+  double lowest = 1e9, highest = 0.0;
+  for (const Cell & cell : mapped.cells)
+  {
+    lowest = std::min(lowest, mapped.materials[cell.material].youngsModulus);
+    highest = std::max(highest, mapped.materials[cell.material].youngsModulus);
+  }
+  EXPECT_EQ(lowest, CsfMaterial().youngsModulus);
+  EXPECT_EQ(highest, ParenchymaMaterial().youngsModulus);
+
+  // The mapped model into the deformation filter: bottom held, top pressed.
+  Model supported = mapped;
+  supported.nodeSets["low"] = {};
+  std::vector<Vector3> top, push;
+  for (std::size_t n = 0; n < supported.nodes.size(); ++n)
+  {
+    if (supported.nodes[n].z() < -11.0)
+    {
+      supported.nodeSets["low"].push_back(static_cast<Index>(n));
+    }
+    if (supported.nodes[n].z() > 11.0)
+    {
+      top.push_back(supported.nodes[n]);
+      push.emplace_back(0.0, 0.0, -1.0);
+    }
+  }
+  ASSERT_FALSE(supported.nodeSets["low"].empty());
+  ASSERT_FALSE(top.empty());
+  supported.fixedConstraints.push_back({ "low", { true, true, true } });
+  auto deformation = FilterType::New();
+  deformation->SetModel(supported);
+  deformation->SetPrescribedDisplacements(itk::MakeDisplacementPointSet<PointSetType>(top, push));
+  deformation->SetTolerance(1e-3);
+  deformation->Update();
+  EXPECT_TRUE(deformation->GetConverged()) << deformation->GetStopConditionDescription();
+  // The soft CSF below takes most of the 1 mm: the middle of the ball, at its
+  // lower (CSF) part, moves more than it would in a uniform ball (half of it).
+  double middle = 0.0;
+  for (std::size_t n = 0; n < supported.nodes.size(); ++n)
+  {
+    if (std::abs(supported.nodes[n].z()) < 1.0 && supported.nodes[n].head<2>().norm() < 3.0)
+    {
+      middle = std::min(middle, deformation->GetOutput()->GetPointData()->ElementAt(n)[2]);
+    }
+  }
+  EXPECT_LT(middle, -0.6);
 }
 
 } // namespace
