@@ -180,39 +180,10 @@ BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::AssembleMod
 
   if (const SurfaceMeshType * surface = this->GetContactSurface())
   {
-    bmr::ContactSurface contact;
+    bmr::ContactSurface contact = MakeContactSurfaceFromMesh(surface, "contact surface");
     contact.name = "contact-surface-input";
     contact.bodySide = m_ContactBodySideInside ? bmr::ContactSurface::Side::Inside : bmr::ContactSurface::Side::Outside;
     contact.slaveNodeSet = model.nodeSets.count("contact") > 0 ? "contact" : "";
-    const auto * vertices = surface->GetPoints();
-    if (vertices == nullptr || surface->GetNumberOfCells() == 0)
-    {
-      itkExceptionMacro(<< "the contact surface has no triangles; give a closed triangle mesh, e.g. "
-                           "BrainSurfaceMeshSource::GetSkullOutput().");
-    }
-    // Points may carry any identifiers: number them in order.
-    std::map<IdentifierType, bmr::Index> index;
-    for (auto it = vertices->Begin(); it != vertices->End(); ++it)
-    {
-      index[it.Index()] = static_cast<bmr::Index>(contact.vertices.size());
-      contact.vertices.emplace_back(it.Value()[0], it.Value()[1], it.Value()[2]);
-    }
-    for (auto it = surface->GetCells()->Begin(); it != surface->GetCells()->End(); ++it)
-    {
-      const auto * cell = it.Value();
-      if (cell->GetType() != CellGeometryEnum::TRIANGLE_CELL)
-      {
-        itkExceptionMacro(<< "contact surface cell " << it.Index()
-                          << " is not a triangle; the contact surface must be a triangle mesh.");
-      }
-      std::array<bmr::Index, 3> triangle{};
-      auto                      id = cell->PointIdsBegin();
-      for (int v = 0; v < 3; ++v, ++id)
-      {
-        triangle[v] = index.at(*id);
-      }
-      contact.triangles.push_back(triangle);
-    }
     model.contactSurfaces.push_back(std::move(contact));
   }
 

@@ -1,10 +1,15 @@
 #ifndef itkBiomechanicalModelObject_h
 #define itkBiomechanicalModelObject_h
 
+#include "itkCommonEnums.h"
 #include "itkDataObject.h"
 #include "itkObjectFactory.h"
 
 #include "bmrModel.h"
+
+#include <array>
+#include <map>
+#include <string>
 
 namespace itk
 {
@@ -87,6 +92,44 @@ protected:
 private:
   bmr::Model m_Model;
 };
+
+/** A triangle itk::Mesh (mm) as the core's surface (bmr::ContactSurface with
+ *  its defaults: body inside), its points numbered in container order. Throws
+ *  ExceptionObject naming `what` for a mesh without triangles or with another
+ *  cell type. */
+template <typename TMesh>
+bmr::ContactSurface
+MakeContactSurfaceFromMesh(const TMesh * mesh, const std::string & what)
+{
+  bmr::ContactSurface surface;
+  if (mesh == nullptr || mesh->GetPoints() == nullptr || mesh->GetNumberOfCells() == 0)
+  {
+    itkGenericExceptionMacro(<< "the " << what << " has no triangles; give a closed triangle mesh (mm).");
+  }
+  std::map<IdentifierType, bmr::Index> index;
+  for (auto it = mesh->GetPoints()->Begin(); it != mesh->GetPoints()->End(); ++it)
+  {
+    index[it.Index()] = static_cast<bmr::Index>(surface.vertices.size());
+    surface.vertices.emplace_back(it.Value()[0], it.Value()[1], it.Value()[2]);
+  }
+  for (auto it = mesh->GetCells()->Begin(); it != mesh->GetCells()->End(); ++it)
+  {
+    const auto * cell = it.Value();
+    if (cell->GetType() != CellGeometryEnum::TRIANGLE_CELL)
+    {
+      itkGenericExceptionMacro(<< "cell " << it.Index() << " of the " << what
+                               << " is not a triangle; give a triangle mesh.");
+    }
+    std::array<bmr::Index, 3> triangle{};
+    auto                      id = cell->PointIdsBegin();
+    for (int v = 0; v < 3; ++v, ++id)
+    {
+      triangle[v] = index.at(*id);
+    }
+    surface.triangles.push_back(triangle);
+  }
+  return surface;
+}
 
 } // namespace itk
 

@@ -1,5 +1,7 @@
 // itk::BiomechanicalDeformationFilter: the solver as an ITK pipeline filter,
-// and itk::BiomechanicalMaterialMappingFilter, which gives its model materials.
+// and the filters before it: itk::BiomechanicalMaterialMappingFilter (the
+// model's materials) and itk::BiomechanicalLoadsFilter (its prescribed
+// displacements from intraoperative measurements).
 // It must give bitwise the solver's results (hexahedra, ANP tetrahedra,
 // meshless), follow ITK's pipeline conventions (progress, abort, no second
 // solve without a change, a solve again after one), report failures and
@@ -9,6 +11,7 @@
 // ITK headers first: ITK's bundled Eigen must come before the system Eigen.
 #include "itkBiomechanicalDeformationFilter.h"
 #include "itkBiomechanicalGridImageFilter.h"
+#include "itkBiomechanicalLoadsFilter.h"
 #include "itkBrainSurfaceMeshSource.h"
 #include "itkCommand.h"
 #include "itkBiomechanicalMaterialMappingFilter.h"
@@ -16,6 +19,7 @@
 #include "itkFuzzyCMeansClassifierImageFilter.h"
 #include "itkImage.h"
 #include "itkImageRegionIteratorWithIndex.h"
+#include "itkTriangleCell.h"
 
 #include "bmrMaterialMapping.h"
 #include "bmrMeshless.h"
@@ -463,6 +467,121 @@ TEST(MaterialMappingFilter, ClassifierGridMappingAndDeformationCompose)
     }
   }
   EXPECT_LT(middle, -0.6);
+}
+
+using SurfaceMeshType = FilterType::SurfaceMeshType;
+
+/** The core's surface as an itk::Mesh of triangles. */
+SurfaceMeshType::Pointer
+MeshOf(const ContactSurface & surface)
+{
+  auto mesh = SurfaceMeshType::New();
+  for (std::size_t v = 0; v < surface.vertices.size(); ++v)
+  {
+    SurfaceMeshType::PointType point;
+    for (unsigned int d = 0; d < 3; ++d)
+    {
+      point[d] = surface.vertices[v][d];
+    }
+    mesh->SetPoint(v, point);
+  }
+  using TriangleType = itk::TriangleCell<SurfaceMeshType::CellType>;
+  for (std::size_t t = 0; t < surface.triangles.size(); ++t)
+  {
+    SurfaceMeshType::CellAutoPointer cell;
+    cell.TakeOwnership(new TriangleType);
+    for (int v = 0; v < 3; ++v)
+    {
+      cell->SetPointId(v, static_cast<SurfaceMeshType::PointIdentifier>(surface.triangles[t][v]));
+    }
+    mesh->SetCell(t, cell);
+  }
+  return mesh;
+}
+
+// Loads from measurements as a filter: the core's loads, bitwise, as a point
+// set the deformation filter takes.
+TEST(LoadsFilter, SparsePointsAndASurfaceLoadTheExposedNodes)
+{
+  using LoadsType = itk::BiomechanicalLoadsFilter<>;
+  Model model = PressedBlock("hexahedra");
+  model.nodeSets["exposed"] = model.NodeSet("zmax");
+  const std::vector<Index> & exposed = model.nodeSets["exposed"];
+
+  // (b) Sparse points on the top with an affine displacement: reproduced exactly.
+  const auto affine = [](const Vector3 & x) { return Vector3(0.01 * x.y(), -0.02 * x.x(), -0.5 - 0.03 * x.x()); };
+  std::vector<Vector3> points, displacements;
+  for (const Vector3 & x : { Vector3(1, 1, 6), Vector3(9, 1, 6), Vector3(1, 7, 6), Vector3(9, 7, 6), Vector3(5, 4, 6) })
+  {
+    points.push_back(x);
+    displacements.push_back(affine(x));
+  }
+  auto loads = LoadsType::New();
+  loads->SetModelInput([&] {
+    auto object = itk::BiomechanicalModelObject::New();
+    object->SetModel(model);
+    return object;
+  }());
+  loads->SetSparseDisplacements(itk::MakeDisplacementPointSet<PointSetType>(points, displacements));
+  loads->Update();
+  const PrescribedDisplacement direct = DisplacementsFromSparsePoints(model, exposed, points, displacements);
+  const PointSetType *         output = loads->GetOutput();
+  ASSERT_EQ(output->GetNumberOfPoints(), direct.nodes.size());
+  EXPECT_EQ(loads->GetLoadReport().usedPoints, points.size());
+  for (std::size_t k = 0; k < direct.nodes.size(); ++k)
+  {
+    const Vector3 & node = model.nodes[direct.nodes[k]];
+    for (unsigned int d = 0; d < 3; ++d)
+    {
+      EXPECT_EQ(output->GetPoints()->ElementAt(k)[d], node[d]);
+      EXPECT_EQ(output->GetPointData()->ElementAt(k)[d], direct.displacements[k][d]);
+      EXPECT_NEAR(output->GetPointData()->ElementAt(k)[d], affine(node)[d], 1e-8);
+    }
+  }
+
+  // Into the deformation filter: the top nodes end where the loads send them.
+  auto deformation = FilterType::New();
+  deformation->SetModel(model);
+  deformation->SetPrescribedDisplacements(loads->GetOutput());
+  deformation->Update();
+  EXPECT_TRUE(deformation->GetConverged());
+  for (const Index node : exposed)
+  {
+    EXPECT_NEAR(deformation->GetOutput()->GetPointData()->ElementAt(node)[2], affine(model.nodes[node]).z(), 1e-9);
+  }
+
+  // (a) A plane 0.8 mm below the top: every exposed node moves 0.8 mm down.
+  ContactSurface plane = MakePlane(Vector3(5.0, 4.0, 5.2), Vector3::UnitZ(), 40.0);
+  auto           closest = LoadsType::New();
+  closest->SetModelInput(deformation->GetModelInput());
+  closest->SetIntraoperativeSurface(MeshOf(plane));
+  closest->Update();
+  ASSERT_EQ(closest->GetOutput()->GetNumberOfPoints(), exposed.size());
+  for (std::size_t k = 0; k < exposed.size(); ++k)
+  {
+    EXPECT_NEAR(closest->GetOutput()->GetPointData()->ElementAt(k)[2], -0.8, 1e-12);
+    EXPECT_NEAR(closest->GetOutput()->GetPointData()->ElementAt(k)[0], 0.0, 1e-12);
+  }
+
+  // Bad input: both measurements, none, no exposed node set.
+  closest->SetSparseDisplacements(itk::MakeDisplacementPointSet<PointSetType>(points, displacements));
+  EXPECT_THROW(closest->Update(), itk::ExceptionObject);
+  auto none = LoadsType::New();
+  none->SetModelInput(deformation->GetModelInput());
+  EXPECT_THROW(none->Update(), itk::ExceptionObject);
+  auto noSet = LoadsType::New();
+  noSet->SetModelInput(deformation->GetModelInput());
+  noSet->SetExposedNodeSet("opening");
+  noSet->SetIntraoperativeSurface(MeshOf(plane));
+  try
+  {
+    noSet->Update();
+    ADD_FAILURE() << "a missing node set was accepted";
+  }
+  catch (const itk::ExceptionObject & error)
+  {
+    EXPECT_NE(std::string(error.GetDescription()).find("'opening'"), std::string::npos) << error.GetDescription();
+  }
 }
 
 } // namespace
