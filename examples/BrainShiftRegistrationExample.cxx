@@ -4,11 +4,13 @@
 //   preoperative MRI + brain mask
 //     -> fuzzy c-means tissue classes        (itk::FuzzyCMeansClassifierImageFilter)
 //     -> hexahedral grid of the brain        (itk::BiomechanicalGridImageFilter)
-//     -> materials from the memberships      (bmr::MapMaterialsFromMemberships)
+//     -> materials from the memberships      (itk::BiomechanicalMaterialMappingFilter)
 //     -> brain and skull surfaces            (itk::BrainSurfaceMeshSource)
-//     -> fixed skull base, craniotomy loaded by sparse intraoperative
-//        displacements, brain-skull contact  (bmr regions and loads)
-//     -> nonlinear solve to steady state     (bmr::Solver, dynamic relaxation)
+//     -> fixed skull base, craniotomy, contact nodes (bmr regions on the model)
+//     -> craniotomy loaded by sparse intraoperative
+//        displacements                       (itk::BiomechanicalLoadsFilter)
+//     -> nonlinear solve to steady state     (itk::BiomechanicalDeformationFilter,
+//        with the skull as contact surface    dynamic relaxation)
 //     -> B-spline transform of the solution  (itk::DisplacementPointSetToBSplineTransformFilter)
 //     -> warped preoperative image           (itk::TransformWarpImageFilter)
 //     -> edge-based Hausdorff distance       (itk::EdgeHausdorffDistanceImageFilter)
@@ -38,8 +40,11 @@
 #include "itkTransform.h"
 
 // The module's ITK filters.
+#include "itkBiomechanicalDeformationFilter.h"
 #include "itkBiomechanicalGridImageFilter.h"
 #include "itkBiomechanicalImageConversion.h"
+#include "itkBiomechanicalLoadsFilter.h"
+#include "itkBiomechanicalMaterialMappingFilter.h"
 #include "itkBiomechanicalTransformIO.h"
 #include "itkBrainSurfaceMeshSource.h"
 #include "itkDisplacementPointSetToBSplineTransformFilter.h"
@@ -190,15 +195,19 @@ Run(int argc, char * argv[])
   grid->SetGridKind(bmr::ImageGridKind::Hexahedra);
   grid->SetElementSize(elementSize);
   grid->Update();
-  bmr::Model model = grid->GetModel(); // a copy: materials, regions and loads are added below
-  std::cout << "grid       " << model.nodes.size() << " nodes, " << model.cells.size() << " hexahedra of "
-            << elementSize << " mm, volume error " << 100.0 * grid->GetQuality().volumeError << " % of the mask ("
-            << clock.Lap("grid") << " s)\n";
+  std::cout << "grid       " << grid->GetModel().nodes.size() << " nodes, " << grid->GetModel().cells.size()
+            << " hexahedra of " << elementSize << " mm, volume error " << 100.0 * grid->GetQuality().volumeError
+            << " % of the mask (" << clock.Lap("grid") << " s)\n";
 
   // 4. Materials: each cell mixes the class materials (CSF soft, parenchyma
-  // 3 kPa) by its average membership.
-  bmr::MapMaterialsFromMemberships(model, itk::MakeBiomechanicalVolume<float>(classifier->GetOutput()),
-                                   bmr::MaterialMappingSettings{}, nullptr, &warnings);
+  // 3 kPa) by its average membership. The grid's model output (output 1)
+  // carries the model down the pipeline.
+  auto mapping = itk::BiomechanicalMaterialMappingFilter<>::New();
+  mapping->SetModelInput(grid->GetModelOutput());
+  mapping->SetMemberships(classifier->GetOutput());
+  mapping->Update();
+  warnings.insert(warnings.end(), mapping->GetWarnings().begin(), mapping->GetWarnings().end());
+  bmr::Model model = mapping->GetOutput()->GetModel(); // a copy: the regions are added below
   std::cout << "materials  " << model.materials.size() << " distinct mixtures (" << clock.Lap("materials") << " s)\n";
 
   // 5. Surfaces of the body the grid discretises, not of the mask: the corners
@@ -212,27 +221,22 @@ Run(int argc, char * argv[])
   std::cout << "surfaces   brain " << surfaces->GetBrainSurface().triangles.size() << " triangles, skull "
             << surfaces->GetSkullSurface().triangles.size() << " triangles (" << clock.Lap("surfaces") << " s)\n";
 
-  // 6. Boundary conditions on the model's surface nodes.
+  // 6. Regions of the model's surface nodes.
   const std::vector<bmr::Index> surfaceNodes = model.NodeSet("surface");
   //    The skull base and brain stem hold the brain: fixed.
   model.nodeSets["skull_base"] = bmr::SkullBaseNodes(model, surfaceNodes);
   model.fixedConstraints.push_back(bmr::FixedConstraint{ "skull_base" });
-  //    The exposed surface moves as measured: the sparse displacements,
-  //    interpolated (thin-plate spline) to every exposed node.
+  //    The exposed surface, which the measurements load (all of it: sparse
+  //    points are interpolated to every exposed node).
   model.nodeSets["exposed"] = bmr::SurfaceNodesInSphere(model, surfaceNodes, craniotomyCentre, craniotomyRadius);
-  bmr::LoadReport loadReport;
-  model.prescribedDisplacements.push_back(bmr::DisplacementsFromSparsePoints(
-    model, model.nodeSets["exposed"], measured.points, measured.displacements, {}, &loadReport));
-  warnings.insert(warnings.end(), loadReport.warnings.begin(), loadReport.warnings.end());
   //    Every other surface node may slide along the rigid skull or leave it.
   std::vector<char> constrained(model.nodes.size(), 0);
-  for (const bmr::Index node : model.nodeSets["skull_base"])
+  for (const std::string set : { "skull_base", "exposed" })
   {
-    constrained[node] = 1;
-  }
-  for (const bmr::Index node : model.prescribedDisplacements.front().nodes)
-  {
-    constrained[node] = 1;
+    for (const bmr::Index node : model.nodeSets[set])
+    {
+      constrained[node] = 1;
+    }
   }
   std::vector<bmr::Index> contactNodes;
   for (const bmr::Index node : surfaceNodes)
@@ -243,21 +247,36 @@ Run(int argc, char * argv[])
     }
   }
   model.nodeSets["contact"] = contactNodes;
-  bmr::ContactSurface skull = surfaces->GetSkullSurface(); // bodySide Inside: the brain stays inside
-  skull.slaveNodeSet = "contact";
-  model.contactSurfaces.push_back(skull);
-  std::cout << "regions    " << model.nodeSets["skull_base"].size() << " fixed, "
-            << model.prescribedDisplacements.front().nodes.size() << " loaded from " << loadReport.usedPoints
-            << " measurements (" << loadReport.rejectedPoints << " rejected), " << contactNodes.size()
-            << " may touch the skull (" << clock.Lap("regions") << " s)\n";
+  auto regions = itk::BiomechanicalModelObject::New();
+  regions->SetModel(model);
 
-  // 7. Steady state of the nonlinear model under the enforced displacements.
-  // 0.01 mm: far below the 0.1 mm the registration needs.
+  //    The loads: the sparse displacements, interpolated (thin-plate spline)
+  //    to every exposed node, as a point set of the exposed nodes.
+  using PointSetType = itk::DisplacementPointSetType<3>;
+  auto loads = itk::BiomechanicalLoadsFilter<PointSetType>::New();
+  loads->SetModelInput(regions);
+  loads->SetSparseDisplacements(itk::MakeDisplacementPointSet<PointSetType>(measured.points, measured.displacements));
+  loads->Update();
+  const bmr::LoadReport & loadReport = loads->GetLoadReport();
+  warnings.insert(warnings.end(), loadReport.warnings.begin(), loadReport.warnings.end());
+  const std::size_t loadedNodes = loads->GetOutput()->GetNumberOfPoints();
+  std::cout << "regions    " << model.nodeSets["skull_base"].size() << " fixed, " << loadedNodes
+            << " loaded from " << loadReport.usedPoints << " measurements (" << loadReport.rejectedPoints
+            << " rejected), " << contactNodes.size() << " may touch the skull (" << clock.Lap("regions") << " s)\n";
+
+  // 7. Steady state of the nonlinear model under the enforced displacements,
+  // the skull (the body stays inside it) as contact surface of the nodes in
+  // the model's "contact" set. 0.01 mm: far below the 0.1 mm the registration needs.
+  auto deformation = itk::BiomechanicalDeformationFilter<PointSetType>::New();
+  deformation->SetModelInput(regions);
+  deformation->SetPrescribedDisplacements(loads->GetOutput());
+  deformation->SetContactSurface(surfaces->GetSkullOutput());
   bmr::SolverSettings settings;
   settings.integrator = bmr::Integrator::DynamicRelaxation;
   settings.tolerance = 0.01;
-  bmr::Solver            solver(model, settings);
-  const bmr::SolveResult solution = solver.Solve();
+  deformation->SetSolverSettings(settings);
+  deformation->Update();
+  const bmr::SolveResult & solution = deformation->GetSolveResult();
   std::cout << "solve      " << (solution.converged ? "converged" : "NOT CONVERGED") << " in " << solution.steps
             << " steps, estimated error " << solution.estimatedError << " mm, max displacement "
             << solution.maxDisplacement << " mm, " << solution.contactNodes << " nodes on the skull ("
@@ -274,8 +293,8 @@ Run(int argc, char * argv[])
   // 8. The nodal displacements as an ITK transform: a B-spline fitted directly
   // as the backward (resampling) map, refined until the largest residual at
   // the nodes is below 0.1 mm.
-  auto fitter = itk::DisplacementPointSetToBSplineTransformFilter<>::New();
-  fitter->SetInput(itk::MakeDisplacementPointSet(model.nodes, solution.displacements));
+  auto fitter = itk::DisplacementPointSetToBSplineTransformFilter<PointSetType>::New();
+  fitter->SetInput(deformation->GetOutput());
   fitter->SetReferenceImage(preoperative);
   fitter->Update();
   const itk::BSplineFitReport & fit = fitter->GetReport();
@@ -317,7 +336,7 @@ Run(int argc, char * argv[])
   summary["element_size_mm"] = elementSize;
   summary["nodes"] = model.nodes.size();
   summary["cells"] = model.cells.size();
-  summary["loaded_nodes"] = model.prescribedDisplacements.front().nodes.size();
+  summary["loaded_nodes"] = loadedNodes;
   summary["converged"] = solution.converged;
   summary["solve_steps"] = solution.steps;
   summary["estimated_error_mm"] = solution.estimatedError;

@@ -108,6 +108,25 @@ TEST_F(ExampleProgramTest, RegistersColin27WithTheSparseCraniotomyLoad)
   EXPECT_LT(p95, 5.0);
   EXPECT_GT(summary["fraction_within_threshold"].get<double>(), 0.5);
   EXPECT_LT(summary["fraction_within_threshold"].get<double>(), 1.0);
+
+  // The example's chain of filters (classifier, grid, material mapping, loads,
+  // deformation, fitter, warp) is `biomech register`'s on the same inputs:
+  // the same solve to the last digit and the same warped image, byte for byte.
+  const fs::path      registered = m_Folder / "register";
+  const CommandResult reg = bmr::test::RunBiomech(
+    m_Folder, "register " + Quoted(Colin27Folder / "ch2.nii.gz") + " --mask " + Quoted(Colin27Folder / "ch2bet.nii.gz") +
+                " --sparse-displacements " + Quoted(SparseDisplacements) +
+                " --craniotomy-centre -11 43 84 --craniotomy-radius 30 --element-size 7 --quiet -o " +
+                Quoted(registered));
+  ASSERT_EQ(reg.exitCode, 0) << reg.err;
+  const json report = json::parse(ReadText(registered / "registration-report.json"));
+  EXPECT_EQ(report["solve"]["steps"].get<int>(), summary["solve_steps"].get<int>());
+  EXPECT_EQ(report["solve"]["estimated_error_mm"].get<double>(), summary["estimated_error_mm"].get<double>());
+  EXPECT_EQ(report["solve"]["max_displacement_mm"].get<double>(), summary["max_displacement_mm"].get<double>());
+  EXPECT_EQ(report["model"]["loaded_nodes"].get<int>(), summary["loaded_nodes"].get<int>());
+  EXPECT_EQ(report["fit"]["max_residual_mm"].get<double>(), summary["fit_max_residual_mm"].get<double>());
+  EXPECT_EQ(ReadText(registered / "warped.nii.gz"), ReadText(output / "warped.nii.gz"))
+    << "the example's warped image differs from biomech register's";
 }
 
 TEST_F(ExampleProgramTest, MissingImageIsNamedAndNothingIsWritten)
