@@ -11,7 +11,11 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <Eigen/Geometry>
+
+#include <cmath>
 #include <filesystem>
+#include <type_traits>
 #include <fstream>
 
 namespace fs = std::filesystem;
@@ -290,6 +294,78 @@ TEST_F(RegisterCommandTest, BadArgumentsWriteNothing)
     EXPECT_NE(run.err.find(expected), std::string::npos) << "expected '" << expected << "' in: " << run.err;
     EXPECT_FALSE(fs::exists(output)) << arguments;
   }
+}
+
+// Scanner geometry: the same voxels of Colin27 placed about 1 m from the
+// origin with oblique axes (turned 21 degrees about z and 10.5 about x), as a
+// scanner's export places them. The grid is the same in index space, so its
+// nodes are the moved ones, and every region must be the same nodes: in
+// particular the fixed skull-base band, which is measured along the image's
+// superior axis (along world +z it fixed 36 instead of 59 nodes at 7 mm).
+TEST(BrainShiftRegistration, ObliqueScannerGeometryGivesTheSameModelRegions)
+{
+  if (!HaveColin27())
+  {
+    GTEST_SKIP() << "Colin27 (mricron-data) is not installed";
+  }
+  const Colin27 & colin = Colin27::Get();
+  const double    a = 21.0 * M_PI / 180.0, b = 10.5 * M_PI / 180.0;
+  const Eigen::Matrix3d rotation = (Eigen::AngleAxisd(a, Eigen::Vector3d::UnitZ()) *
+                                    Eigen::AngleAxisd(b, Eigen::Vector3d::UnitX())).toRotationMatrix();
+  const bmr::Vector3 translation(812.0, -433.0, 517.0); // mm, about 1.05 m
+  const auto         moved = [&](auto * image) {
+    using ImageType = std::remove_const_t<std::remove_pointer_t<decltype(image)>>;
+    auto copy = ImageType::New();
+    copy->Graft(image); // the same voxels; new origin and direction cosines
+    typename ImageType::DirectionType direction = image->GetDirection();
+    typename ImageType::PointType     origin;
+    Eigen::Matrix3d                   d;
+    for (unsigned int r = 0; r < 3; ++r)
+    {
+      for (unsigned int c = 0; c < 3; ++c)
+      {
+        d(r, c) = direction[r][c];
+      }
+    }
+    const Eigen::Matrix3d turned = rotation * d;
+    const bmr::Vector3    o = rotation * bmr::Vector3(image->GetOrigin()[0], image->GetOrigin()[1], image->GetOrigin()[2]) +
+                           translation;
+    for (unsigned int r = 0; r < 3; ++r)
+    {
+      origin[r] = o[r];
+      for (unsigned int c = 0; c < 3; ++c)
+      {
+        direction[r][c] = turned(r, c);
+      }
+    }
+    copy->SetOrigin(origin);
+    copy->SetDirection(direction);
+    return copy;
+  };
+
+  bmr::BrainModelSettings settings;
+  settings.grid.elementSize = 7.0;
+  settings.craniotomyCentre = bmr::Vector3(-11.0, 43.0, 84.0);
+  settings.craniotomyRadius = 30.0;
+  bmr::StageTimer        timer;
+  const bmr::BrainModel  plain = bmr::BuildBrainModel(colin.image, colin.mask, nullptr, {}, nullptr, settings, timer);
+  settings.craniotomyCentre = rotation * settings.craniotomyCentre + translation;
+  const auto             image = moved(colin.image.GetPointer());
+  const auto             mask = moved(colin.mask.GetPointer());
+  const bmr::BrainModel  oblique = bmr::BuildBrainModel(image, mask, nullptr, {}, nullptr, settings, timer);
+
+  ASSERT_EQ(oblique.model.nodes.size(), plain.model.nodes.size());
+  double mismatch = 0.0;
+  for (std::size_t n = 0; n < plain.model.nodes.size(); ++n)
+  {
+    mismatch = std::max(mismatch, (rotation * plain.model.nodes[n] + translation - oblique.model.nodes[n]).norm());
+  }
+  EXPECT_LT(mismatch, 1e-6);
+  for (const std::string set : { "surface", "skull_base", "exposed" })
+  {
+    EXPECT_EQ(oblique.model.NodeSet(set), plain.model.NodeSet(set)) << set;
+  }
+  EXPECT_EQ(plain.model.NodeSet("skull_base").size(), 59u);
 }
 
 } // namespace

@@ -151,6 +151,25 @@ LoadFromIntraoperativeData(const Model &              model,
                                       kScanPointSpacing, settings, &report, modelSurface);
 }
 
+/** The image axis (a direction-cosine column) nearest LPS +z, pointing up. */
+Vector3
+SuperiorImageAxis(const RegistrationImage * image)
+{
+  const auto & direction = image->GetDirection();
+  Vector3      best = Vector3::UnitZ();
+  double       bestCosine = 0.0;
+  for (unsigned int axis = 0; axis < 3; ++axis)
+  {
+    const Vector3 column(direction[0][axis], direction[1][axis], direction[2][axis]);
+    if (std::abs(column.z()) > std::abs(bestCosine))
+    {
+      bestCosine = column.z();
+      best = column.normalized();
+    }
+  }
+  return bestCosine < 0.0 ? Vector3(-best) : best;
+}
+
 } // namespace
 
 RegistrationLabelImage::Pointer
@@ -321,7 +340,15 @@ BuildBrainModel(const RegistrationImage *      image,
   }
 
   const std::vector<Index> & surfaceNodes = model.NodeSet("surface");
-  model.nodeSets["skull_base"] = SkullBaseNodes(model, surfaceNodes, settings.skullBase);
+  SkullBaseSettings          skullBase = settings.skullBase;
+  if (skullBase.superior == Vector3::UnitZ())
+  {
+    // The patient's superior axis: the image axis nearest LPS +z. On an
+    // oblique acquisition (scanners tilt the slices 20-30 degrees) world +z
+    // would tilt the fixed band across the brain stem.
+    skullBase.superior = SuperiorImageAxis(image);
+  }
+  model.nodeSets["skull_base"] = SkullBaseNodes(model, surfaceNodes, skullBase);
   model.fixedConstraints = { FixedConstraint{ "skull_base", { true, true, true } } };
   if (settings.craniotomyMask.IsNotNull())
   {
