@@ -52,8 +52,8 @@ namespace itk
  * GetStopConditionDescription(). A solve that stops without converging is
  * not an exception: it is reported there and with itkWarningMacro. A solve
  * that fails (an inverted element, which it names; an unstable solution; a
- * model that does not validate) throws itk::ExceptionObject with the core's
- * message and leaves the output empty.
+ * model that does not validate) throws itk::ExceptionObject whose
+ * description is the solver's message, and leaves the output empty.
  *
  * Progress: ProgressEvent every 200 steps (dynamic relaxation: how far the
  * estimated error has fallen towards the tolerance, on a log scale; explicit

@@ -241,7 +241,9 @@ BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::GenerateDat
   }
   catch (const bmr::Error & error)
   {
-    itkExceptionMacro(<< error.what());
+    // The solver's message as it is (it names the cell, step and cause):
+    // callers pass it on to their users.
+    throw ExceptionObject(__FILE__, __LINE__, error.what(), ITK_LOCATION);
   }
   if (!m_Result.converged)
   {

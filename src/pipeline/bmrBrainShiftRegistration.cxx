@@ -13,6 +13,8 @@
 
 #include "bmrScene.h"
 
+#include <omp.h>
+
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
@@ -570,11 +572,9 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
   auto deformation = DeformationType::New();
   deformation->SetModel(model);
   deformation->SetSolverSettings(settings.solver);
+  // 0: OpenMP's default (OMP_NUM_THREADS), as the solver's own default.
   const int threads = settings.solver.threads != 0 ? settings.solver.threads : settings.model.threads;
-  if (threads > 0)
-  {
-    deformation->SetNumberOfWorkUnits(static_cast<itk::ThreadIdType>(threads));
-  }
+  deformation->SetNumberOfWorkUnits(static_cast<itk::ThreadIdType>(threads > 0 ? threads : omp_get_max_threads()));
   if (solverProgress)
   {
     deformation->AddObserver(itk::ProgressEvent(), [&](const itk::EventObject &) {
