@@ -1377,11 +1377,17 @@ RasterizeCells(const Model & model, const ImageGeometry & grid)
       const Eigen::Matrix3d toBarycentric = edges.inverse();
       const Vector3         lower = corners.rowwise().minCoeff();
       const Vector3         upper = corners.rowwise().maxCoeff();
+      // Voxel centres on a cell's face (7 mm cells on 1 mm voxels put many
+      // there) must count whatever the image's placement: an image file's
+      // geometry in single precision (NIfTI) moves the nodes by 1e-5 voxel
+      // 1 m from the origin, and a 1e-9 tolerance let that decide (a
+      // registration 0.65 mm different, docs/model-building.md).
+      constexpr double      kOnFace = 1e-3; // voxels, in the bounds; barycentric, in the test
       int                   first[3], last[3];
       for (int d = 0; d < 3; ++d)
       {
-        first[d] = std::max(0, static_cast<int>(std::ceil(lower[d] - 1e-9)));
-        last[d] = std::min(grid.size[d] - 1, static_cast<int>(std::floor(upper[d] + 1e-9)));
+        first[d] = std::max(0, static_cast<int>(std::ceil(lower[d] - kOnFace)));
+        last[d] = std::min(grid.size[d] - 1, static_cast<int>(std::floor(upper[d] + kOnFace)));
       }
       for (int k = first[2]; k <= last[2]; ++k)
       {
@@ -1391,7 +1397,7 @@ RasterizeCells(const Model & model, const ImageGeometry & grid)
           {
             const Vector3 local = toBarycentric * (Vector3(i, j, k) - corners.col(0));
             // Inclusive: a voxel centre on a face shared by two cells counts for the body.
-            if (local.minCoeff() >= -1e-9 && local.sum() <= 1.0 + 1e-9)
+            if (local.minCoeff() >= -kOnFace && local.sum() <= 1.0 + kOnFace)
             {
               std::uint8_t & value = volume.values[grid.Offset(i, j, k)];
 #pragma omp atomic write

@@ -16,6 +16,7 @@
 #include <cmath>
 #include <filesystem>
 #include <type_traits>
+#include <unistd.h>
 #include <fstream>
 
 namespace fs = std::filesystem;
@@ -301,7 +302,8 @@ TEST_F(RegisterCommandTest, BadArgumentsWriteNothing)
 // scanner's export places them. The grid is the same in index space, so its
 // nodes are the moved ones, and every region must be the same nodes: in
 // particular the fixed skull-base band, which is measured along the image's
-// superior axis (along world +z it fixed 36 instead of 59 nodes at 7 mm).
+// superior axis (along world +z it fixed 36 instead of 59 nodes at 7 mm),
+// and the same skull.
 TEST(BrainShiftRegistration, ObliqueScannerGeometryGivesTheSameModelRegions)
 {
   if (!HaveColin27())
@@ -350,9 +352,17 @@ TEST(BrainShiftRegistration, ObliqueScannerGeometryGivesTheSameModelRegions)
   bmr::StageTimer        timer;
   const bmr::BrainModel  plain = bmr::BuildBrainModel(colin.image, colin.mask, nullptr, {}, nullptr, settings, timer);
   settings.craniotomyCentre = rotation * settings.craniotomyCentre + translation;
-  const auto             image = moved(colin.image.GetPointer());
-  const auto             mask = moved(colin.mask.GetPointer());
-  const bmr::BrainModel  oblique = bmr::BuildBrainModel(image, mask, nullptr, {}, nullptr, settings, timer);
+  // Through NIfTI files, as a scanner exports them: their geometry is single
+  // precision, which moves the nodes by about 1e-5 mm this far out.
+  const fs::path folder = fs::temp_directory_path() / ("bmr-oblique-" + std::to_string(::getpid()));
+  fs::create_directories(folder);
+  itk::WriteBiomechanicalImage(moved(colin.image.GetPointer()).GetPointer(), folder / "image.nii.gz");
+  itk::WriteBiomechanicalImage(moved(colin.mask.GetPointer()).GetPointer(), folder / "mask.nii.gz");
+  const auto image = itk::ReadBiomechanicalImage<bmr::RegistrationImage>((folder / "image.nii.gz").string(), "image");
+  const auto mask = bmr::ThresholdMask(
+    itk::ReadBiomechanicalImage<bmr::RegistrationImage>((folder / "mask.nii.gz").string(), "mask"));
+  fs::remove_all(folder);
+  const bmr::BrainModel oblique = bmr::BuildBrainModel(image, mask, nullptr, {}, nullptr, settings, timer);
 
   ASSERT_EQ(oblique.model.nodes.size(), plain.model.nodes.size());
   double mismatch = 0.0;
@@ -360,12 +370,20 @@ TEST(BrainShiftRegistration, ObliqueScannerGeometryGivesTheSameModelRegions)
   {
     mismatch = std::max(mismatch, (rotation * plain.model.nodes[n] + translation - oblique.model.nodes[n]).norm());
   }
-  EXPECT_LT(mismatch, 1e-6);
+  EXPECT_LT(mismatch, 1e-3);
   for (const std::string set : { "surface", "skull_base", "exposed" })
   {
     EXPECT_EQ(oblique.model.NodeSet(set), plain.model.NodeSet(set)) << set;
   }
   EXPECT_EQ(plain.model.NodeSet("skull_base").size(), 59u);
+  // The skull is the level set of the cells rasterised onto the voxels, many
+  // of whose centres lie on cell faces: they must count in both placements.
+  // With a 1e-9 voxel tolerance the file's rounding decided: the skull
+  // enclosed 1.1 % less (1,886,952 against 1,908,612 mm^3) and the
+  // registration differed by 0.65 mm; now 1e-6 (marching cubes still meets
+  // voxel values on the level: 148,908 against 148,946 vertices).
+  const double skullVolume = bmr::EnclosedVolume(plain.surfaces.skull);
+  EXPECT_NEAR(bmr::EnclosedVolume(oblique.surfaces.skull), skullVolume, 1e-5 * skullVolume);
 }
 
 } // namespace
