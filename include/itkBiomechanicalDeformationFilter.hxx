@@ -250,27 +250,7 @@ BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::GenerateDat
     itkWarningMacro(<< "the solve did not converge: " << m_Result.message);
   }
 
-  auto points = DisplacementPointSetType::PointsContainer::New();
-  auto data = DisplacementPointSetType::PointDataContainer::New();
-  points->Reserve(model.nodes.size());
-  data->Reserve(model.nodes.size());
-  for (std::size_t n = 0; n < model.nodes.size(); ++n)
-  {
-    PointType                                     point;
-    typename DisplacementPointSetType::PixelType displacement;
-    for (unsigned int d = 0; d < 3; ++d)
-    {
-      point[d] = model.nodes[n][d];
-      displacement[d] = m_Result.displacements[n][d];
-    }
-    points->SetElement(n, point);
-    data->SetElement(n, displacement);
-  }
-  output->SetPoints(points);
-  output->SetPointData(data);
-  // The whole point set is produced: without this a PointSet reports its
-  // requested region outside the buffered one and the next Update() solves again.
-  output->SetBufferedRegion(output->GetRequestedRegion());
+  FillDisplacementPointSet(output, model.nodes, m_Result.displacements);
   if (model.discretization == bmr::Discretization::Meshless)
   {
     m_SolvedModel = model;

@@ -212,10 +212,7 @@ protected:
     {
       positions.push_back(model.nodes[node]);
     }
-    const auto result = MakeDisplacementPointSet<DisplacementPointSetType>(positions, load.displacements);
-    output->SetPoints(result->GetPoints());
-    output->SetPointData(result->GetPointData());
-    output->SetBufferedRegion(output->GetRequestedRegion());
+    FillDisplacementPointSet(output, positions, load.displacements);
   }
 
   void

@@ -237,25 +237,27 @@ private:
   bool             m_DomainExtended{ false };
 };
 
-/** The fitter's input from the mechanics core: the points are `nodes`
- * (reference positions, mm) and carry `displacements` (mm), one per node,
- * e.g. bmr::Model::nodes and bmr::SolveResult::displacements (for a meshless
- * model these are the interpolated nodal displacements, not the MLS
- * parameters). Throws ExceptionObject when the counts differ. */
-template <typename TPointSet = DisplacementPointSetType<3>>
-typename TPointSet::Pointer
-MakeDisplacementPointSet(const std::vector<bmr::Vector3> & nodes, const std::vector<bmr::Vector3> & displacements)
+/** Sets `pointSet`'s points to `nodes` (reference positions, mm) carrying
+ * `displacements` (mm), one per node, and marks the whole set as produced
+ * (buffered region = requested region), as a filter's output must be or the
+ * pipeline runs the filter again. Throws ExceptionObject when the counts differ. */
+template <typename TPointSet>
+void
+FillDisplacementPointSet(TPointSet *                         pointSet,
+                         const std::vector<bmr::Vector3> & nodes,
+                         const std::vector<bmr::Vector3> & displacements)
 {
   static_assert(TPointSet::PointDimension == 3, "the mechanics core is 3D");
   if (nodes.size() != displacements.size())
   {
-    itkGenericExceptionMacro("MakeDisplacementPointSet: " << nodes.size() << " nodes but " << displacements.size()
-                                                          << " displacements; give the result of a solve of "
-                                                             "this model (one displacement per node).");
+    itkGenericExceptionMacro("displacement point set: " << nodes.size() << " nodes but " << displacements.size()
+                                                         << " displacements; give the result of a solve of "
+                                                            "this model (one displacement per node).");
   }
-  auto pointSet = TPointSet::New();
-  pointSet->GetPoints()->Reserve(nodes.size());
-  pointSet->GetPointData()->Reserve(nodes.size());
+  auto points = TPointSet::PointsContainer::New();
+  auto data = TPointSet::PointDataContainer::New();
+  points->Reserve(nodes.size());
+  data->Reserve(nodes.size());
   for (std::size_t n = 0; n < nodes.size(); ++n)
   {
     typename TPointSet::PointType point;
@@ -265,9 +267,25 @@ MakeDisplacementPointSet(const std::vector<bmr::Vector3> & nodes, const std::vec
       point[d] = nodes[n][d];
       displacement[d] = displacements[n][d];
     }
-    pointSet->GetPoints()->SetElement(n, point);
-    pointSet->GetPointData()->SetElement(n, displacement);
+    points->SetElement(n, point);
+    data->SetElement(n, displacement);
   }
+  pointSet->SetPoints(points);
+  pointSet->SetPointData(data);
+  pointSet->SetBufferedRegion(pointSet->GetRequestedRegion());
+}
+
+/** The fitter's input from the mechanics core: the points are `nodes`
+ * (reference positions, mm) and carry `displacements` (mm), one per node,
+ * e.g. bmr::Model::nodes and bmr::SolveResult::displacements (for a meshless
+ * model these are the interpolated nodal displacements, not the MLS
+ * parameters). Throws ExceptionObject when the counts differ. */
+template <typename TPointSet = DisplacementPointSetType<3>>
+typename TPointSet::Pointer
+MakeDisplacementPointSet(const std::vector<bmr::Vector3> & nodes, const std::vector<bmr::Vector3> & displacements)
+{
+  auto pointSet = TPointSet::New();
+  FillDisplacementPointSet(pointSet.GetPointer(), nodes, displacements);
   return pointSet;
 }
 
