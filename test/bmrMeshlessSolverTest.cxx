@@ -429,11 +429,7 @@ TEST(MeshlessExplicitDynamics, SettlesToTheDynamicRelaxationSolution)
   Solver            dynamics(model, settings);
   const SolveResult result = dynamics.Solve();
   ASSERT_TRUE(result.converged) << result.message;
-  double difference = 0.0;
-  for (std::size_t n = 0; n < model.nodes.size(); ++n)
-  {
-    difference = std::max(difference, (result.displacements[n] - steady.displacements[n]).norm());
-  }
+  const double difference = MaxDifference(result.displacements, steady.displacements);
   RecordProperty("maxDifferenceMm", Sci(difference));
   EXPECT_LT(difference, 0.01 * 0.6);
   EXPECT_LT(PrescribedMismatch(model, result), 1e-8);
@@ -544,11 +540,7 @@ TEST(MeshlessContact, SlidingIsUnresisted)
   RecordProperty("tangentialOverNormal", Sci(std::hypot(onPlane.x(), onPlane.y()) / onPlane.z()));
   ASSERT_GT(onPlane.z(), 0.0) << "the plane must push the body up";
   EXPECT_LT(std::hypot(onPlane.x(), onPlane.y()), 1e-4 * onPlane.z()) << "tangential force on the plane";
-  double difference = 0.0;
-  for (std::size_t n = 0; n < model.nodes.size(); ++n)
-  {
-    difference = std::max(difference, (slid.displacements[n] - pressed.displacements[n] - slide).norm());
-  }
+  const double difference = MaxDifference(slid.displacements, pressed.displacements, slide);
   RecordProperty("maxDifferenceFromTranslatedSolution_mm", Sci(difference));
   EXPECT_LT(difference, 1e-5);
 }

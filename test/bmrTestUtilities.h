@@ -311,6 +311,19 @@ MaxNorm(const std::vector<Vector3> & values, const std::vector<Index> & nodes = 
   return m;
 }
 
+/** Largest |a_n - b_n - shift| over the nodes: how far one solution is from
+ *  another (translated by `shift`). */
+inline double
+MaxDifference(const std::vector<Vector3> & a, const std::vector<Vector3> & b, const Vector3 & shift = Vector3::Zero())
+{
+  double m = 0.0;
+  for (std::size_t n = 0; n < a.size(); ++n)
+  {
+    m = std::max(m, (a[n] - b[n] - shift).norm());
+  }
+  return m;
+}
+
 /** Scientific notation for RecordProperty (shows in --gtest_output=xml). */
 inline std::string
 Sci(double value)
