@@ -423,6 +423,26 @@ TEST(MaterialMappingFilter, ClassifierGridMappingAndDeformationCompose)
   {
     EXPECT_EQ(mapped.cells[c].material, direct.cells[c].material);
   }
+  // Bad input is named: no memberships; class materials that do not match the classes.
+  auto missing = itk::BiomechanicalMaterialMappingFilter<>::New();
+  missing->SetModelInput(grid->GetModelOutput());
+  EXPECT_THROW(missing->Update(), itk::ExceptionObject);
+  auto wrongCount = itk::BiomechanicalMaterialMappingFilter<>::New();
+  wrongCount->SetModelInput(grid->GetModelOutput());
+  wrongCount->SetMemberships(classifier->GetOutput());
+  wrongCount->SetClassMaterials(DefaultClassMaterials(3));
+  try
+  {
+    wrongCount->Update();
+    ADD_FAILURE() << "3 class materials for 2 classes were accepted";
+  }
+  catch (const itk::ExceptionObject & error)
+  {
+    EXPECT_NE(std::string(error.GetDescription()).find("3 class materials for a membership image of 2"),
+              std::string::npos)
+      << error.GetDescription();
+  }
+
   // The dark lower part is CSF (10 Pa), the bright upper part parenchyma (3000 Pa).
   double lowest = 1e9, highest = 0.0;
   for (const Cell & cell : mapped.cells)
