@@ -1,14 +1,16 @@
 // `biomech demo`: brain-shift registration against a known answer. Makes a
 // ground-truth brain shift of Colin27 with an independent, finer model
 // (bmrSyntheticBrainShift.h), registers from the displaced exposed surface
-// only, runs the B-spline intensity baseline on the same pair, and reports
-// time, displacement error against the ground truth and edge-based
-// Hausdorff distances for: no registration, biomechanical, B-spline.
+// only, runs the B-spline intensity baseline (and elastix, the peer users
+// pick) on the same pair, and reports time, displacement error against the
+// ground truth and edge-based Hausdorff distances for each method.
 #include "bmrImageCommands.h"
 
 // ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.
 #include "itkBSplineTransform.h"
 #include "itkBiomechanicalTransformIO.h"
+#include "itkCastImageFilter.h"
+#include "itkDisplacementFieldTransform.h"
 #include "itkImageFileWriter.h"
 
 #include "bmrCommandSupport.h"
@@ -18,10 +20,23 @@
 
 #include <nlohmann/json.hpp>
 
+#include <cerrno>
+#include <chrono>
 #include <cstdio>
+#include <cstring>
+#include <deque>
 #include <filesystem>
+#include <fstream>
 #include <iostream>
+#include <regex>
 #include <sstream>
+
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+extern char ** environ;
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
@@ -46,6 +61,11 @@ struct DemoOptions
   std::string                 load = "points";
   double                      registrationGravity = 0.0; // g
   bool                        noBaseline = false;
+  bool                        elastix = false;
+  std::vector<std::string>    elastixParameters;
+  std::string                 contrast = "preoperative";
+  std::string                 noiseModel = "gaussian";
+  std::vector<double>         intraoperativeSpacing;
   std::vector<unsigned int>   baselineShrinkFactors{ 4, 2, 1 };
   unsigned int                baselineIterations = 0;
   int                         overlays = 3;
@@ -149,6 +169,179 @@ ParseVariant(const std::string & variant)
   return settings;
 }
 
+/** Runs `arguments` (arguments[0] found on PATH), its output into `log`;
+ *  throws Error naming the program, its exit and the log's last lines. */
+void
+RunProgram(const std::vector<std::string> & arguments, const fs::path & log, const std::string & install)
+{
+  std::vector<char *> argv;
+  for (const std::string & argument : arguments)
+  {
+    argv.push_back(const_cast<char *>(argument.c_str()));
+  }
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_adddup2(&actions, STDOUT_FILENO, STDERR_FILENO);
+  pid_t     child = 0;
+  const int spawned = posix_spawnp(&child, argv[0], &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (spawned != 0)
+  {
+    throw Error("cannot run " + arguments[0] + " (" + std::strerror(spawned) + "); " + install);
+  }
+  int status = 0;
+  while (::waitpid(child, &status, 0) < 0 && errno == EINTR)
+  {
+  }
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
+  {
+    std::ifstream           file(log);
+    std::deque<std::string> tail;
+    for (std::string line; std::getline(file, line);)
+    {
+      tail.push_back(line);
+      if (tail.size() > 8)
+      {
+        tail.pop_front();
+      }
+    }
+    std::string last;
+    for (const std::string & line : tail)
+    {
+      last += "\n  " + line;
+    }
+    throw Error(arguments[0] + " failed (" +
+                (WIFEXITED(status) ? "exit status " + std::to_string(WEXITSTATUS(status))
+                                   : "signal " + std::to_string(WTERMSIG(status))) +
+                "); its log " + log.string() + " ends:" + last);
+  }
+}
+
+/** Whether `program` is an executable file in a folder of PATH. */
+bool
+OnPath(const std::string & program)
+{
+  const char *      path = std::getenv("PATH");
+  std::stringstream folders(path != nullptr ? path : "");
+  for (std::string folder; std::getline(folders, folder, ':');)
+  {
+    if (!folder.empty() && ::access((fs::path(folder) / program).c_str(), X_OK) == 0)
+    {
+      return true;
+    }
+  }
+  return false;
+}
+
+/** The elastix parameter files shipped with the module: installed beside the
+ *  executable (share/BiomechanicalRegistration/elastix), else the source tree's. */
+std::vector<std::string>
+DefaultElastixParameters()
+{
+  std::error_code  ignored;
+  const fs::path   executable = fs::read_symlink("/proc/self/exe", ignored);
+  for (const fs::path & folder : { executable.parent_path().parent_path() / "share" / "BiomechanicalRegistration" / "elastix",
+                                   fs::path(BMR_ELASTIX_PARAMETERS_DIR) })
+  {
+    if (fs::exists(folder / "affine.txt") && fs::exists(folder / "bspline.txt"))
+    {
+      return { (folder / "affine.txt").string(), (folder / "bspline.txt").string() };
+    }
+  }
+  throw Error("the elastix parameter files (affine.txt, bspline.txt) are not installed; give them with "
+              "--elastix-parameters");
+}
+
+/** elastix's registration of the pair and what the study measures of it. */
+struct ElastixPeer
+{
+  itk::DisplacementFieldTransform<double, 3>::Pointer transform; // backward map over the preoperative grid
+  RegistrationImage::Pointer                          warpedOnFixedGrid;
+  double                                              seconds = 0.0;       // elastix alone
+  double                                              outputSeconds = 0.0; // transformix: field and warped image
+};
+
+/** elastix (the parameter files in turn) with the intraoperative image fixed,
+ *  the preoperative one moving and the intraoperative brain mask; then
+ *  transformix for the warped image on the fixed grid and for the
+ *  deformation field on the preoperative grid, where errors are measured
+ *  (outside a partial field of view too, as elastix's B-spline extends it). */
+ElastixPeer
+RegisterWithElastix(const fs::path & fixed, const fs::path & moving, const fs::path & fixedMask,
+                    const std::vector<std::string> & parameterFiles, const RegistrationImage * preoperativeGrid,
+                    const fs::path & folder, int threads)
+{
+  const std::string install = "install Debian's elastix (scripts/install-dependencies.sh) or leave out --elastix";
+  std::error_code   ignored;
+  fs::remove_all(folder, ignored);
+  CreateFolder(folder);
+  // Absolute: the last stage's parameters name the first's file by this folder.
+  const fs::path out = fs::absolute(folder);
+  std::vector<std::string> elastix{ "elastix", "-f", fixed.string(), "-m", moving.string(), "-fMask",
+                                    fixedMask.string(), "-out", out.string() };
+  for (const std::string & file : parameterFiles)
+  {
+    if (!fs::exists(file))
+    {
+      throw Error("elastix parameter file " + file + " does not exist");
+    }
+    elastix.insert(elastix.end(), { "-p", file });
+  }
+  std::vector<std::string> threading;
+  if (threads > 0)
+  {
+    threading = { "-threads", std::to_string(threads) };
+  }
+  elastix.insert(elastix.end(), threading.begin(), threading.end());
+  ElastixPeer peer;
+  auto        start = std::chrono::steady_clock::now();
+  RunProgram(elastix, out / "elastix-output.txt", install);
+  peer.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+
+  // The last stage's parameters hold the chain; a copy with the preoperative
+  // grid's origin, size and spacing gives the field there (same directions).
+  const fs::path transform = out / ("TransformParameters." + std::to_string(parameterFiles.size() - 1) + ".txt");
+  std::ifstream  in(transform);
+  std::string    text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const auto     vector3 = [](const auto & values) {
+    std::ostringstream line;
+    line.precision(17);
+    line << values[0] << " " << values[1] << " " << values[2];
+    return line.str();
+  };
+  text = std::regex_replace(text, std::regex(R"(\(Size [^)]*\))"),
+                            "(Size " + vector3(preoperativeGrid->GetLargestPossibleRegion().GetSize()) + ")");
+  text = std::regex_replace(text, std::regex(R"(\(Spacing [^)]*\))"), "(Spacing " + vector3(preoperativeGrid->GetSpacing()) + ")");
+  text = std::regex_replace(text, std::regex(R"(\(Origin [^)]*\))"), "(Origin " + vector3(preoperativeGrid->GetOrigin()) + ")");
+  const fs::path onPreoperativeGrid = out / "TransformParameters.preoperative-grid.txt";
+  std::ofstream(onPreoperativeGrid) << text;
+
+  start = std::chrono::steady_clock::now();
+  const auto transformix = [&](std::vector<std::string> command, const fs::path & output) {
+    CreateFolder(output);
+    command.insert(command.end(), { "-out", output.string() });
+    command.insert(command.end(), threading.begin(), threading.end());
+    RunProgram(command, output / "transformix-output.txt", install);
+  };
+  transformix({ "transformix", "-in", moving.string(), "-tp", transform.string() }, out / "warped");
+  transformix({ "transformix", "-def", "all", "-tp", onPreoperativeGrid.string() }, out / "field");
+  peer.outputSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+
+  peer.warpedOnFixedGrid = ReadImage<RegistrationImage>((out / "warped" / "result.nii").string(), "elastix's warped image");
+  using FieldType = itk::DisplacementFieldTransform<double, 3>::DisplacementFieldType;
+  using FloatFieldType = itk::Image<itk::Vector<float, 3>, 3>;
+  const auto floatField = ReadImage<FloatFieldType>((out / "field" / "deformationField.nii").string(),
+                                                    "elastix's deformation field");
+  auto cast = itk::CastImageFilter<FloatFieldType, FieldType>::New();
+  cast->SetInput(floatField);
+  cast->Update();
+  peer.transform = itk::DisplacementFieldTransform<double, 3>::New();
+  peer.transform->SetDisplacementField(cast->GetOutput());
+  return peer;
+}
+
 int
 RunDemo(DemoOptions options)
 {
@@ -166,6 +359,30 @@ RunDemo(DemoOptions options)
     options.truth.tumourCentre = Vector3(options.tumourCentre.at(0), options.tumourCentre.at(1), options.tumourCentre.at(2));
   }
   options.truth.grid.kind = ParseImageGridKind(options.truthGrid);
+  options.truth.contrast = ParseIntraoperativeContrast(options.contrast);
+  options.truth.noiseModel = options.noiseModel == "rician" ? NoiseModel::Rician : NoiseModel::Gaussian;
+  if (!options.intraoperativeSpacing.empty())
+  {
+    options.truth.intraoperativeSpacing =
+      Vector3(options.intraoperativeSpacing.at(0), options.intraoperativeSpacing.at(1), options.intraoperativeSpacing.at(2));
+  }
+  // Before the long ground-truth solve: the peer's files.
+  options.elastix = options.elastix || !options.elastixParameters.empty();
+  if (options.elastix)
+  {
+    for (const char * program : { "elastix", "transformix" })
+    {
+      if (!OnPath(program))
+      {
+        throw Error(std::string(program) + " is not on PATH: install Debian's elastix (scripts/install-dependencies.sh) "
+                    "or leave out --elastix");
+      }
+    }
+    if (options.elastixParameters.empty())
+    {
+      options.elastixParameters = DefaultElastixParameters();
+    }
+  }
   std::vector<ImageGridSettings> variants;
   for (const std::string & variant : options.variants)
   {
@@ -299,6 +516,33 @@ RunDemo(DemoOptions options)
     WriteEdgeOverlays(method.edges, intraoperative, overlays.string(), "bspline", options.overlays);
   }
 
+  if (options.elastix)
+  {
+    if (!options.quiet)
+    {
+      std::cerr << "elastix (peer): " << options.elastixParameters.size() << " parameter files\n";
+    }
+    const ElastixPeer peer =
+      RegisterWithElastix(output / "intraoperative.nii.gz", options.image, output / "intraoperative-brain-mask.nii.gz",
+                          options.elastixParameters, preoperative, output / "elastix", options.truth.threads);
+    if (peer.warpedOnFixedGrid->GetLargestPossibleRegion() != intraoperative->GetLargestPossibleRegion())
+    {
+      throw Error("transformix's warped image is not on the intraoperative grid; check the parameter files' output settings");
+    }
+    // The same grid, read back from single-precision NIfTI: take the exact geometry.
+    peer.warpedOnFixedGrid->CopyInformation(intraoperative);
+    MethodResult method;
+    method.name = "elastix B-spline";
+    method.seconds = peer.seconds;
+    method.stages = { { "register", peer.seconds }, { "transformix", peer.outputSeconds } };
+    method.error = MeasureDisplacementError(peer.transform, truth.truthTransform,
+                                            truth.intraoperativeBrainOnPreoperativeGrid);
+    method.edges = EvaluateEdges(intraoperative, peer.warpedOnFixedGrid, intraoperativeMask);
+    method.details = { { "parameter_files", options.elastixParameters }, { "folder", (output / "elastix").string() } };
+    methods.push_back(method);
+    WriteEdgeOverlays(method.edges, intraoperative, overlays.string(), "elastix", options.overlays);
+  }
+
   json report;
   report["preoperative_image"] = options.image;
   report["brain_mask"] = options.mask;
@@ -325,6 +569,11 @@ RunDemo(DemoOptions options)
     { "intraoperative_spacing_mm", { options.truth.intraoperativeSpacing.x(), options.truth.intraoperativeSpacing.y(),
                                      options.truth.intraoperativeSpacing.z() } },
     { "noise", options.truth.noise },
+    { "noise_model", options.noiseModel },
+    { "intraoperative_contrast", IntraoperativeContrastName(options.truth.contrast) },
+    { "bias_field", options.truth.biasField },
+    { "field_of_view_mm", options.truth.fieldOfView },
+    { "resection_cavity_radius_mm", truth.resectionCavityRadius },
     { "seconds", truth.timer.Json() } };
   report["methods"] = json::array();
   for (const MethodResult & method : methods)
@@ -384,6 +633,32 @@ AddDemoCommand(CLI::App & app)
     ->capture_default_str();
   demo->add_option("--noise", options->truth.noise, "Noise of the intraoperative image (fraction of the bright level)")
     ->capture_default_str();
+  demo->add_option("--noise-model", options->noiseModel,
+                   "Noise of the intraoperative image: gaussian, or rician (magnitude images at low field)")
+    ->check(CLI::IsMember({ "gaussian", "rician" }))
+    ->capture_default_str();
+  demo->add_option("--intraoperative-contrast", options->contrast,
+                   "Contrast of the intraoperative image: preoperative (the T1's), t2 (CSF bright), low-field-t1 "
+                   "(half the tissue contrast)")
+    ->check(CLI::IsMember({ "preoperative", "t2", "low-field-t1" }))
+    ->capture_default_str();
+  demo->add_option("--bias-field", options->truth.biasField,
+                   "Smooth multiplicative bias field of the intraoperative image: largest deviation from 1 (0.2: +-20 %)")
+    ->check(CLI::Range(0.0, 0.9))
+    ->capture_default_str();
+  demo->add_option("--intraoperative-spacing", options->intraoperativeSpacing,
+                   "Voxel spacing of the intraoperative image X Y Z (mm); default 0.86 0.86 2.5")
+    ->expected(3)
+    ->check(CLI::PositiveNumber);
+  demo->add_option("--field-of-view", options->truth.fieldOfView,
+                   "Edge of the intraoperative image's cubic field of view around the craniotomy and beneath it (mm); "
+                   "0: the whole head")
+    ->check(CLI::NonNegativeNumber)
+    ->capture_default_str();
+  demo->add_option("--resection-margin", options->truth.resectionMargin,
+                   "Resect the tumour and this margin (mm) before the intraoperative image: a fluid-filled cavity whose "
+                   "walls sag (needs --tumour-radius)")
+    ->check(CLI::NonNegativeNumber);
   demo->add_option("--variant", options->variants,
                    "Registration grid KIND:SIZE (hexahedra, tetrahedra, mixed, meshless); repeat for several")
     ->capture_default_str();
@@ -395,6 +670,12 @@ AddDemoCommand(CLI::App & app)
                    "Gravity in the registration's model (g, along the ground truth's direction); 0: surface only")
     ->capture_default_str();
   demo->add_flag("--no-baseline", options->noBaseline, "Skip the B-spline intensity registration");
+  demo->add_flag("--elastix", options->elastix,
+                 "Also register with elastix (Debian's elastix; affine then B-spline, Mattes mutual information; "
+                 "the parameter files in examples/elastix)");
+  demo->add_option("--elastix-parameters", options->elastixParameters,
+                   "elastix parameter files, in order (default: the module's affine.txt and bspline.txt)")
+    ->check(CLI::ExistingFile);
   demo->add_option("--baseline-shrink-factors", options->baselineShrinkFactors, "Baseline pyramid")
     ->capture_default_str();
   demo->add_option("--baseline-iterations", options->baselineIterations, "Baseline iterations per level (0: default)")

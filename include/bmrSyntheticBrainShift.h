@@ -21,6 +21,56 @@
 namespace bmr
 {
 
+/** The intraoperative image's contrast: the preoperative T1's, a T2-like one
+ *  (CSF bright, white matter dark) or a low-field T1-like one (less contrast
+ *  between the tissue classes). */
+enum class IntraoperativeContrast
+{
+  Preoperative,
+  T2Like,
+  LowFieldT1
+};
+
+const char *
+IntraoperativeContrastName(IntraoperativeContrast contrast);
+
+/** "preoperative", "t2", "low-field-t1"; throws bmr::Error naming the choices. */
+IntraoperativeContrast
+ParseIntraoperativeContrast(const std::string & name);
+
+/** Gaussian noise, or Rician: the magnitude of complex Gaussian noise, as in
+ *  magnitude MR images at low signal-to-noise ratio (low field). */
+enum class NoiseModel
+{
+  Gaussian,
+  Rician
+};
+
+/** The building blocks of the synthetic intraoperative image. */
+
+/** The image in another contrast: three tissue classes (CSF, grey, white
+ *  matter) from fuzzy c-means on the brain's voxels; intensity is mapped
+ *  piecewise linearly through the class centres (0 -> 0, centre k -> its
+ *  level in the new contrast, the last segment's ratio beyond). T2-like:
+ *  CSF at white matter's T1 level, grey matter at 0.65 and white matter at
+ *  0.5 of it (CSF twice, grey matter 1.3 times white matter); low-field T1: each class at half its T1 contrast to white matter. A
+ *  function of the T1 intensity, so still mutual information's ideal case (a
+ *  real T2 is not): it tests that a method copes with another contrast. */
+RegistrationImage::Pointer
+MakeImageInContrast(const RegistrationImage * image, const RegistrationLabelImage * brainMask,
+                    IntraoperativeContrast contrast);
+
+/** Multiplies the image by 1 + amplitude p(x), p a random quadratic
+ *  polynomial of the grid's normalised coordinates whose largest magnitude
+ *  over the grid is 1: a smooth receive-coil bias field. */
+void
+ApplyBiasField(RegistrationImage * image, double amplitude, std::uint32_t seed);
+
+/** Adds noise of standard deviation `deviation` (Gaussian), or takes the
+ *  magnitude of the value plus complex Gaussian noise (Rician). */
+void
+AddImageNoise(RegistrationImage * image, double deviation, NoiseModel model, std::uint32_t seed);
+
 struct SyntheticBrainShiftSettings
 {
   /** Craniotomy: the exposed surface (sphere). "Down" points from the
@@ -67,11 +117,25 @@ struct SyntheticBrainShiftSettings
   double  tumourRadius = 0.0;
   double  tumourStiffness = 2.0;
 
-  /** The intraoperative image: voxel spacing (mm) and Gaussian noise
-   *  (standard deviation as a fraction of the 99.5th intensity percentile). */
+  /** The intraoperative image: voxel spacing (mm) and noise (standard
+   *  deviation as a fraction of the 99.5th intensity percentile). */
   Vector3       intraoperativeSpacing = Vector3(0.86, 0.86, 2.5);
   double        noise = 0.02;
+  NoiseModel    noiseModel = NoiseModel::Gaussian;
   std::uint32_t seed = 1;
+  /** Realistic intraoperative images (docs/validation.md): another contrast
+   *  (a function of the preoperative intensity through its tissue classes),
+   *  a smooth multiplicative bias field (largest deviation from 1, e.g. 0.2),
+   *  and a partial field of view (edge of a cube in mm around the craniotomy
+   *  and what lies beneath it; 0: the whole head). */
+  IntraoperativeContrast contrast = IntraoperativeContrast::Preoperative;
+  double                 biasField = 0.0;
+  double                 fieldOfView = 0.0;
+  /** A resection cavity: the tumour and this margin (mm) removed before the
+   *  intraoperative image; negative: no resection (needs a tumour). The
+   *  cavity's cells carry the drained CSF's material, so its walls sag; in the
+   *  image it is fluid, and it is left out of the intraoperative brain. */
+  double resectionMargin = -1.0;
 
   int threads = 0;
 };
@@ -87,9 +151,11 @@ struct SyntheticBrainShift
    *  fitted to its nodes within 0.05 mm. */
   RegistrationTransform::Pointer truthTransform;
   double                         truthFitMaxResidual = 0.0;
-  RegistrationImage::Pointer      intraoperativeImage;     // intraoperative grid, with noise
-  RegistrationLabelImage::Pointer intraoperativeBrainMask; // intraoperative grid
-  /** The intraoperative brain on the preoperative grid: where displacement errors are measured. */
+  RegistrationImage::Pointer      intraoperativeImage;     // intraoperative grid (field of view), contrast, bias, noise
+  RegistrationLabelImage::Pointer intraoperativeBrainMask; // intraoperative grid; without the resection cavity
+  /** The intraoperative brain on the preoperative grid (the whole brain, also
+   *  outside a partial field of view; without the resection cavity): where
+   *  displacement errors are measured. */
   RegistrationLabelImage::Pointer intraoperativeBrainOnPreoperativeGrid;
   /** The displaced exposed brain surface: the preoperative brain surface
    *  within craniotomyRadius + scanMargin, moved by the ground truth. */
@@ -98,6 +164,7 @@ struct SyntheticBrainShift
    *  within the craniotomy) with their ground-truth displacements. */
   SparseDisplacements             trackedPoints;
   RegistrationLabelImage::Pointer tumourMask; // preoperative grid; null without a tumour
+  double                          resectionCavityRadius = 0.0; // mm around the tumour's centre; 0: no resection
   StageTimer                      timer;
 };
 

@@ -7,6 +7,7 @@
 
 #include "itkBiomechanicalImageIO.h"
 #include "itkBiomechanicalTransformIO.h"
+#include "itkImageRegionConstIteratorWithIndex.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -15,6 +16,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <iostream>
 #include <type_traits>
 #include <unistd.h>
 #include <fstream>
@@ -387,3 +389,201 @@ TEST(BrainShiftRegistration, ObliqueScannerGeometryGivesTheSameModelRegions)
 }
 
 } // namespace
+
+namespace
+{
+
+/** A cube of `size` voxels (1 mm) filled with `value`; mask: all inside. */
+bmr::RegistrationImage::Pointer
+UniformImage(unsigned int size, float value)
+{
+  auto image = bmr::RegistrationImage::New();
+  bmr::RegistrationImage::SizeType extent;
+  extent.Fill(size);
+  image->SetRegions(extent);
+  image->Allocate();
+  image->FillBuffer(value);
+  return image;
+}
+
+} // namespace
+
+// The intraoperative contrast maps the three tissue classes' centres to their
+// new levels (bmrSyntheticBrainShift.h): on an image of exactly three
+// intensities, fuzzy c-means finds them, and each maps to its target.
+TEST(SyntheticIntraoperativeImage, ContrastMapsTheTissueClassCentres)
+{
+  const auto image = UniformImage(24, 0.0f);
+  float *    values = image->GetBufferPointer();
+  const std::size_t count = image->GetBufferedRegion().GetNumberOfPixels();
+  for (std::size_t n = 0; n < count; ++n)
+  {
+    values[n] = std::array<float, 3>{ 30.0f, 70.0f, 100.0f }[n % 3];
+  }
+  auto mask = bmr::RegistrationLabelImage::New();
+  mask->CopyInformation(image);
+  mask->SetRegions(image->GetBufferedRegion());
+  mask->Allocate();
+  mask->FillBuffer(1);
+  const std::vector<std::pair<bmr::IntraoperativeContrast, std::array<double, 3>>> cases = {
+    { bmr::IntraoperativeContrast::Preoperative, { 30.0, 70.0, 100.0 } },
+    { bmr::IntraoperativeContrast::T2Like, { 100.0, 65.0, 50.0 } },       // CSF bright, white matter darkest
+    { bmr::IntraoperativeContrast::LowFieldT1, { 65.0, 85.0, 100.0 } }, // half the contrast to white matter
+  };
+  for (const auto & [contrast, expected] : cases)
+  {
+    const auto mapped = bmr::MakeImageInContrast(image, mask, contrast);
+    for (std::size_t n = 0; n < 3; ++n)
+    {
+      EXPECT_NEAR(mapped->GetBufferPointer()[n], expected[n], 1e-3) << bmr::IntraoperativeContrastName(contrast);
+    }
+  }
+  EXPECT_EQ(bmr::ParseIntraoperativeContrast("t2"), bmr::IntraoperativeContrast::T2Like);
+  EXPECT_THROW(bmr::ParseIntraoperativeContrast("flair"), bmr::Error);
+}
+
+// The bias field reaches its amplitude exactly (normalised over the grid), is
+// smooth (a quadratic: neighbouring voxels differ by a few percent of it at
+// most) and depends on the seed.
+TEST(SyntheticIntraoperativeImage, BiasFieldIsSmoothAndReachesItsAmplitude)
+{
+  const unsigned int size = 31;
+  const auto         first = UniformImage(size, 100.0f);
+  const auto         second = UniformImage(size, 100.0f);
+  bmr::ApplyBiasField(first, 0.2, 7);
+  bmr::ApplyBiasField(second, 0.2, 8);
+  double largest = 0.0, largestStep = 0.0, difference = 0.0;
+  for (itk::ImageRegionConstIteratorWithIndex<bmr::RegistrationImage> it(first, first->GetBufferedRegion()); !it.IsAtEnd();
+       ++it)
+  {
+    largest = std::max(largest, std::abs(it.Get() / 100.0 - 1.0));
+    difference = std::max(difference, std::abs(it.Get() - second->GetPixel(it.GetIndex())) / 100.0);
+    auto next = it.GetIndex();
+    if (next[0] + 1 < static_cast<long>(size))
+    {
+      ++next[0];
+      largestStep = std::max(largestStep, std::abs(first->GetPixel(next) - it.Get()) / 100.0);
+    }
+  }
+  EXPECT_NEAR(largest, 0.2, 1e-6);
+  // Along a grid line the field is a quadratic of magnitude <= 1 on [-1, 1]: by Markov's inequality its
+  // slope is at most 2^2 = 4 per unit, and a voxel is 2 / 30 units.
+  EXPECT_LE(largestStep, 0.2 * 4.0 * 2.0 / 30.0 + 1e-6);
+  EXPECT_GT(difference, 0.02);
+}
+
+// Rician noise on a dark background has the Rayleigh mean sigma sqrt(pi / 2),
+// not zero: the floor that low-field magnitude images show.
+TEST(SyntheticIntraoperativeImage, NoiseModelsHaveTheirBackgroundStatistics)
+{
+  for (const bmr::NoiseModel model : { bmr::NoiseModel::Gaussian, bmr::NoiseModel::Rician })
+  {
+    const auto image = UniformImage(50, 0.0f);
+    bmr::AddImageNoise(image, 10.0, model, 3);
+    double            sum = 0.0, squares = 0.0;
+    const std::size_t count = image->GetBufferedRegion().GetNumberOfPixels();
+    for (std::size_t n = 0; n < count; ++n)
+    {
+      sum += image->GetBufferPointer()[n];
+      squares += image->GetBufferPointer()[n] * image->GetBufferPointer()[n];
+    }
+    const double mean = sum / count, deviation = std::sqrt(squares / count - mean * mean);
+    if (model == bmr::NoiseModel::Gaussian)
+    {
+      EXPECT_NEAR(mean, 0.0, 0.1);
+      EXPECT_NEAR(deviation, 10.0, 0.1);
+    }
+    else
+    {
+      EXPECT_NEAR(mean, 10.0 * std::sqrt(M_PI / 2.0), 0.1);
+      EXPECT_NEAR(deviation, 10.0 * std::sqrt(2.0 - M_PI / 2.0), 0.1);
+    }
+  }
+}
+
+// A realistic intraoperative image: T2-like contrast, a 120 mm field of view
+// and a resection cavity (a 12 mm tumour and 3 mm of margin). The image covers
+// the field of view and the craniotomy; the cavity is out of both brain masks,
+// shows fluid (bright in T2) and its walls sag: it holds less volume than the
+// same sphere of the intact brain does after the shift.
+TEST(BrainShiftRegistration, ResectionCavityAndFieldOfViewInTheIntraoperativeImage)
+{
+  if (!HaveColin27())
+  {
+    GTEST_SKIP() << "Colin27 (mricron-data) is not installed";
+  }
+  const Colin27 &                  colin = Colin27::Get();
+  bmr::SyntheticBrainShiftSettings scene = CoarseTruth(0.3);
+  scene.tumourCentre = bmr::Vector3(-11.0, 40.0, 55.0);
+  scene.tumourRadius = 12.0;
+  scene.noise = 0.0;
+  const bmr::SyntheticBrainShift intact = bmr::MakeSyntheticBrainShift(colin.image, colin.mask, scene);
+  scene.resectionMargin = 3.0;
+  scene.contrast = bmr::IntraoperativeContrast::T2Like;
+  scene.fieldOfView = 120.0;
+  const bmr::SyntheticBrainShift resected = bmr::MakeSyntheticBrainShift(colin.image, colin.mask, scene);
+  ASSERT_TRUE(resected.solve.converged);
+  EXPECT_DOUBLE_EQ(resected.resectionCavityRadius, 15.0);
+
+  // Field of view: at most 120 mm (and a voxel) along each axis, holding the craniotomy.
+  const auto & image = resected.intraoperativeImage;
+  for (unsigned int d = 0; d < 3; ++d)
+  {
+    EXPECT_LE((image->GetLargestPossibleRegion().GetSize()[d] - 1) * image->GetSpacing()[d], 120.0) << d;
+  }
+  bmr::RegistrationImage::IndexType index;
+  EXPECT_TRUE(image->TransformPhysicalPointToIndex(bmr::RegistrationImage::PointType(scene.craniotomyCentre.data()), index));
+
+  // The cavity's volume (1 mm voxels around it whose backward map lands in the resected sphere) against the same
+  // sphere's in the intact brain: the nearly incompressible tissue keeps that one, the cavity's walls sag in.
+  const auto volumeMappedIntoSphere = [&](const bmr::SyntheticBrainShift & truth) {
+    double count = 0.0;
+    for (double x = -25.0; x <= 25.0; x += 1.0)
+      for (double y = -25.0; y <= 25.0; y += 1.0)
+        for (double z = -25.0; z <= 25.0; z += 1.0)
+        {
+          const bmr::Vector3 point = scene.tumourCentre + bmr::Vector3(x, y, z);
+          const auto         source = truth.truthTransform->TransformPoint(bmr::RegistrationTransform::InputPointType(point.data()));
+          count += (bmr::Vector3(source[0], source[1], source[2]) - scene.tumourCentre).norm() <= 15.0 ? 1.0 : 0.0;
+        }
+    return count;
+  };
+  const double sphere = 4.0 / 3.0 * M_PI * std::pow(15.0, 3);
+  const double intactVolume = volumeMappedIntoSphere(intact), cavityVolume = volumeMappedIntoSphere(resected);
+  EXPECT_NEAR(intactVolume, sphere, 0.05 * sphere);
+  EXPECT_LT(cavityVolume, 0.97 * intactVolume);
+  EXPECT_GT(cavityVolume, 0.5 * intactVolume);
+  // ... and it is out of the brain where errors are measured.
+  const auto voxels = [](const bmr::RegistrationLabelImage * mask) {
+    std::size_t count = 0;
+    for (std::size_t n = 0, total = mask->GetBufferedRegion().GetNumberOfPixels(); n < total; ++n)
+    {
+      count += mask->GetBufferPointer()[n] > 0 ? 1 : 0;
+    }
+    return static_cast<double>(count);
+  };
+  EXPECT_NEAR(voxels(intact.intraoperativeBrainOnPreoperativeGrid) - voxels(resected.intraoperativeBrainOnPreoperativeGrid),
+              cavityVolume, 0.05 * cavityVolume);
+  std::cout << "sphere " << sphere << " mm^3, mapped into it: intact " << intactVolume << ", resected " << cavityVolume << "\n";
+
+  // T2: the cavity's fluid is brighter than the brain's median.
+  std::vector<float> brain;
+  for (itk::ImageRegionConstIteratorWithIndex<bmr::RegistrationLabelImage> it(resected.intraoperativeBrainMask,
+                                                                              resected.intraoperativeBrainMask->GetBufferedRegion());
+       !it.IsAtEnd(); ++it)
+  {
+    if (it.Get() > 0)
+    {
+      brain.push_back(image->GetPixel(it.GetIndex()));
+    }
+  }
+  std::nth_element(brain.begin(), brain.begin() + brain.size() / 2, brain.end());
+  // The cavity moves a few mm with the shift; its centre stays well inside it.
+  ASSERT_TRUE(image->TransformPhysicalPointToIndex(bmr::RegistrationImage::PointType(scene.tumourCentre.data()), index));
+  EXPECT_GT(image->GetPixel(index), 1.3 * brain[brain.size() / 2]);
+  EXPECT_EQ(resected.intraoperativeBrainMask->GetPixel(index), 0);
+
+  // Bad input: a resection without a tumour.
+  scene.tumourRadius = 0.0;
+  EXPECT_THROW(bmr::MakeSyntheticBrainShift(colin.image, colin.mask, scene), bmr::Error);
+}

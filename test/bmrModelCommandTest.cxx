@@ -466,6 +466,10 @@ TEST_F(ModelCommandTest, BadInputsExitOneNameTheProblemAndWriteNothing)
     { "model " + head + " --mask " + mask + " --sparse-displacements " + Quoted(m_Folder / "points.csv"),
       "craniotomy" },
     { "demo --csf-poisson-ratio 0.5", "--csf-poisson-ratio" },
+    { "demo --bias-field 1.5", "--bias-field" },
+    { "demo --intraoperative-contrast flair", "--intraoperative-contrast" },
+    { "demo --noise-model poisson", "--noise-model" },
+    { "demo --elastix-parameters " + Quoted(m_Folder / "missing.txt"), "--elastix-parameters" },
     { "model " + head + " --mask " + mask + craniotomy + " --csf-poisson-ratio 0.5", "--csf-poisson-ratio" },
     { "model " + head + " --mask " + mask + craniotomy + " --csf-modulus 0", "--csf-modulus" },
     { "model " + head + " --mask " + mask + craniotomy + " --csf-drained-depth 20", "--gravity" },
@@ -482,4 +486,27 @@ TEST_F(ModelCommandTest, BadInputsExitOneNameTheProblemAndWriteNothing)
     EXPECT_EQ(FileCount(output), 0u) << arguments;
     fs::remove_all(output);
   }
+}
+
+// The demo's realistic-image and peer options fail before the ground truth's
+// solve, with the option or the missing program named, and write nothing.
+TEST_F(ModelCommandTest, DemoNamesAResectionWithoutTumourAndAMissingElastix)
+{
+  if (!fs::exists(Colin27Folder / "ch2.nii.gz"))
+  {
+    GTEST_SKIP() << "Colin27 (mricron-data) is not installed";
+  }
+  const fs::path output = m_Folder / "out";
+  CommandResult  run = Biomech("demo --resection-margin 3 -o " + Quoted(output));
+  EXPECT_EQ(run.exitCode, 1) << run.err;
+  EXPECT_NE(run.err.find("tumour"), std::string::npos) << run.err;
+  EXPECT_EQ(FileCount(output), 0u);
+
+  const std::string path = std::getenv("PATH") != nullptr ? std::getenv("PATH") : "";
+  ::setenv("PATH", (m_Folder / "empty-path").c_str(), 1);
+  run = Biomech("demo --elastix -o " + Quoted(output));
+  ::setenv("PATH", path.c_str(), 1);
+  EXPECT_EQ(run.exitCode, 1) << run.err;
+  EXPECT_NE(run.err.find("elastix is not on PATH"), std::string::npos) << run.err;
+  EXPECT_EQ(FileCount(output), 0u);
 }

@@ -818,7 +818,9 @@ BindSyntheticBrainShift(py::module_ & module)
     "make_synthetic_brain_shift",
     [](const py::object & image, const py::object & brainMask, const py::object & craniotomyCentre,
        double craniotomyRadius, double shift, double gravity, double elementSize, const py::object & intraoperativeSpacing,
-       double noise, std::uint32_t seed, int threads, const py::object & progress) {
+       double noise, const std::string & noiseModel, const std::string & contrast, double biasField,
+       double fieldOfView, const py::object & tumourCentre, double tumourRadius, double tumourStiffness,
+       const py::object & resectionMargin, std::uint32_t seed, int threads, const py::object & progress) {
       const auto                  preoperative = ItkImage(image, "image");
       const auto                  mask = ItkLabelImage(brainMask, "brain_mask");
       SyntheticBrainShiftSettings settings;
@@ -829,6 +831,21 @@ BindSyntheticBrainShift(py::module_ & module)
       settings.grid.elementSize = elementSize;
       settings.intraoperativeSpacing = VectorFromObject(intraoperativeSpacing, "intraoperative_spacing");
       settings.noise = noise;
+      if (noiseModel != "gaussian" && noiseModel != "rician")
+      {
+        throw py::value_error("noise_model must be 'gaussian' or 'rician', not '" + noiseModel + "'");
+      }
+      settings.noiseModel = noiseModel == "rician" ? NoiseModel::Rician : NoiseModel::Gaussian;
+      settings.contrast = ParseIntraoperativeContrast(contrast);
+      settings.biasField = biasField;
+      settings.fieldOfView = fieldOfView;
+      if (!tumourCentre.is_none())
+      {
+        settings.tumourCentre = VectorFromObject(tumourCentre, "tumour_centre");
+      }
+      settings.tumourRadius = tumourRadius;
+      settings.tumourStiffness = tumourStiffness;
+      settings.resectionMargin = resectionMargin.is_none() ? -1.0 : resectionMargin.cast<double>();
       settings.seed = seed;
       settings.threads = threads;
       if (mask.IsNull())
@@ -852,10 +869,14 @@ BindSyntheticBrainShift(py::module_ & module)
     py::arg("intraoperative_spacing") = py::make_tuple(SyntheticBrainShiftSettings{}.intraoperativeSpacing.x(),
                                                        SyntheticBrainShiftSettings{}.intraoperativeSpacing.y(),
                                                        SyntheticBrainShiftSettings{}.intraoperativeSpacing.z()),
-    py::arg("noise") = SyntheticBrainShiftSettings{}.noise, py::arg("seed") = SyntheticBrainShiftSettings{}.seed,
-    py::arg("threads") = 0, py::arg("progress") = py::none(),
+    py::arg("noise") = SyntheticBrainShiftSettings{}.noise, py::arg("noise_model") = "gaussian",
+    py::arg("intraoperative_contrast") = "preoperative", py::arg("bias_field") = 0.0, py::arg("field_of_view") = 0.0,
+    py::arg("tumour_centre") = py::none(), py::arg("tumour_radius") = 0.0,
+    py::arg("tumour_stiffness") = SyntheticBrainShiftSettings{}.tumourStiffness, py::arg("resection_margin") = py::none(),
+    py::arg("seed") = SyntheticBrainShiftSettings{}.seed, py::arg("threads") = 0, py::arg("progress") = py::none(),
     "The README demo's ground truth on any brain: shift mm sag of the craniotomy, gravity in g, a noisy "
-    "intraoperative image.");
+    "intraoperative image; realistic with another contrast ('t2', 'low-field-t1'), a bias field (largest deviation "
+    "from 1), Rician noise, a partial field of view (mm) and a resection cavity (a tumour and resection_margin mm).");
 
   module.def(
     "measure_displacement_error",

@@ -4,6 +4,7 @@
 #include "itkBSplineIntensityRegistrationFilter.h"
 #include "itkBiomechanicalImageConversion.h"
 #include "itkDisplacementPointSetToBSplineTransformFilter.h"
+#include "itkImageRegionConstIteratorWithIndex.h"
 #include "itkImageRegionIteratorWithIndex.h"
 
 #include <algorithm>
@@ -81,7 +82,232 @@ ResampledGrid(const RegistrationImage * image, const Vector3 & spacing)
   return grid;
 }
 
+/** Piecewise-linear intensity map through the tissue classes' centres: 0 -> 0,
+ *  centre k -> target k, beyond the brightest centre the last segment's ratio. */
+struct ClassIntensityMap
+{
+  std::vector<double> centres; // ascending
+  std::vector<double> targets;
+
+  double operator()(double value) const
+  {
+    if (value <= 0.0)
+    {
+      return value * targets.front() / centres.front();
+    }
+    double x0 = 0.0, y0 = 0.0;
+    for (std::size_t k = 0; k < centres.size(); ++k)
+    {
+      if (value <= centres[k])
+      {
+        return y0 + (value - x0) * (targets[k] - y0) / (centres[k] - x0);
+      }
+      x0 = centres[k];
+      y0 = targets[k];
+    }
+    return value * targets.back() / centres.back();
+  }
+};
+
+/** The intraoperative grid: `spacing` over the preoperative image's extent,
+ *  cropped to a cube of edge `fieldOfView` (mm; 0: no cropping) centred on `centre`. */
+RegistrationImage::Pointer
+IntraoperativeGrid(const RegistrationImage * image, const Vector3 & spacing, double fieldOfView, const Vector3 & centre)
+{
+  RegistrationImage::Pointer grid = ResampledGrid(image, spacing);
+  if (fieldOfView <= 0.0)
+  {
+    return grid;
+  }
+  const auto size = grid->GetLargestPossibleRegion().GetSize();
+  std::array<double, 3> lower{ 1e300, 1e300, 1e300 }, upper{ -1e300, -1e300, -1e300 };
+  for (int corner = 0; corner < 8; ++corner)
+  {
+    RegistrationImage::PointType point;
+    for (unsigned int d = 0; d < 3; ++d)
+    {
+      point[d] = centre[d] + ((corner >> d) & 1 ? 0.5 : -0.5) * fieldOfView;
+    }
+    itk::ContinuousIndex<double, 3> index;
+    grid->TransformPhysicalPointToContinuousIndex(point, index);
+    for (unsigned int d = 0; d < 3; ++d)
+    {
+      lower[d] = std::min(lower[d], index[d]);
+      upper[d] = std::max(upper[d], index[d]);
+    }
+  }
+  RegistrationImage::IndexType first;
+  RegistrationImage::SizeType  cropped;
+  for (unsigned int d = 0; d < 3; ++d)
+  {
+    const double from = std::max(0.0, std::ceil(lower[d]));
+    const double to = std::min(static_cast<double>(size[d]) - 1.0, std::floor(upper[d]));
+    if (!(to >= from))
+    {
+      throw Error("the intraoperative field of view (a " + std::to_string(fieldOfView) + " mm cube around " +
+                  FormatPoint(centre) + ") holds no voxel of the image; enlarge it or give 0 for the whole head");
+    }
+    first[d] = static_cast<itk::IndexValueType>(from);
+    cropped[d] = static_cast<itk::SizeValueType>(to - from) + 1;
+  }
+  RegistrationImage::PointType origin;
+  grid->TransformIndexToPhysicalPoint(first, origin);
+  grid->SetOrigin(origin);
+  grid->SetRegions(cropped);
+  return grid;
+}
+
+/** Where the backward map takes a voxel into the resection cavity: the image
+ *  there shows `fluid`, and the brain mask loses it. */
+void
+FillResectionCavity(RegistrationImage * image, RegistrationLabelImage * brainMask, const RegistrationTransform * backward,
+                    const Vector3 & centre, double radius, float fluid)
+{
+  itk::ImageRegionIteratorWithIndex<RegistrationLabelImage> it(brainMask, brainMask->GetBufferedRegion());
+  for (; !it.IsAtEnd(); ++it)
+  {
+    RegistrationLabelImage::PointType point;
+    brainMask->TransformIndexToPhysicalPoint(it.GetIndex(), point);
+    const auto    source = backward->TransformPoint(point);
+    const Vector3 x(source[0], source[1], source[2]);
+    if ((x - centre).norm() <= radius)
+    {
+      it.Set(0);
+      if (image != nullptr)
+      {
+        image->SetPixel(it.GetIndex(), fluid);
+      }
+    }
+  }
+}
+
 } // namespace
+
+RegistrationImage::Pointer
+MakeImageInContrast(const RegistrationImage * image, const RegistrationLabelImage * brainMask,
+                    IntraoperativeContrast contrast)
+{
+  if (image == nullptr || brainMask == nullptr ||
+      image->GetBufferedRegion().GetSize() != brainMask->GetBufferedRegion().GetSize())
+  {
+    throw Error("MakeImageInContrast: give an image and a brain mask on the same grid");
+  }
+  std::vector<float> samples;
+  const float *         values = image->GetBufferPointer();
+  const unsigned char * inside = brainMask->GetBufferPointer();
+  const std::size_t     count = image->GetBufferedRegion().GetNumberOfPixels();
+  for (std::size_t n = 0; n < count; ++n)
+  {
+    if (inside[n] > 0)
+    {
+      samples.push_back(values[n]);
+    }
+  }
+  FuzzyCMeansSettings classes;
+  classes.classes = 3;
+  const FuzzyCMeansResult fit = FitFuzzyCMeans(samples, classes);
+  ClassIntensityMap       map;
+  map.centres = fit.centroids;
+  const double white = fit.centroids.back();
+  if (!(fit.centroids.front() > 0.0) || !(fit.centroids[1] > fit.centroids[0]) || !(white > fit.centroids[1]))
+  {
+    throw Error("the intraoperative contrast needs three distinct positive tissue intensities in the brain; "
+                "the preoperative image's classes are at " + FormatPoint(Vector3(fit.centroids[0], fit.centroids[1], white)));
+  }
+  for (const double centre : fit.centroids)
+  {
+    // T2-like: CSF twice as bright as white matter, grey matter 1.3 times.
+    // Low-field T1: half the contrast of each class against white matter.
+    const std::size_t k = map.targets.size();
+    map.targets.push_back(contrast == IntraoperativeContrast::T2Like       ? white * std::array<double, 3>{ 1.0, 0.65, 0.5 }[k]
+                          : contrast == IntraoperativeContrast::LowFieldT1 ? white - 0.5 * (white - centre)
+                                                                           : centre);
+  }
+  auto result = RegistrationImage::New();
+  result->CopyInformation(image);
+  result->SetRegions(image->GetBufferedRegion());
+  result->Allocate();
+  float * mapped = result->GetBufferPointer();
+  for (std::size_t n = 0; n < count; ++n)
+  {
+    mapped[n] = static_cast<float>(map(values[n]));
+  }
+  return result;
+}
+
+void
+ApplyBiasField(RegistrationImage * image, double amplitude, std::uint32_t seed)
+{
+  std::mt19937                     random(seed);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  std::array<double, 9>            weights{}; // x, y, z, xx, yy, zz, xy, yz, zx
+  for (double & weight : weights)
+  {
+    weight = normal(random);
+  }
+  const auto size = image->GetBufferedRegion().GetSize();
+  const auto polynomial = [&](const RegistrationImage::IndexType & index) {
+    std::array<double, 3> x{};
+    for (unsigned int d = 0; d < 3; ++d)
+    {
+      x[d] = size[d] > 1 ? 2.0 * static_cast<double>(index[d]) / static_cast<double>(size[d] - 1) - 1.0 : 0.0;
+    }
+    return weights[0] * x[0] + weights[1] * x[1] + weights[2] * x[2] + weights[3] * x[0] * x[0] +
+           weights[4] * x[1] * x[1] + weights[5] * x[2] * x[2] + weights[6] * x[0] * x[1] + weights[7] * x[1] * x[2] +
+           weights[8] * x[2] * x[0];
+  };
+  double                                              largest = 0.0;
+  itk::ImageRegionIteratorWithIndex<RegistrationImage> it(image, image->GetBufferedRegion());
+  for (it.GoToBegin(); !it.IsAtEnd(); ++it)
+  {
+    largest = std::max(largest, std::abs(polynomial(it.GetIndex())));
+  }
+  for (it.GoToBegin(); !it.IsAtEnd(); ++it)
+  {
+    it.Set(static_cast<float>(it.Get() * (1.0 + amplitude * polynomial(it.GetIndex()) / largest)));
+  }
+}
+
+void
+AddImageNoise(RegistrationImage * image, double deviation, NoiseModel model, std::uint32_t seed)
+{
+  std::mt19937                     random(seed);
+  std::normal_distribution<double> normal(0.0, deviation);
+  float *                          values = image->GetBufferPointer();
+  for (std::size_t n = 0, count = image->GetBufferedRegion().GetNumberOfPixels(); n < count; ++n)
+  {
+    const double real = values[n] + normal(random);
+    values[n] = static_cast<float>(model == NoiseModel::Rician ? std::hypot(real, normal(random)) : real);
+  }
+}
+
+const char *
+IntraoperativeContrastName(IntraoperativeContrast contrast)
+{
+  switch (contrast)
+  {
+    case IntraoperativeContrast::T2Like:
+      return "t2";
+    case IntraoperativeContrast::LowFieldT1:
+      return "low-field-t1";
+    default:
+      return "preoperative";
+  }
+}
+
+IntraoperativeContrast
+ParseIntraoperativeContrast(const std::string & name)
+{
+  for (const IntraoperativeContrast contrast :
+       { IntraoperativeContrast::Preoperative, IntraoperativeContrast::T2Like, IntraoperativeContrast::LowFieldT1 })
+  {
+    if (name == IntraoperativeContrastName(contrast))
+    {
+      return contrast;
+    }
+  }
+  throw Error("unknown intraoperative contrast '" + name + "'; choose preoperative, t2 or low-field-t1");
+}
 
 SyntheticBrainShift
 MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
@@ -96,6 +322,20 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
   if (!(settings.targetShift > 0.0))
   {
     throw Error("MakeSyntheticBrainShift: the target shift must be > 0 mm");
+  }
+  if (!(settings.biasField >= 0.0 && settings.biasField < 1.0))
+  {
+    throw Error("MakeSyntheticBrainShift: the bias field's amplitude must be in [0, 1) (0.2: +-20 %)");
+  }
+  if (!(settings.fieldOfView == 0.0 || settings.fieldOfView >= 2.0 * settings.scanMargin + 20.0))
+  {
+    throw Error("MakeSyntheticBrainShift: the field of view must be 0 (the whole head) or at least " +
+                std::to_string(2.0 * settings.scanMargin + 20.0) + " mm, to show the craniotomy");
+  }
+  if (settings.resectionMargin >= 0.0 && !(settings.tumourRadius > 0.0))
+  {
+    throw Error("MakeSyntheticBrainShift: a resection removes the tumour; give a tumour (centre and radius) "
+                "or no resection margin");
   }
   SyntheticBrainShift truth;
   truth.timer = StageTimer(stageCallback);
@@ -123,6 +363,35 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
   truth.model = BuildBrainModel(preoperativeImage, brainMask, truth.tumourMask, ContactSurface{}, nullptr,
                                 modelSettings, timer);
   Model & model = truth.model.model;
+  if (settings.resectionMargin >= 0.0)
+  {
+    // The cavity's cells hold drained fluid: the CSF's material, weightless.
+    truth.resectionCavityRadius = settings.tumourRadius + settings.resectionMargin;
+    Material cavity = csf;
+    cavity.name = "resection cavity";
+    model.materials.push_back(cavity);
+    std::size_t removed = 0;
+    for (Cell & cell : model.cells)
+    {
+      Vector3 centre = Vector3::Zero();
+      const int corners = NodesPerCell(cell.type);
+      for (int k = 0; k < corners; ++k)
+      {
+        centre += model.nodes[cell.nodes[k]];
+      }
+      if ((centre / corners - settings.tumourCentre).norm() <= truth.resectionCavityRadius)
+      {
+        cell.material = static_cast<Index>(model.materials.size() - 1);
+        ++removed;
+      }
+    }
+    if (removed == 0)
+    {
+      throw Error("the resection cavity (radius " + std::to_string(truth.resectionCavityRadius) +
+                  " mm around the tumour) holds no cell of the ground truth's " + ImageGridKindName(settings.grid.kind) +
+                  "; give a finite-element ground truth and a larger tumour or margin");
+    }
+  }
   Vector3 centroid = Vector3::Zero();
   for (const Vector3 & node : model.nodes)
   {
@@ -254,24 +523,51 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
     }
   });
 
-  // The intraoperative image: the preoperative image warped by the ground
-  // truth onto an intraoperative grid, with noise; and its brain mask.
+  // The intraoperative image: the preoperative image in the intraoperative
+  // contrast, warped by the ground truth onto the intraoperative grid (its
+  // field of view), the resection cavity filled with fluid, bias field, noise;
+  // and its brain mask.
   timer.Run("intraop-image", [&] {
-    const auto grid = ResampledGrid(preoperativeImage, settings.intraoperativeSpacing);
-    truth.intraoperativeImage = WarpImage(preoperativeImage, truth.truthTransform, grid);
+    const RegistrationImage::Pointer source =
+      settings.contrast == IntraoperativeContrast::Preoperative
+        ? RegistrationImage::Pointer(const_cast<RegistrationImage *>(preoperativeImage))
+        : MakeImageInContrast(preoperativeImage, brainMask, settings.contrast);
+    const double fieldDepth = std::min(std::max(0.0, 0.5 * settings.fieldOfView - settings.scanMargin),
+                                       (centroid - settings.craniotomyCentre).norm());
+    const auto   grid = IntraoperativeGrid(preoperativeImage, settings.intraoperativeSpacing, settings.fieldOfView,
+                                           settings.craniotomyCentre + fieldDepth * down);
+    truth.intraoperativeImage = WarpImage(source, truth.truthTransform, grid);
     truth.intraoperativeBrainMask = WarpLabelImage(brainMask, truth.truthTransform, grid);
     truth.intraoperativeBrainOnPreoperativeGrid = WarpLabelImage(brainMask, truth.truthTransform);
+    if (truth.resectionCavityRadius > 0.0)
+    {
+      // Fluid: as dark as the darkest 2 % of the brain (as bright as the brightest 2 % in T2), i.e. CSF.
+      std::vector<float> brain;
+      for (itk::ImageRegionConstIteratorWithIndex<RegistrationLabelImage> it(truth.intraoperativeBrainMask,
+                                                                             truth.intraoperativeBrainMask->GetBufferedRegion());
+           !it.IsAtEnd(); ++it)
+      {
+        if (it.Get() > 0)
+        {
+          brain.push_back(truth.intraoperativeImage->GetPixel(it.GetIndex()));
+        }
+      }
+      const bool  bright = settings.contrast == IntraoperativeContrast::T2Like;
+      const auto  tenth = brain.begin() + static_cast<std::ptrdiff_t>((bright ? 0.98 : 0.02) * static_cast<double>(brain.size()));
+      std::nth_element(brain.begin(), tenth, brain.end());
+      FillResectionCavity(truth.intraoperativeImage, truth.intraoperativeBrainMask, truth.truthTransform,
+                          settings.tumourCentre, truth.resectionCavityRadius, *tenth);
+      FillResectionCavity(nullptr, truth.intraoperativeBrainOnPreoperativeGrid, truth.truthTransform,
+                          settings.tumourCentre, truth.resectionCavityRadius, 0.0F);
+    }
+    if (settings.biasField > 0.0)
+    {
+      ApplyBiasField(truth.intraoperativeImage, settings.biasField, settings.seed + 1);
+    }
     if (settings.noise > 0.0)
     {
-      const double                     level = OverlayGreyRange(preoperativeImage).second;
-      std::mt19937                     random(settings.seed);
-      std::normal_distribution<double> normal(0.0, settings.noise * level);
-      float *                          values = truth.intraoperativeImage->GetBufferPointer();
-      for (std::size_t n = 0, count = truth.intraoperativeImage->GetBufferedRegion().GetNumberOfPixels(); n < count;
-           ++n)
-      {
-        values[n] = static_cast<float>(values[n] + normal(random));
-      }
+      AddImageNoise(truth.intraoperativeImage, settings.noise * OverlayGreyRange(preoperativeImage).second,
+               settings.noiseModel, settings.seed);
     }
   });
   return truth;

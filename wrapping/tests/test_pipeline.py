@@ -164,6 +164,20 @@ def test_synthetic_brain_shift_needs_a_mask():
         bmr.make_synthetic_brain_shift(blob(16), None)
 
 
+def test_synthetic_brain_shift_names_bad_intraoperative_options():
+    """The realistic intraoperative image's options are checked before the ground truth's solve."""
+    image = blob(16)
+    mask = bmr.image_from_array((image.array > 50).astype(np.uint8), image.spacing, image.origin, image.direction)
+    with pytest.raises(ValueError, match="noise_model"):
+        bmr.make_synthetic_brain_shift(image, mask, noise_model="poisson")
+    with pytest.raises(bmr.Error, match="low-field-t1"):
+        bmr.make_synthetic_brain_shift(image, mask, intraoperative_contrast="flair")
+    with pytest.raises(bmr.Error, match="tumour"):
+        bmr.make_synthetic_brain_shift(image, mask, resection_margin=3.0)
+    with pytest.raises(bmr.Error, match="bias field"):
+        bmr.make_synthetic_brain_shift(image, mask, bias_field=1.5)
+
+
 def test_atlas_brain_mask_follows_a_moved_colin27(colin27):
     """Colin27 at half resolution, moved by 6 mm: the atlas (Colin27 itself) must be registered to find its brain."""
     image, mask = colin27
