@@ -234,7 +234,10 @@ def main():
     parser.add_argument("--output", default=os.path.join(ROOT, "out", "validation"))
     parser.add_argument("--docs", default=os.path.join(ROOT, "docs"))
     parser.add_argument("--biomech", default=BIOMECH, help="the biomech executable")
-    parser.add_argument("--scenes", nargs="*", help="only these scenes (the docs are not rewritten)")
+    parser.add_argument("--scenes", nargs="*",
+                        help="only these scenes (the docs are rewritten only with --update-json)")
+    parser.add_argument("--update-json", help="an earlier run's validation.json: replace its rows of --scenes, "
+                        "rewrite the docs from it")
     parser.add_argument("--from-json", help="rewrite the docs from an earlier run's validation.json, run nothing")
     arguments = parser.parse_args()
     BIOMECH = arguments.biomech
@@ -265,9 +268,18 @@ def main():
         platform.processor() or platform.machine(), os.cpu_count(), time.strftime("%Y-%m-%d"), load,
         os.getloadavg()[0])
     os.makedirs(arguments.output, exist_ok=True)
+    if arguments.update_json:
+        with open(arguments.update_json) as handle:
+            earlier = json.load(handle)
+        rerun = {entry["name"]: entry for entry in runs}
+        order = [scene[0] for scene in SCENES]
+        merged = {entry["name"]: entry for entry in earlier["runs"]}
+        merged.update(rerun)
+        runs = sorted(merged.values(), key=lambda entry: order.index(entry["name"]) if entry["name"] in order else 99)
+        machine = earlier.get("machine", "") + "; rerun of %s: %s" % (", ".join(sorted(rerun)), machine)
     with open(os.path.join(arguments.output, "validation.json"), "w") as handle:
         json.dump({"runs": runs, "machine": machine}, handle, indent=1)
-    if not arguments.reduced and not arguments.scenes:
+    if not arguments.reduced and (not arguments.scenes or arguments.update_json):
         os.makedirs(arguments.docs, exist_ok=True)
         plot(runs, os.path.join(arguments.docs, "validation-error-vs-time.png"))
         with open(os.path.join(arguments.docs, "validation.md"), "w") as handle:
