@@ -29,6 +29,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <new>
 #include <optional>
 #include <unistd.h>
 
@@ -272,6 +273,12 @@ main(int argc, char ** argv)
       }
     }
     throw bmr::Error("no subcommand ran");
+  }
+  catch (const std::bad_alloc &)
+  {
+    std::cerr << "biomech: error: out of memory: the model or image is too large for this machine's memory; "
+                 "use a coarser mesh or a smaller image\n";
+    return ExitError;
   }
   catch (const std::exception & error)
   {

@@ -94,7 +94,7 @@ ReadImageFileInfo(const std::string & path, const std::string & what)
   }
   catch (const itk::ExceptionObject & exception)
   {
-    throw Error("cannot read " + what + " '" + path + "': " + exception.GetDescription());
+    throw Error("cannot read " + what + " '" + path + "': " + itk::PlainDescription(exception.GetDescription()));
   }
   return ImageFileInfo{ io->GetNumberOfDimensions(), io->GetComponentType(), io->GetNumberOfComponents() };
 }
@@ -239,7 +239,8 @@ RunBSplineRegister(const BSplineRegisterOptions & options, const ImageFileInfo &
     }
     catch (const itk::ExceptionObject & exception)
     {
-      throw Error(std::string("bspline-register failed: ") + exception.GetDescription());
+      throw Error(std::string("bspline-register failed: ") +
+                  itk::PlainDescription(exception.GetDescription()));
     }
   });
 
@@ -307,7 +308,7 @@ RunBSplineRegister(const BSplineRegisterOptions & options, const ImageFileInfo &
         }
         catch (const itk::ExceptionObject & exception)
         {
-          throw Error(exception.GetDescription());
+          throw Error(itk::PlainDescription(exception.GetDescription()));
         }
         written.push_back(options.transform);
       }

@@ -52,22 +52,15 @@ struct EvaluateOptions
   bool        quiet = false;
 };
 
-/** An ITK exception's description without the "ITK ERROR: Class(0x...): Class: " prefix. */
+/** An ITK exception's description as one plain line (itk::PlainDescription), without the filter's name. */
 std::string
 PlainMessage(const itk::ExceptionObject & exception)
 {
-  std::string       message = exception.GetDescription();
+  std::string       message = itk::PlainDescription(exception.GetDescription());
   const std::string prefix = "EdgeHausdorffDistanceImageFilter: ";
   if (const auto position = message.rfind(prefix); position != std::string::npos)
   {
     return message.substr(position + prefix.size());
-  }
-  if (message.rfind("ITK ERROR: ", 0) == 0)
-  {
-    if (const auto position = message.find("): "); position != std::string::npos)
-    {
-      return message.substr(position + 3);
-    }
   }
   return message;
 }

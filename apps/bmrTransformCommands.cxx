@@ -147,7 +147,7 @@ WriteTransform(const itk::TransformBaseTemplate<double> * transform, const std::
   }
   catch (const itk::ExceptionObject & exception)
   {
-    throw Error(exception.GetDescription());
+    throw Error(itk::PlainDescription(exception.GetDescription()));
   }
 }
 
@@ -191,7 +191,8 @@ RunFitTransform(const FitTransformOptions & options)
     }
     catch (const itk::ExceptionObject & exception)
     {
-      throw Error(std::string("fitting the transform failed: ") + exception.GetDescription());
+      throw Error(std::string("fitting the transform failed: ") +
+                  itk::PlainDescription(exception.GetDescription()));
     }
   });
 
@@ -298,7 +299,8 @@ WarpWithPixelType(const WarpOptions & options, const itk::Transform<double, 3, 3
   }
   catch (const itk::ExceptionObject & exception)
   {
-    throw Error(std::string("warping '") + options.image + "' failed: " + exception.GetDescription());
+    throw Error(std::string("warping '") + options.image +
+                "' failed: " + itk::PlainDescription(exception.GetDescription()));
   }
   WriteImageAtomically(warp->GetOutput(), options.output);
 }
@@ -317,7 +319,7 @@ RunWarp(const WarpOptions & options)
   }
   catch (const itk::ExceptionObject & exception)
   {
-    throw Error(exception.GetDescription());
+    throw Error(itk::PlainDescription(exception.GetDescription()));
   }
   const auto * transform = dynamic_cast<const itk::Transform<double, 3, 3> *>(read.GetPointer());
   if (transform == nullptr)
@@ -337,7 +339,14 @@ RunWarp(const WarpOptions & options)
     throw Error("cannot read image '" + options.image + "': no ITK image reader knows this format");
   }
   io->SetFileName(options.image);
-  io->ReadImageInformation();
+  try
+  {
+    io->ReadImageInformation();
+  }
+  catch (const itk::ExceptionObject & exception)
+  {
+    throw Error("cannot read image '" + options.image + "': " + itk::PlainDescription(exception.GetDescription()));
+  }
   if (io->GetNumberOfDimensions() != 3 || io->GetNumberOfComponents() != 1)
   {
     throw Error("image '" + options.image + "' has " + std::to_string(io->GetNumberOfDimensions()) + " dimensions and " +

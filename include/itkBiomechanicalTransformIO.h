@@ -6,6 +6,7 @@
 #ifndef itkBiomechanicalTransformIO_h
 #define itkBiomechanicalTransformIO_h
 
+#include "itkBiomechanicalImageIO.h"
 #include "itkTransformBase.h"
 #include "itkTransformFileReader.h"
 #include "itkTransformFileWriter.h"
@@ -69,13 +70,24 @@ ReadBiomechanicalTransform(const std::string & path)
   }
   auto reader = TransformFileReaderTemplate<double>::New();
   reader->SetFileName(path);
+  std::string failure;
   try
   {
     reader->Update();
   }
   catch (const ExceptionObject & exception)
   {
-    itkGenericExceptionMacro("cannot read transform '" << path << "': " << exception.GetDescription());
+    failure = PlainDescription(exception.GetDescription());
+  }
+  catch (const std::exception &)
+  {
+    // ITK's text transform reader throws std::out_of_range on some malformed lines.
+    failure = "the file is damaged or not an ITK transform file (.h5, .hdf5, .tfm, .txt)";
+  }
+  if (!failure.empty())
+  {
+    // Constructed directly: itkGenericExceptionMacro would prefix "ITK ERROR: " to the description.
+    throw ExceptionObject(__FILE__, __LINE__, "cannot read transform '" + path + "': " + failure, ITK_LOCATION);
   }
   const auto * list = reader->GetTransformList();
   if (list->size() != 1)

@@ -19,6 +19,25 @@ namespace bmr
 namespace
 {
 
+/** Throws when a grid of cellsX x cellsY x cellsZ cells (doubles: they may be
+ *  huge or not finite) has more nodes or cells than a 32-bit Index numbers
+ *  (3 DOF per node), before anything is allocated for it. */
+void
+RequireIndexableGrid(const char * generator, double cellsX, double cellsY, double cellsZ)
+{
+  const double nodes = (cellsX + 1.0) * (cellsY + 1.0) * (cellsZ + 1.0);
+  const double cells = 6.0 * cellsX * cellsY * cellsZ; // tetrahedra: 6 per grid cell
+  const double limit = static_cast<double>(std::numeric_limits<Index>::max());
+  if (!(3.0 * nodes <= limit && cells <= limit))
+  {
+    std::ostringstream message;
+    message << generator << ": a grid of " << cellsX << " x " << cellsY << " x " << cellsZ << " cells has " << nodes
+            << " nodes, more than the " << static_cast<long long>(limit / 3.0)
+            << " a model can number; use fewer divisions or a coarser spacing";
+    throw Error(message.str());
+  }
+}
+
 
 /** Adds the cells of one grid cell whose 8 corner node ids (VTK order) are given. */
 void
@@ -100,6 +119,7 @@ MakeBlockMesh(const Vector3 & size, const std::array<int, 3> & divisions, GridCe
       throw Error(message.str());
     }
   }
+  RequireIndexableGrid("MakeBlockMesh", divisions[0], divisions[1], divisions[2]);
   const int nx = divisions[0], ny = divisions[1], nz = divisions[2];
   Model     model;
   model.materials.push_back(material);
@@ -308,11 +328,13 @@ MakeEllipsoidMesh(const Vector3 & semiAxes, double spacing, GridCells cells, con
     throw Error(message.str());
   }
   // Grid symmetric about the origin that covers the ellipsoid.
+  const Vector3 gridCells = (2.0 * semiAxes / spacing).array().ceil().max(1.0).matrix();
+  RequireIndexableGrid("MakeEllipsoidMesh", gridCells[0], gridCells[1], gridCells[2]);
   std::array<int, 3> n{};
   Vector3            lower;
   for (int d = 0; d < 3; ++d)
   {
-    n[d] = std::max(1, static_cast<int>(std::ceil(2.0 * semiAxes[d] / spacing)));
+    n[d] = static_cast<int>(gridCells[d]);
     lower[d] = -0.5 * n[d] * spacing;
   }
   auto inside = [&](int i, int j, int k) {

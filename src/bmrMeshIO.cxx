@@ -179,6 +179,37 @@ ConvertUnstructuredGrid(vtkUnstructuredGrid * grid, const std::string & path, co
     mesh.model.nodes[point] = Vector3(coordinates[0], coordinates[1], coordinates[2]);
   }
 
+  // VTK does not check a legacy file's cell arrays: in a damaged file, offsets
+  // that run backwards or past the connectivity, or fewer cell types than
+  // cells, crash the reading of the cells below. Check them first.
+  vtkCellArray *         cellArray = grid->GetCells();
+  vtkUnsignedCharArray * cellTypes = grid->GetCellTypesArray();
+  if (cellCount > 0)
+  {
+    const auto damaged = [&](const std::string & what) {
+      return Error("mesh '" + path + "' is damaged: " + what + "; write the file again (truncated or edited?)");
+    };
+    if (cellArray == nullptr || cellTypes == nullptr || cellTypes->GetNumberOfTuples() != cellCount)
+    {
+      throw damaged("it lists " + std::to_string(cellCount) + " cells but " +
+                    std::to_string(cellTypes == nullptr ? 0 : cellTypes->GetNumberOfTuples()) + " cell types");
+    }
+    vtkDataArray *  offsets = cellArray->GetOffsetsArray();
+    const vtkIdType connectivitySize = cellArray->GetNumberOfConnectivityIds();
+    if (offsets == nullptr || offsets->GetNumberOfTuples() != cellCount + 1 || offsets->GetTuple1(0) != 0.0)
+    {
+      throw damaged("its cell offsets do not match its " + std::to_string(cellCount) + " cells");
+    }
+    for (vtkIdType cellId = 0; cellId < cellCount; ++cellId)
+    {
+      const double begin = offsets->GetTuple1(cellId), end = offsets->GetTuple1(cellId + 1);
+      if (!(end >= begin && end <= static_cast<double>(connectivitySize)))
+      {
+        throw damaged("the point list of cell " + std::to_string(cellId) + " does not lie within the connectivity");
+      }
+    }
+  }
+
   mesh.model.cells.resize(cellCount);
   vtkNew<vtkIdList> cellPoints;
   for (vtkIdType cellId = 0; cellId < cellCount; ++cellId)
@@ -208,7 +239,14 @@ ConvertUnstructuredGrid(vtkUnstructuredGrid * grid, const std::string & path, co
     }
     for (int local = 0; local < nodeCount; ++local)
     {
-      cell.nodes[local] = static_cast<Index>(cellPoints->GetId(local));
+      const vtkIdType point = cellPoints->GetId(local);
+      if (point < 0 || point >= pointCount)
+      {
+        throw Error("mesh '" + path + "': cell " + std::to_string(cellId) + " refers to point " +
+                    std::to_string(point) + ", which does not exist (the mesh has points 0 to " +
+                    std::to_string(pointCount - 1) + ")");
+      }
+      cell.nodes[local] = static_cast<Index>(point);
     }
   }
 
@@ -239,15 +277,20 @@ ConvertUnstructuredGrid(vtkUnstructuredGrid * grid, const std::string & path, co
       throw Error("mesh '" + path + "': cell-data array '" + labelArray + "' has " +
                   std::to_string(labels->second.components) + " components; material labels need exactly one");
     }
+    if (labels->second.Tuples() != static_cast<std::size_t>(cellCount))
+    {
+      throw Error("mesh '" + path + "': cell-data array '" + labelArray + "' has " +
+                  std::to_string(labels->second.Tuples()) + " values for " + std::to_string(cellCount) + " cells");
+    }
     mesh.cellLabels.resize(cellCount);
     for (vtkIdType cellId = 0; cellId < cellCount; ++cellId)
     {
       const double value = labels->second.values[cellId];
-      if (!std::isfinite(value) || value != std::round(value))
+      if (!std::isfinite(value) || value != std::round(value) || std::abs(value) > 2147483647.0)
       {
         std::ostringstream message;
         message << "mesh '" << path << "': cell " << cellId << " has material label " << value << " in array '"
-                << labelArray << "'; labels must be integers";
+                << labelArray << "'; labels must be 32-bit integers";
         throw Error(message.str());
       }
       mesh.cellLabels[cellId] = static_cast<int>(value);

@@ -160,6 +160,12 @@ public:
 
   long long Integer() const
   {
+    // Above 2^63 - 1 nlohmann keeps an unsigned integer, which get<long long> would wrap to a negative number.
+    if (m_Value.is_number_unsigned() &&
+        m_Value.get<unsigned long long>() > static_cast<unsigned long long>(std::numeric_limits<long long>::max()))
+    {
+      Fail("integer " + m_Value.dump() + " is too large");
+    }
     if (m_Value.is_number_integer())
     {
       return m_Value.get<long long>();
@@ -1463,9 +1469,16 @@ ParseScene(const std::string & jsonText, const std::string & scenePath)
   {
     root = json::parse(jsonText);
   }
-  catch (const json::parse_error & error)
+  catch (const json::exception & error) // parse_error, or out_of_range for a number such as 1e999
   {
-    throw Error(scenePath + ": not valid JSON: " + error.what());
+    // nlohmann's text starts "[json.exception.parse_error.101] parse error at ...": keep what follows.
+    std::string detail = error.what();
+    if (const auto position = detail.find("] "); detail.rfind("[json.exception", 0) == 0 && position != std::string::npos)
+    {
+      detail.erase(0, position + 2);
+    }
+    throw Error(scenePath + ": not valid JSON: " + detail +
+                " (NaN, Infinity and comments are not JSON; check the file is complete)");
   }
   if (!root.is_object())
   {

@@ -1132,7 +1132,17 @@ SolveResult
 Solver::Impl::SolveExplicitDynamics(const ProgressCallback & progress, const FrameCallback & frames)
 {
   const double requested = settings.timeStep > 0.0 ? settings.timeStep : settings.timeStepSafetyFactor * criticalTimeStep;
-  const int    steps = static_cast<int>(std::ceil(settings.endTime / requested - 1e-9));
+  const double stepCount = std::ceil(settings.endTime / requested - 1e-9);
+  // The step counter is an int: a larger count would wrap and "reach" the end time at once.
+  if (!(stepCount <= static_cast<double>(std::numeric_limits<int>::max())))
+  {
+    std::ostringstream message;
+    message << "solver setting end_time " << settings.endTime << " s needs " << stepCount << " steps of " << requested
+            << " s, more than the " << std::numeric_limits<int>::max()
+            << " an explicit dynamics run can take; shorten end_time or use dynamic relaxation for a steady state.";
+    throw Error(message.str());
+  }
+  const int    steps = std::max(1, static_cast<int>(stepCount));
   const double h = settings.endTime / steps; // land exactly on the end time
   const double c = settings.dampingCoefficient;
   const double alpha = 2.0 * h * h / (2.0 + c * h);

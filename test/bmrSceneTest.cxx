@@ -4,6 +4,7 @@
 #include "bmrMeshIO.h"
 #include "bmrMeshless.h"
 #include "bmrScene.h"
+#include "bmrSolver.h"
 
 #include "bmrTemporaryFolderTest.h"
 
@@ -519,6 +520,64 @@ TEST_F(SceneTest, BadFileInputsAreNamed)
   EXPECT_CONTAINS(ErrorMessage([&] { bmr::ReadScene((m_Folder / "missing.json").string()); }), "missing.json");
 }
 
+// Inputs that the fuzzer (test/fuzz_inputs.py) once turned into a crash, a
+// wrapped-around result or an unclear message.
+TEST_F(SceneTest, FuzzedInputsEndInNamedErrors)
+{
+  // nlohmann's "[json.exception.parse_error.101]" prefix is not for users.
+  std::string message = ErrorMessage([&] { bmr::ParseScene("{\"mesh\": NaN}", "nan.json"); });
+  EXPECT_CONTAINS(message, "nan.json: not valid JSON");
+  EXPECT_CONTAINS(message, "line 1");
+  EXPECT_EQ(message.find("json.exception"), std::string::npos) << message;
+  // A number beyond double was nlohmann's uncaught out_of_range exception.
+  message = ErrorMessage([&] { bmr::ParseScene("{\"mesh\": 1e999}", "huge.json"); });
+  EXPECT_CONTAINS(message, "huge.json: not valid JSON: number overflow parsing '1e999'");
+
+  // 2^63 was read as -2^63 ("must be between 1 and ..., got -9223372036854775808").
+  json scene = BlockScene();
+  scene["solver"] = { { "max_steps", 9223372036854775808ull } };
+  message = ParseError(scene);
+  EXPECT_CONTAINS(message, "solver.max_steps: integer 9223372036854775808 is too large");
+
+  // A grid too large to number was a std::bad_alloc (or a wrapped-around index).
+  scene = BlockScene();
+  scene["mesh"]["divisions"] = { 100000, 100000, 100000 };
+  message = ParseError(scene);
+  EXPECT_CONTAINS(message, "mesh: MakeBlockMesh");
+  EXPECT_CONTAINS(message, "use fewer divisions");
+  scene["mesh"] = { { "generate", "ellipsoid" }, { "semi_axes", { 1e300, 1e300, 1e300 } }, { "spacing", 1e-300 } };
+  scene.erase("node_sets");
+  scene.erase("fixed");
+  scene.erase("prescribed_displacements");
+  EXPECT_CONTAINS(ParseError(scene), "MakeEllipsoidMesh");
+
+  // An end time of more steps than an int counts wrapped around and "converged" at once.
+  scene = BlockScene();
+  scene["solver"] = { { "integrator", "explicit_dynamics" }, { "end_time", 1e308 } };
+  const bmr::Scene parsed = Parse(scene);
+  message = ErrorMessage([&] { bmr::Solver(parsed.model, parsed.settings).Solve(); });
+  EXPECT_CONTAINS(message, "end_time");
+  EXPECT_CONTAINS(message, "more than");
+
+  // A legacy VTK file with damaged cell offsets crashed VTK's GetCellPoints;
+  // a point id past the points was read as a node.
+  const std::string original = ReadText(fs::path(BMR_SOURCE_DIR) / "examples/scenes/data/small-block.vtk");
+  scene = json::parse(R"({"mesh": "damaged.vtk", "materials": [{"youngs_modulus": 3000, "poisson_ratio": 0.45}]})");
+  std::string damaged = original;
+  const auto offsets = damaged.find("256 264 272");
+  ASSERT_NE(offsets, std::string::npos);
+  damaged.replace(offsets, 11, "256 24 272");
+  WriteText(m_Folder / "damaged.vtk", damaged);
+  message = ParseError(scene);
+  EXPECT_CONTAINS(message, "damaged.vtk' is damaged");
+  EXPECT_CONTAINS(message, "cell 56");
+  damaged = original;
+  const auto connectivity = damaged.find('\n', damaged.find("CONNECTIVITY")) + 1;
+  damaged.replace(connectivity, damaged.find(' ', connectivity) - connectivity, "9999");
+  WriteText(m_Folder / "damaged.vtk", damaged);
+  EXPECT_CONTAINS(ParseError(scene), "cell 0 refers to point 9999, which does not exist");
+}
+
 TEST_F(SceneTest, ReportHoldsEveryResultField)
 {
   json scene = BlockScene();
@@ -818,4 +877,37 @@ TEST_F(SceneCliTest, FailedSolveExitsOneAndWritesNothing)
   EXPECT_CONTAINS(run.err, "biomech: error: the solve failed");
   EXPECT_CONTAINS(run.err, "element");
   EXPECT_TRUE(FilesIn(output).empty());
+}
+
+TEST_F(SceneCliTest, DamagedImagesAndTransformsGiveOneLineErrors)
+{
+  // 6 x 6 x 6 voxels of MetaImage, whole and cut in half.
+  std::string image = "ObjectType = Image\nNDims = 3\nDimSize = 6 6 6\nElementSpacing = 2 2 2\n"
+                      "ElementType = MET_UCHAR\nElementDataFile = LOCAL\n";
+  image += std::string(216, '\1');
+  WriteText(m_Folder / "mask.mha", image);
+  WriteText(m_Folder / "truncated.mha", image.substr(0, image.size() - 150));
+  WriteText(m_Folder / "garbage.nii.gz", "not an image");
+  WriteText(m_Folder / "bad.tfm", "#Insight Transform File V1.0\n#Transform 0\nTransform: Nothing\n");
+  const auto quoted = [&](const std::string & name) { return "'" + (m_Folder / name).string() + "'"; };
+  const auto expectOneLineError = [&](const CommandResult & run, const std::string & part) {
+    EXPECT_EQ(run.exitCode, 1) << run.err;
+    EXPECT_EQ(run.err.rfind("biomech: error: ", 0), 0u) << run.err;
+    EXPECT_EQ(run.err.find('\n'), run.err.size() - 1) << run.err;
+    EXPECT_CONTAINS(run.err, part);
+  };
+
+  // MetaIO only printed its complaint and the garbage voxels were used.
+  expectOneLineError(Biomech("grid " + quoted("truncated.mha") + " -o " + quoted("grid.vtu")), "fewer voxels");
+  // ITK's several-line list of the IO classes it tried.
+  expectOneLineError(Biomech("grid " + quoted("garbage.nii.gz") + " -o " + quoted("grid.vtu")),
+                     "no ITK reader recognises the file");
+  // ITK's text transform reader threw std::out_of_range ("basic_string::replace").
+  expectOneLineError(Biomech("warp " + quoted("mask.mha") + " " + quoted("bad.tfm") + " -o " + quoted("w.mha")),
+                     "cannot read transform");
+  // A grid too large to number: std::bad_alloc.
+  expectOneLineError(Biomech("make-mesh --shape block --size 1 1 1 --divisions 100000 100000 100000 -o " +
+                             quoted("big.vtu")),
+                     "use fewer divisions");
+  EXPECT_EQ(FilesIn(m_Folder).size(), 4u); // nothing written
 }
