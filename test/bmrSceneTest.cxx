@@ -539,6 +539,13 @@ TEST_F(SceneTest, FuzzedInputsEndInNamedErrors)
   message = ParseError(scene);
   EXPECT_CONTAINS(message, "solver.max_steps: integer 9223372036854775808 is too large");
 
+  // A choice with a line break in it was echoed verbatim: a two-line error.
+  scene = BlockScene();
+  scene["discretization"] = "a\nb";
+  message = ParseError(scene);
+  EXPECT_CONTAINS(message, "\"a\\nb\" is not one of");
+  EXPECT_EQ(message.find('\n'), std::string::npos) << message;
+
   // A grid too large to number was a std::bad_alloc (or a wrapped-around index).
   scene = BlockScene();
   scene["mesh"]["divisions"] = { 100000, 100000, 100000 };
