@@ -123,7 +123,7 @@ def Short(error):
     return error.replace("biomech: error: ", "").split(". Likely cause")[0].replace("|", "/")
 
 
-def reading(runs):
+def reading(runs, machine=""):
     """The conclusions, computed from the table's numbers (never fixed text beside changing data)."""
     def methods(entry):
         return {method["name"]: method for method in entry["report"]["methods"]} if entry["report"] else {}
@@ -135,7 +135,7 @@ def reading(runs):
              "* **Time** is the registration's: for the biomechanical rows everything but the evaluation (model, "
              "solve, fit, warp of the 181 x 217 x 181 volume); for the intensity registrations their optimisation "
              "(elastix: the `elastix` process; transformix's field and warped image are not counted). Quiet-machine "
-             "end-to-end times are in [registration-benchmark.md](registration-benchmark.md).",
+             "end-to-end times are in [registration-benchmark.md](registration-benchmark.md)." + busy(machine),
              "* **Meshless** is not in the study: the meshless Colin27 registration converges but takes minutes a "
              "scene (docs/model-building.md)."]
     ten = [(entry["name"], methods(entry).get("biomechanical hexahedra 5 mm")) for entry in runs
@@ -168,6 +168,13 @@ def reading(runs):
                      "`-realistic` scenes add another contrast, a resection cavity, a bias field, Rician noise, "
                      "thicker slices and a partial field of view. The T2-like contrast is a function of the T1 "
                      "intensity, which mutual information is built for; a real T2 is not.")
+    by_name = {entry["name"]: methods(entry) for entry in runs}
+    plain, realistic = by_name.get("parietal-10mm-resection"), by_name.get("parietal-10mm-realistic")
+    if plain and realistic:
+        changes = ["%s %.2f -> %.2f mm" % (name, p95(plain[name]), p95(realistic[name]))
+                   for name in realistic if name in plain and name != "no registration"]
+        lines.append("* **What the realistic image costs each method** (`-realistic` against `-resection`: the same "
+                     "ground truth, only the intraoperative image differs), 95th percentile: %s." % "; ".join(changes))
     spreads = []
     for entry in runs:
         values = [p95(method) for name, method in methods(entry).items() if name.startswith("biomechanical")]
@@ -187,6 +194,16 @@ def reading(runs):
         lines.append("* **%s** (fluid-like CSF, tetrahedral ground truth): 95th percentile %s." % (
             entry["name"], ", ".join(described)))
     return "\n".join(lines) + "\n"
+
+
+def busy(machine):
+    """A sentence on the machine's load during the run, from the machine line's load averages."""
+    import re
+    loads = [float(value) for value in re.findall(r"load average ([0-9.]+)", machine)]
+    if loads and max(loads) > 1.0:
+        return (" This run's machine was busy (load average up to %.1f on 2 cores, other work beside it): its times "
+                "are upper bounds." % max(loads))
+    return ""
 
 
 def markdown(runs, machine):
@@ -221,7 +238,7 @@ def markdown(runs, machine):
                 entry["name"], method["name"], method["seconds"], error["mean"], error["p95"], error["max"],
                 "%.2f" % hausdorff["p95"] if hausdorff else "-",
                 "%.1f%%" % (100 * fraction) if fraction is not None else "-"))
-    lines += ["", "![error against run time](validation-error-vs-time.png)", reading(runs),
+    lines += ["", "![error against run time](validation-error-vs-time.png)", reading(runs, machine),
               "The stiff and extreme cases on every discretization are in [stability-matrix.md](stability-matrix.md)."]
     return "\n".join(lines) + "\n"
 
