@@ -339,6 +339,8 @@ RegisterWithElastix(const fs::path & fixed, const fs::path & moving, const fs::p
   cast->Update();
   peer.transform = itk::DisplacementFieldTransform<double, 3>::New();
   peer.transform->SetDisplacementField(cast->GetOutput());
+  // 85 MB on Colin27's grid; the transform parameter files make it again.
+  fs::remove(out / "field" / "deformationField.nii", ignored);
   return peer;
 }
 

@@ -774,7 +774,7 @@ Driver(const Options & options, const std::string & self)
   std::strftime(date, sizeof date, "%Y-%m-%d %H:%M UTC", std::gmtime(&now));
 
   md << "# Benchmarks\n\n"
-     << "Written by `bmrBenchmark` (apps/bmrBenchmark.cxx); run `scripts/run-benchmarks.sh` to reproduce. "
+     << "Written by `bmrBenchmark` (benchmarks/bmrBenchmark.cxx); run `scripts/run-benchmarks.sh` to reproduce. "
      << "Timings are wall-clock seconds on the machine below; per-unit costs are per element and time step.\n\n"
      << "## Machine and build\n\n"
      << "| | |\n|---|---|\n"

@@ -420,7 +420,7 @@ main(int argc, char ** argv)
     std::strftime(date, sizeof(date), "%Y-%m-%d %H:%M UTC", std::gmtime(&now));
     section << bmr::benchmark::ImageSectionBegin << "\n"
             << "## From displacements to a warped image\n\n"
-            << "Written by `bmrImageBenchmark` (apps/bmrImageBenchmark.cxx, run by scripts/run-benchmarks.sh). "
+            << "Written by `bmrImageBenchmark` (benchmarks/bmrImageBenchmark.cxx, run by scripts/run-benchmarks.sh). "
             << "CPU " << bmr::benchmark::CpuModel() << ", " << threads << " ITK threads, " << date
             << ", load average at start " << loadBefore << ". Median of " << repeats << " runs.\n\n"
             << "Case: Colin27 resampled onto a 256 x 256 x 128 grid of 1 x 1 x 1.5 mm; a brain-sized ellipsoid "

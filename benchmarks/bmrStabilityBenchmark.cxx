@@ -488,7 +488,7 @@ Report(const std::vector<Cell> & cells, const Options & options)
   std::ostringstream report;
   report << "# Stability matrix\n\n"
          << "Written by `bmrStabilityBenchmark" << (options.quick ? " --quick" : "")
-         << "` (apps/bmrStabilityBenchmark.cxx; `scripts/run-benchmarks.sh` runs it). Every case on every "
+         << "` (benchmarks/bmrStabilityBenchmark.cxx; `scripts/run-benchmarks.sh` runs it). Every case on every "
             "discretization, dynamic relaxation to "
          << kTolerance << " mm; *estimated* is the solver's error estimate, *true* the largest nodal distance to "
          << "the same model solved to " << kTightFactor * kTolerance << " mm, and *analytic* / *CalculiX* the largest "

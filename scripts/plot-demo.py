@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """Plots a `biomech demo` report: displacement error against registration time,
 and the edge-based Hausdorff curves, for every method (no registration,
-biomechanical, B-spline).
+biomechanical, B-spline, elastix).
 
     /usr/bin/python3 scripts/plot-demo.py out/demo/demo-report.json out/demo/error-vs-time.png
 """

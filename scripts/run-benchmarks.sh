@@ -24,7 +24,7 @@ cmake --build "${build}" --target bmrBenchmark bmrImageBenchmark bmrStabilityBen
 command -v ccx >/dev/null 2>&1 || echo "run-benchmarks: ccx (calculix-ccx) not found; the CalculiX-referenced part is skipped" >&2
 
 cd "${root}"
-"${build}/apps/bmrBenchmark" \
+"${build}/benchmarks/bmrBenchmark" \
   --output docs/benchmarks.md \
   --csv docs/benchmark-error-vs-time.csv \
   --reference-cache "${build}/benchmark-cache" \
@@ -35,9 +35,9 @@ if [ -f docs/benchmark-error-vs-time.csv ]; then
   /usr/bin/python3 scripts/plot-benchmarks.py docs/benchmark-error-vs-time.csv docs/benchmark-error-vs-time.png
 fi
 # Stiff and extreme cases on every discretization: docs/stability-matrix.md.
-OMP_WAIT_POLICY=PASSIVE "${build}/apps/bmrStabilityBenchmark" --output docs/stability-matrix.md
+OMP_WAIT_POLICY=PASSIVE "${build}/benchmarks/bmrStabilityBenchmark" --output docs/stability-matrix.md
 # Image stages (fit, warp, B-spline baseline): their own section of docs/benchmarks.md.
-OMP_WAIT_POLICY=PASSIVE "${build}/apps/bmrImageBenchmark" --output docs/benchmarks.md
+OMP_WAIT_POLICY=PASSIVE "${build}/benchmarks/bmrImageBenchmark" --output docs/benchmarks.md
 # Model building from an MRI (Colin27): docs/model-building-benchmark.md.
 /usr/bin/python3 scripts/benchmark-model-building.py "${build}/apps/biomech"
 # The whole registration, end to end, with its error: docs/registration-benchmark.md.

@@ -43,5 +43,5 @@ fi
 output_dir=out/demo
 echo
 echo "== biomech demo -o ${output_dir} (Colin27 from mricron-data)"
-"${biomech}" demo -o "${output_dir}" --load surface
+"${biomech}" demo -o "${output_dir}" --load surface --elastix
 /usr/bin/python3 scripts/plot-demo.py "${output_dir}/demo-report.json" "${output_dir}/error-vs-time.png"

@@ -370,7 +370,7 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
     Material cavity = csf;
     cavity.name = "resection cavity";
     model.materials.push_back(cavity);
-    std::size_t removed = 0;
+    std::size_t cavityCells = 0;
     for (Cell & cell : model.cells)
     {
       Vector3 centre = Vector3::Zero();
@@ -382,10 +382,10 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
       if ((centre / corners - settings.tumourCentre).norm() <= truth.resectionCavityRadius)
       {
         cell.material = static_cast<Index>(model.materials.size() - 1);
-        ++removed;
+        ++cavityCells;
       }
     }
-    if (removed == 0)
+    if (cavityCells == 0)
     {
       throw Error("the resection cavity (radius " + std::to_string(truth.resectionCavityRadius) +
                   " mm around the tumour) holds no cell of the ground truth's " + ImageGridKindName(settings.grid.kind) +
@@ -553,10 +553,10 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
         }
       }
       const bool  bright = settings.contrast == IntraoperativeContrast::T2Like;
-      const auto  tenth = brain.begin() + static_cast<std::ptrdiff_t>((bright ? 0.98 : 0.02) * static_cast<double>(brain.size()));
-      std::nth_element(brain.begin(), tenth, brain.end());
+      const auto  fluid = brain.begin() + static_cast<std::ptrdiff_t>((bright ? 0.98 : 0.02) * static_cast<double>(brain.size()));
+      std::nth_element(brain.begin(), fluid, brain.end());
       FillResectionCavity(truth.intraoperativeImage, truth.intraoperativeBrainMask, truth.truthTransform,
-                          settings.tumourCentre, truth.resectionCavityRadius, *tenth);
+                          settings.tumourCentre, truth.resectionCavityRadius, *fluid);
       FillResectionCavity(nullptr, truth.intraoperativeBrainOnPreoperativeGrid, truth.truthTransform,
                           settings.tumourCentre, truth.resectionCavityRadius, 0.0F);
     }
@@ -567,7 +567,7 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
     if (settings.noise > 0.0)
     {
       AddImageNoise(truth.intraoperativeImage, settings.noise * OverlayGreyRange(preoperativeImage).second,
-               settings.noiseModel, settings.seed);
+                    settings.noiseModel, settings.seed);
     }
   });
   return truth;
