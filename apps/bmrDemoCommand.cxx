@@ -201,16 +201,20 @@ RunProgram(const std::vector<std::string> & arguments, const fs::path & log, con
     std::deque<std::string> tail;
     for (std::string line; std::getline(file, line);)
     {
+      if (line.find_first_not_of(" \t\r") == std::string::npos)
+      {
+        continue;
+      }
       tail.push_back(line);
       if (tail.size() > 8)
       {
         tail.pop_front();
       }
     }
-    std::string last;
+    std::string last; // one line, as every error of biomech
     for (const std::string & line : tail)
     {
-      last += "\n  " + line;
+      last += (last.empty() ? " " : " | ") + line;
     }
     throw Error(arguments[0] + " failed (" +
                 (WIFEXITED(status) ? "exit status " + std::to_string(WEXITSTATUS(status))

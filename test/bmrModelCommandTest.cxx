@@ -509,4 +509,13 @@ TEST_F(ModelCommandTest, DemoNamesAResectionWithoutTumourAndAMissingElastix)
   EXPECT_EQ(run.exitCode, 1) << run.err;
   EXPECT_NE(run.err.find("elastix is not on PATH"), std::string::npos) << run.err;
   EXPECT_EQ(FileCount(output), 0u);
+
+  // elastix itself failing (a transform it does not know): named, with its log's last lines, on one line.
+  std::ofstream(m_Folder / "bad-parameters.txt") << "(Transform \"NoSuchTransform\")\n";
+  run = Biomech("demo --quiet --truth-element-size 8 --variant hexahedra:9 --no-baseline --overlays 0 --elastix-parameters " +
+                Quoted(m_Folder / "bad-parameters.txt") + " -o " + Quoted(output));
+  EXPECT_EQ(run.exitCode, 1) << run.err;
+  EXPECT_NE(run.err.find("biomech: error: elastix failed"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("elastix-output.txt ends:"), std::string::npos) << run.err;
+  EXPECT_EQ(run.err.find('\n'), run.err.size() - 1) << run.err;
 }
