@@ -5,6 +5,7 @@
 #include "bmrSyntheticBrainShift.h"
 #include "bmrTemporaryFolderTest.h"
 
+#include "itkBiomechanicalImageConversion.h"
 #include "itkBiomechanicalImageIO.h"
 #include "itkBiomechanicalTransformIO.h"
 #include "itkAffineTransform.h"
@@ -317,6 +318,16 @@ ScannerTranslation()
   return bmr::Vector3(812.0, -433.0, 517.0);
 }
 
+/** An image's grid placed where the scanner puts the head: directions turned, origin moved as a point. */
+bmr::ImageGeometry
+ScannerGeometry(const bmr::ImageGeometry & geometry)
+{
+  bmr::ImageGeometry moved = geometry;
+  moved.direction = ScannerRotation() * geometry.direction;
+  moved.origin = ScannerRotation() * geometry.origin + ScannerTranslation();
+  return moved;
+}
+
 // Scanner geometry: the same voxels of Colin27 placed about 1 m from the
 // origin with oblique axes (turned 21 degrees about z and 10.5 about x), as a
 // scanner's export places them. The grid is the same in index space, so its
@@ -337,29 +348,7 @@ TEST(BrainShiftRegistration, ObliqueScannerGeometryGivesTheSameModelRegions)
     using ImageType = std::remove_const_t<std::remove_pointer_t<decltype(image)>>;
     auto copy = ImageType::New();
     copy->Graft(image); // the same voxels; new origin and direction cosines
-    typename ImageType::DirectionType direction = image->GetDirection();
-    typename ImageType::PointType     origin;
-    Eigen::Matrix3d                   d;
-    for (unsigned int r = 0; r < 3; ++r)
-    {
-      for (unsigned int c = 0; c < 3; ++c)
-      {
-        d(r, c) = direction[r][c];
-      }
-    }
-    const Eigen::Matrix3d turned = rotation * d;
-    const bmr::Vector3    o = rotation * bmr::Vector3(image->GetOrigin()[0], image->GetOrigin()[1], image->GetOrigin()[2]) +
-                           translation;
-    for (unsigned int r = 0; r < 3; ++r)
-    {
-      origin[r] = o[r];
-      for (unsigned int c = 0; c < 3; ++c)
-      {
-        direction[r][c] = turned(r, c);
-      }
-    }
-    copy->SetOrigin(origin);
-    copy->SetDirection(direction);
+    itk::ApplyBiomechanicalGeometry(ScannerGeometry(itk::MakeBiomechanicalGeometry(image)), copy.GetPointer());
     return copy;
   };
 
@@ -442,40 +431,19 @@ TEST(BrainShiftRegistration, ResampledInt16ScannerImageRegistersAsTheOriginal)
     toColin->SetMatrix(matrix);
     toColin->SetOffset(shift);
   }
-  const auto sourceDirection = colin.image->GetDirection();
-  Eigen::Matrix3d directionMatrix;
-  for (unsigned int r = 0; r < 3; ++r)
+  bmr::ImageGeometry grid = ScannerGeometry(itk::MakeBiomechanicalGeometry(colin.image.GetPointer()));
+  const bmr::Vector3 spacing(1.0, 1.2, 1.5);
+  for (int d = 0; d < 3; ++d)
   {
-    for (unsigned int c = 0; c < 3; ++c)
-    {
-      directionMatrix(r, c) = sourceDirection[r][c];
-    }
+    grid.size[d] = static_cast<int>(std::ceil(grid.size[d] * grid.spacing[d] / spacing[d]));
   }
-  const Eigen::Matrix3d                turned = rotation * directionMatrix;
-  bmr::RegistrationImage::DirectionType direction;
-  for (unsigned int r = 0; r < 3; ++r)
-  {
-    for (unsigned int c = 0; c < 3; ++c)
-    {
-      direction[r][c] = turned(r, c);
-    }
-  }
-  const double spacing[3] = { 1.0, 1.2, 1.5 };
-  bmr::RegistrationImage::SizeType size;
-  for (unsigned int d = 0; d < 3; ++d)
-  {
-    size[d] = static_cast<itk::SizeValueType>(
-      std::ceil(colin.image->GetLargestPossibleRegion().GetSize()[d] * colin.image->GetSpacing()[d] / spacing[d]));
-  }
-  const bmr::Vector3 origin = move(bmr::Vector3(colin.image->GetOrigin()[0], colin.image->GetOrigin()[1],
-                                                colin.image->GetOrigin()[2]));
+  grid.spacing = spacing;
+  auto gridImage = bmr::RegistrationImage::New();
+  itk::ApplyBiomechanicalGeometry(grid, gridImage.GetPointer());
   auto resample = itk::ResampleImageFilter<bmr::RegistrationImage, bmr::RegistrationImage>::New();
   resample->SetInput(colin.image);
   resample->SetTransform(toColin);
-  resample->SetOutputOrigin(origin.data());
-  resample->SetOutputSpacing(spacing);
-  resample->SetOutputDirection(direction);
-  resample->SetSize(size);
+  resample->SetOutputParametersFromImage(gridImage);
   resample->Update();
   auto scanner = ShortImage::New();
   scanner->CopyInformation(resample->GetOutput());

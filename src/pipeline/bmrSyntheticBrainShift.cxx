@@ -528,10 +528,10 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
   // field of view), the resection cavity filled with fluid, bias field, noise;
   // and its brain mask.
   timer.Run("intraop-image", [&] {
-    const RegistrationImage::Pointer source =
+    const RegistrationImage::ConstPointer source =
       settings.contrast == IntraoperativeContrast::Preoperative
-        ? RegistrationImage::Pointer(const_cast<RegistrationImage *>(preoperativeImage))
-        : MakeImageInContrast(preoperativeImage, brainMask, settings.contrast);
+        ? RegistrationImage::ConstPointer(preoperativeImage)
+        : RegistrationImage::ConstPointer(MakeImageInContrast(preoperativeImage, brainMask, settings.contrast));
     const double fieldDepth = std::min(std::max(0.0, 0.5 * settings.fieldOfView - settings.scanMargin),
                                        (centroid - settings.craniotomyCentre).norm());
     const auto   grid = IntraoperativeGrid(preoperativeImage, settings.intraoperativeSpacing, settings.fieldOfView,
