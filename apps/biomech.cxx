@@ -9,6 +9,7 @@
 //                 (--intraoperative-surface S | --sparse-displacements CSV | --intraoperative-image I) -o DIR
 //   biomech fit-transform | warp | evaluate | bspline-register   (transform, warp, accuracy, baseline)
 //   biomech demo [-o DIR]   (registration against a known answer, with the B-spline baseline)
+//   biomech electrodes CT MRI [--mask M] [--contacts N] -o DIR   (contacts from an intraoperative CT)
 //   biomech simulate SCENE.json [-d DIR]   (moving tools in time: .pvd frames, tool forces .csv)
 //
 // Exit status: 0 success (solve converged), 2 solve finished but did not
@@ -238,6 +239,7 @@ main(int argc, char ** argv)
                                                                 bmr::app::AddEvaluateCommand(app),
                                                                 bmr::app::AddBSplineRegisterCommand(app),
                                                                 bmr::app::AddDemoCommand(app),
+                                                                bmr::app::AddElectrodesCommand(app),
                                                                 bmr::app::AddSimulateCommand(app) };
 
   try

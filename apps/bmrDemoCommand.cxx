@@ -16,6 +16,7 @@
 #include "bmrCommandSupport.h"
 
 #include "bmrMeshIO.h"
+#include "bmrElectrodes.h"
 #include "bmrSyntheticBrainShift.h"
 
 #include <nlohmann/json.hpp>
@@ -28,6 +29,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <optional>
 #include <regex>
 #include <sstream>
 
@@ -414,16 +416,44 @@ RunDemo(DemoOptions options)
   WriteImageAtomically(intraoperative, output / "intraoperative.nii.gz");
   WriteImageAtomically(intraoperativeMask, output / "intraoperative-brain-mask.nii.gz");
   WriteSurface((output / "exposed-surface.vtp").string(), truth.exposedSurface);
+  WriteSparseDisplacements((output / "tracked-points.csv").string(), truth.trackedPoints);
+  // The epilepsy workflow: a grid on the shifted brain, seen in a CT; its
+  // contacts, found and projected along gravity (the head's position in the
+  // operating room tells its direction), load the registration.
+  std::optional<ElectrodeLocalisation> electrodes;
+  json                                 electrodeReport;
+  if (options.load == "electrodes")
   {
-    std::ostringstream csv;
-    csv << "x,y,z,ux,uy,uz\n";
-    for (std::size_t k = 0; k < truth.trackedPoints.points.size(); ++k)
+    StageTimer                 timer(stages);
+    const SyntheticElectrodeCt ct = timer.Run("electrode-ct", [&] {
+      return MakeSyntheticElectrodeCt(preoperative, brainMask, truth, options.truth.craniotomyCentre);
+    });
+    WriteImageAtomically(ct.image.GetPointer(), output / "electrodes-ct.nii.gz");
+    std::vector<std::string> ignored;
+    const BrainSurfaces      surfaces =
+      BrainSurfacesOfMask(MaskVolume(brainMask, "brain mask"), BrainModelSettings{}.skullGap, ignored);
+    ElectrodeLocalisationSettings settings;
+    settings.detection.expectedContacts = static_cast<int>(ct.contacts.size());
+    settings.projectionDirection = truth.down;
+    electrodes = timer.Run("electrodes", [&] { return LocateElectrodes(ct.image, preoperative, surfaces.brain, settings); });
+    WriteSparseDisplacements((output / "electrode-displacements.csv").string(), electrodes->loads);
+    const ElectrodeLocalisationErrors errors = MeasureElectrodeLocalisation(*electrodes, ct);
+    electrodeReport = { { "contacts", ct.contacts.size() },
+                        { "found", electrodes->contacts.size() },
+                        { "each_found_once", errors.eachContactFoundOnce },
+                        { "detection_max_mm", errors.detectionMax },
+                        { "location_mean_mm", errors.locationMean },
+                        { "location_max_mm", errors.locationMax },
+                        { "displacement_error_mean_mm", errors.displacementMean },
+                        { "displacement_error_max_mm", errors.displacementMax },
+                        { "alignment_seconds", electrodes->alignment.seconds },
+                        { "seconds", timer.Json() } };
+    if (!options.quiet)
     {
-      const Vector3 & x = truth.trackedPoints.points[k];
-      const Vector3 & u = truth.trackedPoints.displacements[k];
-      csv << x.x() << "," << x.y() << "," << x.z() << "," << u.x() << "," << u.y() << "," << u.z() << "\n";
+      std::cerr << "electrodes: " << electrodes->contacts.size() << " of " << ct.contacts.size()
+                << " contacts found, located within " << errors.locationMax
+                << " mm, measured displacements within " << errors.displacementMax << " mm\n";
     }
-    WriteTextFileAtomically((output / "tracked-points.csv").string(), csv.str());
   }
   itk::WriteBiomechanicalTransform(truth.truthTransform, (output / "ground-truth-transform.h5").string());
   const fs::path overlays = output / "overlays";
@@ -446,6 +476,10 @@ RunDemo(DemoOptions options)
     if (options.load == "surface")
     {
       inputs.intraoperative.surface = truth.exposedSurface;
+    }
+    else if (options.load == "electrodes")
+    {
+      inputs.intraoperative.sparse = electrodes->loads;
     }
     else
     {
@@ -581,6 +615,10 @@ RunDemo(DemoOptions options)
     { "field_of_view_mm", options.truth.fieldOfView },
     { "resection_cavity_radius_mm", truth.resectionCavityRadius },
     { "seconds", truth.timer.Json() } };
+  if (!electrodeReport.is_null())
+  {
+    report["electrodes"] = electrodeReport;
+  }
   report["methods"] = json::array();
   for (const MethodResult & method : methods)
   {
@@ -669,8 +707,9 @@ AddDemoCommand(CLI::App & app)
                    "Registration grid KIND:SIZE (hexahedra, tetrahedra, mixed, meshless); repeat for several")
     ->capture_default_str();
   demo->add_option("--load", options->load,
-                   "What the registration is given: the displaced exposed surface, or its tracked points")
-    ->check(CLI::IsMember({ "surface", "points" }))
+                   "What the registration is given: the displaced exposed surface, its tracked points, or the "
+                   "contacts of an 8 x 8 electrode grid found in a simulated CT")
+    ->check(CLI::IsMember({ "surface", "points", "electrodes" }))
     ->capture_default_str();
   demo->add_option("--registration-gravity", options->registrationGravity,
                    "Gravity in the registration's model (g, along the ground truth's direction); 0: surface only")

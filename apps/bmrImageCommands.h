@@ -6,6 +6,7 @@
 //   evaluate              (bmrEvaluateCommand.cxx)
 //   bspline-register      (bmrBSplineRegisterCommand.cxx)
 //   demo                  (bmrDemoCommand.cxx: registration against a known answer)
+//   electrodes            (bmrElectrodesCommand.cxx: contacts from an intraoperative CT)
 #ifndef bmrImageCommands_h
 #define bmrImageCommands_h
 
@@ -28,6 +29,8 @@ std::function<int()>
 AddBSplineRegisterCommand(CLI::App & app);
 std::function<int()>
 AddDemoCommand(CLI::App & app);
+std::function<int()>
+AddElectrodesCommand(CLI::App & app);
 
 } // namespace app
 } // namespace bmr

@@ -125,6 +125,29 @@ struct SparseDisplacements
   std::vector<Vector3> displacements; // mm
 };
 
+/** Writes `sparse` as the CSV ReadSparseDisplacements reads (header
+ *  x,y,z,ux,uy,uz), through a temporary file. Throws bmr::Error naming the
+ *  path when it cannot be written or the sizes differ. */
+void
+WriteSparseDisplacements(const std::string & csvPath, const SparseDisplacements & sparse);
+
+/** Points measured on the displaced brain (e.g. electrode contacts on the
+ *  shifted cortex) as sparse displacements: each point's reference position
+ *  lies on the undeformed `referenceSurface`, its displacement is the point
+ *  minus that position. Without `direction` the reference is the closest
+ *  point of the surface (normal projection: motion along the surface is
+ *  lost, as in the literature's electrode workflow; and a point that sank
+ *  below the surface may find a sulcus' wall); with a direction (e.g.
+ *  gravity's, along which the brain sinks) it is the first point of the
+ *  surface that a ray along the direction meets, started 50 mm before the
+ *  point (outside the brain): where the point was before it sank.
+ *  Errors (bmr::Error): no points, a point that is not finite or whose ray
+ *  misses the surface (naming it), a zero direction, and the surface's own
+ *  errors (TriangleSurfaceTree). */
+SparseDisplacements
+ProjectOntoSurface(const std::vector<Vector3> & displacedPoints, const ContactSurface & referenceSurface,
+                   const Vector3 * direction = nullptr);
+
 /** Reads a CSV file with the header `x,y,z,ux,uy,uz` (mm; spaces around
  *  fields allowed), one point per line. Blank lines and lines starting with
  *  '#' are skipped. Errors (bmr::Error naming the path and the line number): a

@@ -151,6 +151,9 @@ struct SyntheticBrainShift
    *  fitted to its nodes within 0.05 mm. */
   RegistrationTransform::Pointer truthTransform;
   double                         truthFitMaxResidual = 0.0;
+  /** Forward map of the ground truth (preoperative point -> intraoperative
+   *  point), fitted to the same nodes: moves surface points and electrodes. */
+  RegistrationTransform::ConstPointer forwardTransform;
   RegistrationImage::Pointer      intraoperativeImage;     // intraoperative grid (field of view), contrast, bias, noise
   RegistrationLabelImage::Pointer intraoperativeBrainMask; // intraoperative grid; without the resection cavity
   /** The intraoperative brain on the preoperative grid (the whole brain, also

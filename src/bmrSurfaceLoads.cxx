@@ -1,5 +1,6 @@
 #include "bmrSurfaceLoads.h"
 #include "bmrClosestPoint.h"
+#include "bmrMeshIO.h"
 
 #include <Eigen/Dense>
 
@@ -8,6 +9,8 @@
 #include <cstdint>
 #include <cstdlib>
 #include <fstream>
+#include <iomanip>
+#include <limits>
 #include <map>
 #include <set>
 #include <sstream>
@@ -491,6 +494,106 @@ DisplacementsBetweenSurfaces(const Model &               model,
                                " mm from the " + surfaceName + " and are left out of the load");
   }
   return load;
+}
+
+namespace
+{
+// A directed projection's ray starts this far (mm) before the point: outside the brain for a point on its surface.
+constexpr double kProjectionReach = 50.0;
+
+/** The parameter t of the first intersection of the ray point + t direction,
+ *  t > -reach, with the surface (Moeller-Trumbore against every triangle),
+ *  or NaN when it misses the surface. */
+double
+FirstRayHit(const ContactSurface & surface, const Vector3 & point, const Vector3 & direction, double reach)
+{
+  double first = std::numeric_limits<double>::quiet_NaN();
+  for (const auto & triangle : surface.triangles)
+  {
+    const Vector3 & a = surface.vertices[triangle[0]];
+    const Vector3   edge1 = surface.vertices[triangle[1]] - a, edge2 = surface.vertices[triangle[2]] - a;
+    const Vector3   p = direction.cross(edge2);
+    const double    determinant = edge1.dot(p);
+    if (std::abs(determinant) < 1e-12)
+    {
+      continue;
+    }
+    const Vector3 s = point - a;
+    const double  u = s.dot(p) / determinant;
+    const Vector3 q = s.cross(edge1);
+    const double  v = direction.dot(q) / determinant;
+    const double  t = edge2.dot(q) / determinant;
+    if (u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > -reach && !(t >= first))
+    {
+      first = t;
+    }
+  }
+  return first;
+}
+} // namespace
+
+SparseDisplacements
+ProjectOntoSurface(const std::vector<Vector3> & displacedPoints, const ContactSurface & referenceSurface,
+                   const Vector3 * direction)
+{
+  if (displacedPoints.empty())
+  {
+    throw Error("ProjectOntoSurface: no points to project onto the " + referenceSurface.name + " surface");
+  }
+  if (direction != nullptr && !(direction->norm() > 0.0 && direction->allFinite()))
+  {
+    throw Error("ProjectOntoSurface: the projection direction must be a finite non-zero vector, got " +
+                FormatPoint(*direction));
+  }
+  // Builds the tree, which also checks the surface (vertex indices, finite vertices, area).
+  const TriangleSurfaceTree surface(referenceSurface.vertices, referenceSurface.triangles, referenceSurface.name);
+  SparseDisplacements       result;
+  for (std::size_t k = 0; k < displacedPoints.size(); ++k)
+  {
+    const Vector3 & point = displacedPoints[k];
+    if (!point.allFinite())
+    {
+      throw Error("ProjectOntoSurface: point " + std::to_string(k) + " is not finite: " + FormatPoint(point));
+    }
+    Vector3 reference = Vector3::Zero();
+    if (direction == nullptr)
+    {
+      reference = surface.Closest(point).point;
+    }
+    else
+    {
+      const Vector3 unit = direction->normalized();
+      const double  t = FirstRayHit(referenceSurface, point, unit, kProjectionReach);
+      if (!std::isfinite(t))
+      {
+        throw Error("ProjectOntoSurface: the ray along " + FormatPoint(unit) + " through point " + std::to_string(k) +
+                    " " + FormatPoint(point) + " misses the " + referenceSurface.name + " surface");
+      }
+      reference = point + t * unit;
+    }
+    result.points.push_back(reference);
+    result.displacements.push_back(point - reference);
+  }
+  return result;
+}
+
+void
+WriteSparseDisplacements(const std::string & csvPath, const SparseDisplacements & sparse)
+{
+  if (sparse.points.size() != sparse.displacements.size())
+  {
+    throw Error("cannot write '" + csvPath + "': " + std::to_string(sparse.points.size()) + " points but " +
+                std::to_string(sparse.displacements.size()) + " displacements");
+  }
+  std::ostringstream csv;
+  csv << std::setprecision(17) << "x,y,z,ux,uy,uz\n";
+  for (std::size_t k = 0; k < sparse.points.size(); ++k)
+  {
+    const Vector3 & x = sparse.points[k];
+    const Vector3 & u = sparse.displacements[k];
+    csv << x.x() << "," << x.y() << "," << x.z() << "," << u.x() << "," << u.y() << "," << u.z() << "\n";
+  }
+  WriteTextFileAtomically(csvPath, csv.str());
 }
 
 SparseDisplacements

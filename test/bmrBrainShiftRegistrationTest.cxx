@@ -2,6 +2,7 @@
 // synthetic ground truth (bmrSyntheticBrainShift.h) and the `register`
 // subcommand, on Colin27 (Debian's mricron-data) at coarse settings: the
 // reduced form of the README demo.
+#include "bmrColin27.h"
 #include "bmrSyntheticBrainShift.h"
 #include "bmrTemporaryFolderTest.h"
 
@@ -30,32 +31,9 @@ using json = nlohmann::json;
 namespace
 {
 
-const fs::path Colin27Folder("/usr/share/mricron/templates");
-
-bool
-HaveColin27()
-{
-  return fs::exists(Colin27Folder / "ch2.nii.gz") && fs::exists(Colin27Folder / "ch2bet.nii.gz");
-}
-
-/** Colin27, read once for all tests. */
-struct Colin27
-{
-  bmr::RegistrationImage::Pointer      image;
-  bmr::RegistrationLabelImage::Pointer mask;
-
-  static const Colin27 & Get()
-  {
-    static const Colin27 data = [] {
-      Colin27 colin;
-      colin.image = itk::ReadBiomechanicalImage<bmr::RegistrationImage>((Colin27Folder / "ch2.nii.gz").string(), "Colin27");
-      colin.mask = bmr::ThresholdMask(
-        itk::ReadBiomechanicalImage<bmr::RegistrationImage>((Colin27Folder / "ch2bet.nii.gz").string(), "mask"));
-      return colin;
-    }();
-    return data;
-  }
-};
+using bmr_test::Colin27;
+using bmr_test::Colin27Folder;
+using bmr_test::HaveColin27;
 
 /** Coarse ground truth: 6 mm hexahedra, 10 mm sag of the 30 mm superior craniotomy. */
 bmr::SyntheticBrainShiftSettings

@@ -459,6 +459,7 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
     truth.truthTransform = const_cast<RegistrationTransform *>(fitter->GetTransform());
     truth.truthFitMaxResidual = fitter->GetReport().maximumResidual;
     forward = fitter->GetForwardTransform();
+    truth.forwardTransform = forward;
   });
 
   // The exposed surface as a surface scanner would see it: the smooth
