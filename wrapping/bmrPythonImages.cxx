@@ -1,13 +1,14 @@
 // The ITK layer of the Python binding: image and transform files, atlas skull
 // stripping, brain surfaces, the transform fitter, warping, the edge-based
-// Hausdorff evaluator, the B-spline baseline, the patient model and the
-// one-call registration. It calls the pipeline library
+// Hausdorff evaluator, the B-spline baseline, the patient model, the
+// one-call registration and electrodes from an intraoperative CT. It calls the pipeline library
 // (bmrBrainShiftRegistration.h), which holds the filters compiled on float
 // images and unsigned char masks, so that this file instantiates few templates.
 
 // ITK before the core: ITK's bundled Eigen must be seen before the system
-// Eigen (the pipeline header includes ITK's first).
+// Eigen (the pipeline headers include ITK's first).
 #include "bmrBrainShiftRegistration.h"
+#include "bmrElectrodes.h"
 
 #include "itkBiomechanicalImageConversion.h"
 #include "itkBiomechanicalImageIO.h"
@@ -808,6 +809,11 @@ BindSyntheticBrainShift(py::module_ & module)
                            [](const SyntheticBrainShift & truth) {
                              return PythonImage(truth.intraoperativeBrainOnPreoperativeGrid.GetPointer());
                            })
+    .def_property_readonly("down",
+                           [](const SyntheticBrainShift & truth) {
+                             return py::make_tuple(truth.down.x(), truth.down.y(), truth.down.z());
+                           },
+                           "Unit vector from the craniotomy towards the brain's centroid: gravity's direction.")
     .def_readonly("exposed_surface", &SyntheticBrainShift::exposedSurface)
     .def_property_readonly("tracked_points", [](const SyntheticBrainShift & truth) { return ArrayFromPoints(truth.trackedPoints.points); })
     .def_property_readonly("tracked_displacements",
@@ -903,6 +909,98 @@ BindSyntheticBrainShift(py::module_ & module)
     "|T(x) - T_truth(x)| (mm) over the voxels of region (> 0): mean, 95th percentile, maximum. None: no registration.");
 }
 
+// ---------------------------------------------------------------------------
+// Electrodes from an intraoperative CT.
+// ---------------------------------------------------------------------------
+
+void
+BindElectrodes(py::module_ & module)
+{
+  py::class_<SyntheticElectrodeCt>(module, "SyntheticElectrodeCt",
+                                   "A CT-like image after a synthetic brain shift with an electrode grid on the "
+                                   "shifted surface, and where its contacts truly are.")
+    .def_property_readonly("image", [](const SyntheticElectrodeCt & ct) { return PythonImage(ct.image.GetPointer()); })
+    .def_property_readonly("contacts", [](const SyntheticElectrodeCt & ct) { return ArrayFromPoints(ct.contacts); },
+                           "MRI space, on the shifted brain (mm).")
+    .def_property_readonly("preoperative_contacts",
+                           [](const SyntheticElectrodeCt & ct) { return ArrayFromPoints(ct.preoperativeContacts); },
+                           "MRI space, on the undeformed brain surface (mm).")
+    .def_property_readonly("mri_to_ct", [](const SyntheticElectrodeCt & ct) { return PythonTransform{ ct.mriToCt.GetPointer() }; });
+
+  module.def(
+    "make_synthetic_electrode_ct",
+    [](const py::object & image, const py::object & brainMask, const SyntheticBrainShift & truth,
+       const py::object & craniotomyCentre, int rows, int columns, double contactSpacing, std::uint32_t seed) {
+      SyntheticElectrodeCtSettings settings;
+      settings.rows = rows;
+      settings.columns = columns;
+      settings.contactSpacing = contactSpacing;
+      settings.seed = seed;
+      const auto    preoperative = ItkImage(image, "image");
+      const auto    mask = ItkLabelImage(brainMask, "brain_mask");
+      const Vector3 centre = VectorFromObject(craniotomyCentre, "craniotomy_centre");
+      py::gil_scoped_release release;
+      return TranslateItkErrors([&] { return MakeSyntheticElectrodeCt(preoperative, mask, truth, centre, settings); });
+    },
+    py::arg("image"), py::arg("brain_mask"), py::arg("truth"), py::kw_only(),
+    py::arg("craniotomy_centre") = py::make_tuple(SyntheticBrainShiftSettings{}.craniotomyCentre.x(),
+                                                  SyntheticBrainShiftSettings{}.craniotomyCentre.y(),
+                                                  SyntheticBrainShiftSettings{}.craniotomyCentre.z()),
+    py::arg("rows") = SyntheticElectrodeCtSettings{}.rows, py::arg("columns") = SyntheticElectrodeCtSettings{}.columns,
+    py::arg("contact_spacing") = SyntheticElectrodeCtSettings{}.contactSpacing,
+    py::arg("seed") = SyntheticElectrodeCtSettings{}.seed,
+    "biomech demo --load electrodes's CT: a rows x columns grid on the brain around the craniotomy, moved by the "
+    "ground truth `truth` (make_synthetic_brain_shift), in Hounsfield units, 7 degrees and 33 mm from the MRI.");
+
+  module.def(
+    "locate_electrodes",
+    [](const py::object & ct, const py::object & image, const py::object & brainMask, int contacts, double threshold,
+       const py::object & projectAlong) {
+      const auto                    ctImage = ItkImage(ct, "ct");
+      const auto                    mri = ItkImage(image, "preoperative_image");
+      const auto                    mask = ItkLabelImage(brainMask, "brain_mask");
+      ElectrodeLocalisationSettings settings;
+      settings.detection.expectedContacts = contacts;
+      settings.detection.threshold = threshold;
+      if (!projectAlong.is_none())
+      {
+        settings.projectionDirection = VectorFromObject(projectAlong, "project_along");
+      }
+      if (ctImage.IsNull() || mri.IsNull() || mask.IsNull())
+      {
+        throw py::value_error("locate_electrodes needs the CT, the preoperative image and its brain mask");
+      }
+      ElectrodeLocalisation located;
+      {
+        py::gil_scoped_release release;
+        located = TranslateItkErrors([&] {
+          std::vector<std::string> ignored;
+          const BrainSurfaces      surfaces =
+            BrainSurfacesOfMask(MaskVolume(mask, "brain_mask"), BrainModelSettings{}.skullGap, ignored);
+          return LocateElectrodes(ctImage, mri, surfaces.brain, settings);
+        });
+      }
+      std::vector<Vector3> inCt;
+      for (const ElectrodeContact & contact : located.contactsInCt)
+      {
+        inCt.push_back(contact.position);
+      }
+      py::dict result;
+      result["contacts_in_ct"] = ArrayFromPoints(inCt);
+      result["contacts"] = ArrayFromPoints(located.contacts);
+      result["sparse_points"] = ArrayFromPoints(located.loads.points);
+      result["sparse_displacements"] = ArrayFromPoints(located.loads.displacements);
+      result["ct_to_mri"] = PythonTransform{ located.alignment.ctToMri.GetPointer() };
+      result["alignment_seconds"] = located.alignment.seconds;
+      result["warnings"] = located.warnings;
+      return result;
+    },
+    py::arg("ct"), py::arg("preoperative_image"), py::arg("brain_mask"), py::kw_only(), py::arg("contacts") = 0,
+    py::arg("threshold") = ElectrodeDetectionSettings{}.threshold, py::arg("project_along") = py::none(),
+    "Electrode contacts of a CT (Hounsfield units) in the MRI's space and as sparse displacements of the undeformed "
+    "brain surface (closest point, or along project_along): pass sparse_points and sparse_displacements to register().");
+}
+
 } // namespace
 
 void
@@ -912,6 +1010,7 @@ BindImages(py::module_ & module)
   BindFilters(module);
   BindRegistration(module);
   BindSyntheticBrainShift(module);
+  BindElectrodes(module);
 }
 
 } // namespace bmr::python

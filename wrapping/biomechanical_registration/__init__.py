@@ -60,6 +60,8 @@ from ._bmr import (
     make_ellipsoid_surface,
     make_grid,
     make_synthetic_brain_shift,
+    make_synthetic_electrode_ct,
+    locate_electrodes,
     measure_displacement_error,
     parse_scene,
     read_mesh,
