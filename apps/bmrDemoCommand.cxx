@@ -50,6 +50,9 @@ namespace app
 namespace
 {
 
+// The largest brain shift the module is built for (mm): the cut-off of matches along gravity.
+constexpr double kLargestExpectedShift = 25.0;
+
 struct DemoOptions
 {
   std::string                 image = "/usr/share/mricron/templates/ch2.nii.gz";
@@ -61,6 +64,7 @@ struct DemoOptions
   std::string                 truthGrid = "hexahedra";
   std::vector<std::string>    variants{ "hexahedra:5" };
   std::string                 load = "points";
+  std::string                 surfaceMatch = "closest";
   double                      registrationGravity = 0.0; // g
   bool                        noBaseline = false;
   bool                        elastix = false;
@@ -476,6 +480,13 @@ RunDemo(DemoOptions options)
     if (options.load == "surface")
     {
       inputs.intraoperative.surface = truth.exposedSurface;
+      if (options.surfaceMatch == "gravity")
+      {
+        // Along gravity a match's length is the shift itself, not a distance across a gap: the cut-off
+        // that keeps closest-point outliers out (10 mm) would drop the deepest points of a 10 mm sag.
+        inputs.intraoperative.surfaceMatchDirection = truth.down;
+        inputs.intraoperative.maxDistance = kLargestExpectedShift;
+      }
     }
     else if (options.load == "electrodes")
     {
@@ -586,6 +597,8 @@ RunDemo(DemoOptions options)
   json report;
   report["preoperative_image"] = options.image;
   report["brain_mask"] = options.mask;
+  report["load"] = options.load;
+  report["surface_match"] = options.surfaceMatch;
   report["ground_truth"] = {
     { "grid", ImageGridKindName(options.truth.grid.kind) },
     { "element_size_mm", options.truth.grid.elementSize },
@@ -710,6 +723,11 @@ AddDemoCommand(CLI::App & app)
                    "What the registration is given: the displaced exposed surface, its tracked points, or the "
                    "contacts of an 8 x 8 electrode grid found in a simulated CT")
     ->check(CLI::IsMember({ "surface", "points", "electrodes" }))
+    ->capture_default_str();
+  demo->add_option("--surface-match", options->surfaceMatch,
+                   "With --load surface: match the displaced surface by closest points, or along gravity (the "
+                   "direction the head's position gives, in which the brain sinks)")
+    ->check(CLI::IsMember({ "closest", "gravity" }))
     ->capture_default_str();
   demo->add_option("--registration-gravity", options->registrationGravity,
                    "Gravity in the registration's model (g, along the ground truth's direction); 0: surface only")

@@ -233,9 +233,19 @@ struct MeasurementOptions
   std::string intraoperativeSurface;
   std::string sparseDisplacements;
   double      maxDistance = SurfaceLoadSettings{}.maxDistance;
+  std::vector<double> matchAlong;
+
+  std::optional<Vector3> MatchDirection() const
+  {
+    return matchAlong.empty() ? std::nullopt : std::optional<Vector3>(Vector3(matchAlong[0], matchAlong[1], matchAlong[2]));
+  }
 
   void Add(CLI::App * command)
   {
+    command->add_option("--match-along", matchAlong,
+                        "Match the displaced surface (or the image's) along this direction X Y Z, e.g. gravity's, "
+                        "instead of by closest points (register, model)")
+      ->expected(3);
     command->add_option("--intraoperative-surface", intraoperativeSurface,
                         "Displaced exposed surface (.stl, .obj, .vtp, .vtk): closest-point correspondence");
     command->add_option("--sparse-displacements", sparseDisplacements,
@@ -260,6 +270,7 @@ struct MeasurementOptions
     }
     IntraoperativeData data;
     data.maxDistance = maxDistance;
+    data.surfaceMatchDirection = MatchDirection();
     if (!intraoperativeSurface.empty())
     {
       data.surface = ReadSurface(intraoperativeSurface);
@@ -671,6 +682,7 @@ RunRegister(const RegisterOptions & options)
     inputs.intraoperative = *data;
   }
   inputs.intraoperative.maxDistance = options.measurements.maxDistance;
+  inputs.intraoperative.surfaceMatchDirection = options.measurements.MatchDirection();
   if (!options.intraoperativeImage.empty())
   {
     inputs.intraoperative.image = ReadImage<ImageType>(options.intraoperativeImage, "intraoperative image");

@@ -173,6 +173,9 @@ struct IntraoperativeData
   RegistrationLabelImage::ConstPointer imageBrainMask;
   /** Measurements farther than this from the model surface are left out (mm). */
   double maxDistance = SurfaceLoadSettings{}.maxDistance;
+  /** A displaced surface (or the image's) is matched along this direction,
+   *  e.g. gravity's, instead of by closest points (SurfaceLoadSettings::matchDirection). */
+  std::optional<Vector3> surfaceMatchDirection;
 };
 
 struct BrainModel

@@ -13,6 +13,7 @@
 #include "bmrModel.h"
 
 #include <cstddef>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -30,6 +31,12 @@ struct SurfaceLoadSettings
    *  interpolating spline. Positive values trade fidelity at the points for a
    *  smoother field (noisy measurements). */
   double smoothing = 0.0;
+  /** (c) only: each scanned vertex is matched along this direction (e.g.
+   *  gravity's, along which the brain sinks after CSF loss) to the first
+   *  point of the intraoperative surface a ray along it meets, instead of to
+   *  its closest point; a vertex whose ray misses the surface is left out.
+   *  Unset: closest points. */
+  std::optional<Vector3> matchDirection;
 };
 
 struct LoadReport
@@ -94,8 +101,8 @@ DisplacementsFromSparsePoints(const Model &                model,
  *  scanner looking into the craniotomy sees them: per lateral cell of
  *  `spacing` mm, the highest vertex whose normal is within 60 degrees of
  *  the view. Each is matched to its closest point on the
- *  `intraoperativeSurface`, and the displacements are interpolated to the
- *  exposed nodes as in (b).
+ *  `intraoperativeSurface` (or along settings.matchDirection), and the
+ *  displacements are interpolated to the exposed nodes as in (b).
  *
  *  Why not (a): the nodes of a staircase hexahedral surface lie up to half a
  *  cell off the brain surface, and nodes on the walls of a sulcus or of the

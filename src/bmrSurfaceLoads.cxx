@@ -339,6 +339,42 @@ DisplacementsFromSparsePoints(const Model &                model,
   return load;
 }
 
+namespace
+{
+// A directed projection's ray starts this far (mm) before the point: outside the brain for a point on its surface.
+constexpr double kProjectionReach = 50.0;
+
+/** The parameter t of the first intersection of the ray point + t direction,
+ *  t > -reach, with the surface (Moeller-Trumbore against every triangle),
+ *  or NaN when it misses the surface. */
+double
+FirstRayHit(const ContactSurface & surface, const Vector3 & point, const Vector3 & direction, double reach)
+{
+  double first = std::numeric_limits<double>::quiet_NaN();
+  for (const auto & triangle : surface.triangles)
+  {
+    const Vector3 & a = surface.vertices[triangle[0]];
+    const Vector3   edge1 = surface.vertices[triangle[1]] - a, edge2 = surface.vertices[triangle[2]] - a;
+    const Vector3   p = direction.cross(edge2);
+    const double    determinant = edge1.dot(p);
+    if (std::abs(determinant) < 1e-12)
+    {
+      continue;
+    }
+    const Vector3 s = point - a;
+    const double  u = s.dot(p) / determinant;
+    const Vector3 q = s.cross(edge1);
+    const double  v = direction.dot(q) / determinant;
+    const double  t = edge2.dot(q) / determinant;
+    if (u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > -reach && !(t >= first))
+    {
+      first = t;
+    }
+  }
+  return first;
+}
+} // namespace
+
 PrescribedDisplacement
 DisplacementsBetweenSurfaces(const Model &               model,
                              const std::vector<Index> &  exposedNodes,
@@ -353,6 +389,11 @@ DisplacementsBetweenSurfaces(const Model &               model,
   const char * function = "DisplacementsBetweenSurfaces";
   ValidateExposedNodes(model, exposedNodes, function);
   ValidateSettings(settings, function);
+  if (settings.matchDirection && !(settings.matchDirection->norm() > 0.0 && settings.matchDirection->allFinite()))
+  {
+    throw Error(std::string(function) + ": the match direction must be a finite non-zero vector, got " +
+                FormatPoint(*settings.matchDirection));
+  }
   if (!(reach > 0.0) || !(spacing > 0.0))
   {
     throw Error(std::string(function) + ": reach and spacing must be > 0 mm");
@@ -418,10 +459,29 @@ DisplacementsBetweenSurfaces(const Model &               model,
     }
   }
   std::vector<Vector3> scanned, matched;
+  std::size_t          missed = 0;
   for (const auto & [cell, v] : highest)
   {
+    if (settings.matchDirection)
+    {
+      const Vector3 unit = settings.matchDirection->normalized();
+      const double  t = FirstRayHit(intraoperativeSurface, vertices[v], unit, kProjectionReach);
+      if (!std::isfinite(t))
+      {
+        ++missed; // beyond the scanned patch
+        continue;
+      }
+      scanned.push_back(vertices[v]);
+      matched.push_back(t * unit);
+      continue;
+    }
     scanned.push_back(vertices[v]);
     matched.push_back(surface.Closest(vertices[v]).point - vertices[v]);
+  }
+  if (scanned.empty() && settings.matchDirection)
+  {
+    throw Error(std::string(function) + ": no visible vertex of the preoperative surface meets the " +
+                intraoperativeSurface.name + " along the match direction " + FormatPoint(*settings.matchDirection));
   }
   // Closest points jump where the motion is larger than the features (the rim
   // of a sulcus or of the fissure: the match lands on the other side). A
@@ -486,6 +546,11 @@ DisplacementsBetweenSurfaces(const Model &               model,
                                " exposed-surface matches differ from their neighbours' by more than max(1 mm, 20%) "
                                "(closest points across a sulcus or the fissure) and are left out of the load");
   }
+  if (report != nullptr && missed > 0)
+  {
+    report->warnings.push_back(std::to_string(missed) + " visible preoperative vertices meet no point of the " +
+                               surfaceName + " along the match direction (beyond the scan's edge) and are not matched");
+  }
   if (report != nullptr && rejected > 0)
   {
     report->rejectedPoints += rejected;
@@ -495,42 +560,6 @@ DisplacementsBetweenSurfaces(const Model &               model,
   }
   return load;
 }
-
-namespace
-{
-// A directed projection's ray starts this far (mm) before the point: outside the brain for a point on its surface.
-constexpr double kProjectionReach = 50.0;
-
-/** The parameter t of the first intersection of the ray point + t direction,
- *  t > -reach, with the surface (Moeller-Trumbore against every triangle),
- *  or NaN when it misses the surface. */
-double
-FirstRayHit(const ContactSurface & surface, const Vector3 & point, const Vector3 & direction, double reach)
-{
-  double first = std::numeric_limits<double>::quiet_NaN();
-  for (const auto & triangle : surface.triangles)
-  {
-    const Vector3 & a = surface.vertices[triangle[0]];
-    const Vector3   edge1 = surface.vertices[triangle[1]] - a, edge2 = surface.vertices[triangle[2]] - a;
-    const Vector3   p = direction.cross(edge2);
-    const double    determinant = edge1.dot(p);
-    if (std::abs(determinant) < 1e-12)
-    {
-      continue;
-    }
-    const Vector3 s = point - a;
-    const double  u = s.dot(p) / determinant;
-    const Vector3 q = s.cross(edge1);
-    const double  v = direction.dot(q) / determinant;
-    const double  t = edge2.dot(q) / determinant;
-    if (u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > -reach && !(t >= first))
-    {
-      first = t;
-    }
-  }
-  return first;
-}
-} // namespace
 
 SparseDisplacements
 ProjectOntoSurface(const std::vector<Vector3> & displacedPoints, const ContactSurface & referenceSurface,

@@ -859,6 +859,44 @@ TEST(SurfaceLoadBetweenSurfaces, SmoothSagIsFollowed)
   EXPECT_NE(report.warnings[0].find("coplanar"), std::string::npos) << report.warnings[0];
 }
 
+// A surface that sinks obliquely (along (0.3, 0, -1), as a brain sinks along
+// gravity in a turned head): matched along that direction the loads are the
+// motion itself, tangential part included (bound 0.15 mm, the interpolation's);
+// closest points see only its normal part and miss the tangential 0.86 mm at
+// the centre. A zero direction is an error.
+TEST(SurfaceLoadBetweenSurfaces, MatchAlongADirectionKeepsTheTangentialMotion)
+{
+  const auto    model = bmr::MakeBlockMesh(Vector3(40.0, 40.0, 20.0), { 8, 8, 4 }, bmr::GridCells::Hexahedra);
+  const Vector3 direction = Vector3(0.3, 0.0, -1.0).normalized();
+  const auto    sink = [](double x, double y) { return 3.0 * std::exp(-((x - 20) * (x - 20) + (y - 20) * (y - 20)) / 200.0); };
+  const auto    preoperative = HeightPatch(-10.0, 50.0, -10.0, 50.0, 1.0, [](double, double) { return 20.0; });
+  auto          intraoperative = preoperative;
+  for (Vector3 & vertex : intraoperative.vertices)
+  {
+    vertex += sink(vertex.x(), vertex.y()) * direction;
+  }
+  const auto &        top = model.NodeSet("zmax");
+  bmr::SurfaceLoadSettings settings;
+  settings.matchDirection = direction;
+  const auto along = bmr::DisplacementsBetweenSurfaces(model, top, preoperative, intraoperative, 5.0, 2.0, settings);
+  const auto closest = bmr::DisplacementsBetweenSurfaces(model, top, preoperative, intraoperative, 5.0, 2.0, {});
+  ASSERT_EQ(along.nodes.size(), top.size());
+  double closestAtCentre = 0.0;
+  for (std::size_t k = 0; k < along.nodes.size(); ++k)
+  {
+    const Vector3 & x = model.nodes[along.nodes[k]];
+    const Vector3   truth = sink(x.x(), x.y()) * direction;
+    EXPECT_LT((along.displacements[k] - truth).norm(), 0.15) << bmr::FormatPoint(x);
+    if ((x - Vector3(20.0, 20.0, 20.0)).norm() < 1e-9)
+    {
+      closestAtCentre = (closest.displacements[k] - truth).norm();
+    }
+  }
+  EXPECT_GT(closestAtCentre, 0.7);
+  settings.matchDirection = Vector3::Zero();
+  EXPECT_THROW(bmr::DisplacementsBetweenSurfaces(model, top, preoperative, intraoperative, 5.0, 2.0, settings), bmr::Error);
+}
+
 // Hidden and outlying matches are left out: a second sheet 4 mm under the
 // top (a sulcus floor, not seen from above), and a spike of the scan (one
 // vertex thrown 6 mm up) whose matches differ from their neighbours'.

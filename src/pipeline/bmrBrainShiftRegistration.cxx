@@ -118,6 +118,7 @@ LoadFromIntraoperativeData(const Model &              model,
 {
   SurfaceLoadSettings settings;
   settings.maxDistance = data.maxDistance;
+  settings.matchDirection = data.surfaceMatchDirection;
   // A point cloud has no cells; the sparse interpolation then measures distances to the body's surface.
   const ContactSurface * modelSurface = model.cells.empty() ? &surfaces.brain : nullptr;
   if (!data.sparse.points.empty())
