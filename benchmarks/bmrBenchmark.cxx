@@ -16,6 +16,7 @@
 // child modes also serve to reproduce or profile one case:
 //   bmrBenchmark --child brain hex|tet|mtled THREADS SPACING STEPS REPEATS
 //   bmrBenchmark --child indentation hex|tet DIVISIONS THREADS TOLERANCE POISSON [HOURGLASS]
+//   bmrBenchmark --child triad THREADS   (memory bandwidth: STREAM's triad)
 #include "bmrBenchmarkSupport.h"
 #include "bmrCalculix.h"
 #include "bmrMeshGenerators.h"
@@ -36,6 +37,7 @@
 #include <fstream>
 #include <iomanip>
 #include <iostream>
+#include <limits>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -1381,8 +1383,39 @@ Child(int argc, char ** argv)
     std::cout << "BMR_RESULT " << out.dump() << std::endl;
     return 0;
   }
+  if (kind == "triad" && argc == 4)
+  {
+    // Memory bandwidth, STREAM's triad a = b + 3 c over 3 x 256 MiB: the
+    // roofline of kernels whose data do not fit in the caches. Best of 8.
+    const int           threads = std::stoi(argv[3]);
+    const std::size_t   n = std::size_t{ 1 } << 25;
+    std::vector<double> a(n), b(n), c(n);
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (std::size_t i = 0; i < n; ++i)
+    {
+      a[i] = 0.0;
+      b[i] = 1.0;
+      c[i] = 2.0;
+    }
+    double best = std::numeric_limits<double>::infinity();
+    for (int round = 0; round < 8; ++round)
+    {
+      const auto start = std::chrono::steady_clock::now();
+#pragma omp parallel for num_threads(threads) schedule(static)
+      for (std::size_t i = 0; i < n; ++i)
+      {
+        a[i] = b[i] + 3.0 * c[i];
+      }
+      best = std::min(best, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+    }
+    const Json out = { { "threads", threads }, { "triad_gb_per_s", 24.0 * static_cast<double>(n) / best / 1e9 },
+                       { "check", a[n / 2] } };
+    std::cout << "BMR_RESULT " << out.dump() << std::endl;
+    return 0;
+  }
   std::cerr << "bmrBenchmark --child brain hex|tet|mtled THREADS SPACING STEPS REPEATS\n"
-               "bmrBenchmark --child indentation hex|tet DIVISIONS THREADS TOLERANCE POISSON [HOURGLASS]\n";
+               "bmrBenchmark --child indentation hex|tet DIVISIONS THREADS TOLERANCE POISSON [HOURGLASS]\n"
+               "bmrBenchmark --child triad THREADS\n";
   return 2;
 }
 
