@@ -433,13 +433,10 @@ RunDemo(DemoOptions options)
       return MakeSyntheticElectrodeCt(preoperative, brainMask, truth, options.truth.craniotomyCentre);
     });
     WriteImageAtomically(ct.image.GetPointer(), output / "electrodes-ct.nii.gz");
-    std::vector<std::string> ignored;
-    const BrainSurfaces      surfaces =
-      BrainSurfacesOfMask(MaskVolume(brainMask, "brain mask"), BrainModelSettings{}.skullGap, ignored);
     ElectrodeLocalisationSettings settings;
     settings.detection.expectedContacts = static_cast<int>(ct.contacts.size());
     settings.projectionDirection = truth.down;
-    electrodes = timer.Run("electrodes", [&] { return LocateElectrodes(ct.image, preoperative, surfaces.brain, settings); });
+    electrodes = timer.Run("electrodes", [&] { return LocateElectrodes(ct.image, preoperative, ElectrodeReferenceSurface(brainMask), settings); });
     WriteSparseDisplacements((output / "electrode-displacements.csv").string(), electrodes->loads);
     const ElectrodeLocalisationErrors errors = MeasureElectrodeLocalisation(*electrodes, ct);
     electrodeReport = { { "contacts", ct.contacts.size() },

@@ -54,11 +54,9 @@ RunElectrodes(ElectrodesOptions options)
   const RegistrationLabelImage::Pointer mask = timer.Run("brain-mask", [&] {
     return options.mask.empty() ? AtlasBrainMask(mri) : ReadMaskImage(options.mask, "brain mask");
   });
-  const BrainSurfaces surfaces = timer.Run("surface", [&] {
-    return BrainSurfacesOfMask(MaskVolume(mask, "brain mask", nullptr), BrainModelSettings{}.skullGap, warnings);
-  });
+  const ContactSurface surface = timer.Run("surface", [&] { return ElectrodeReferenceSurface(mask, &warnings); });
   const ElectrodeLocalisation located =
-    timer.Run("electrodes", [&] { return LocateElectrodes(ct, mri, surfaces.brain, options.settings); });
+    timer.Run("electrodes", [&] { return LocateElectrodes(ct, mri, surface, options.settings); });
   warnings.insert(warnings.end(), located.warnings.begin(), located.warnings.end());
 
   const fs::path output(options.output);

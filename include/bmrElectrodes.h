@@ -127,9 +127,15 @@ struct ElectrodeLocalisation
   std::vector<std::string> warnings;
 };
 
+/** The surface contacts are projected onto: the brain mask's own smooth
+ *  surface (level 0 of BrainSurfacesOfMask), not a model's staircase one.
+ *  The surface extraction's warnings are appended to `warnings` when given. */
+ContactSurface
+ElectrodeReferenceSurface(const RegistrationLabelImage * brainMask, std::vector<std::string> * warnings = nullptr);
+
 /** Detects the contacts in `ct`, aligns the CT to `mri` and projects the
- *  contacts onto `preoperativeBrainSurface` (the MRI's brain surface, e.g.
- *  BrainSurfacesOfMask). Throws bmr::Error naming the failing step. */
+ *  contacts onto `preoperativeBrainSurface` (the MRI's brain surface,
+ *  ElectrodeReferenceSurface). Throws bmr::Error naming the failing step. */
 ElectrodeLocalisation
 LocateElectrodes(const RegistrationImage *             ct,
                  const RegistrationImage *             mri,

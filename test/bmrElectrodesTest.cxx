@@ -116,14 +116,12 @@ TEST_F(ElectrodesOnColin27, ContactsFromACtRegisterTheBrainShift)
   const bmr::SyntheticElectrodeCt    ct = bmr::MakeSyntheticElectrodeCt(colin.image, colin.mask, truth, scene.craniotomyCentre);
   ASSERT_EQ(ct.contacts.size(), 64u);
 
-  std::vector<std::string> warnings;
-  const bmr::BrainSurfaces surfaces =
-    bmr::BrainSurfacesOfMask(bmr::MaskVolume(colin.mask, "brain mask"), bmr::BrainModelSettings{}.skullGap, warnings);
+  const bmr::ContactSurface surface = bmr::ElectrodeReferenceSurface(colin.mask);
   bmr::ElectrodeLocalisationSettings settings;
   settings.detection.expectedContacts = 64;
-  const bmr::ElectrodeLocalisation normal = bmr::LocateElectrodes(ct.image, colin.image, surfaces.brain, settings);
+  const bmr::ElectrodeLocalisation normal = bmr::LocateElectrodes(ct.image, colin.image, surface, settings);
   settings.projectionDirection = truth.down;
-  const bmr::ElectrodeLocalisation located = bmr::LocateElectrodes(ct.image, colin.image, surfaces.brain, settings);
+  const bmr::ElectrodeLocalisation located = bmr::LocateElectrodes(ct.image, colin.image, surface, settings);
   ASSERT_EQ(located.contacts.size(), 64u);
   EXPECT_TRUE(located.warnings.empty());
 

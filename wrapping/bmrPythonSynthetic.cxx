@@ -200,10 +200,7 @@ BindElectrodes(py::module_ & module)
       {
         py::gil_scoped_release release;
         located = TranslateItkErrors([&] {
-          std::vector<std::string> ignored;
-          const BrainSurfaces      surfaces =
-            BrainSurfacesOfMask(MaskVolume(mask, "brain_mask"), BrainModelSettings{}.skullGap, ignored);
-          return LocateElectrodes(ctImage, mri, surfaces.brain, settings);
+          return LocateElectrodes(ctImage, mri, ElectrodeReferenceSurface(mask), settings);
         });
       }
       std::vector<Vector3> inCt;

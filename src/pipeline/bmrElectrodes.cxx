@@ -62,12 +62,13 @@ Quantile(std::vector<float> & values, double fraction)
 }
 
 /** Centroid (mm) of the voxels above `threshold`; throws when there are none. */
+template <typename TImage>
 Vector3
-CentroidAbove(const RegistrationImage * image, double threshold, const std::string & what)
+CentroidAbove(const TImage * image, double threshold, const std::string & what)
 {
   Vector3     sum = Vector3::Zero();
   std::size_t count = 0;
-  for (itk::ImageRegionConstIteratorWithIndex<RegistrationImage> it(image, image->GetBufferedRegion()); !it.IsAtEnd(); ++it)
+  for (itk::ImageRegionConstIteratorWithIndex<TImage> it(image, image->GetBufferedRegion()); !it.IsAtEnd(); ++it)
   {
     if (it.Get() > threshold)
     {
@@ -471,6 +472,19 @@ AlignCtToMri(const RegistrationImage * ct, const RegistrationImage * mri, const 
 // The whole localisation.
 // ---------------------------------------------------------------------------
 
+ContactSurface
+ElectrodeReferenceSurface(const RegistrationLabelImage * brainMask, std::vector<std::string> * warnings)
+{
+  std::vector<std::string> surfaceWarnings;
+  const BrainSurfaces      surfaces =
+    BrainSurfacesOfMask(MaskVolume(brainMask, "brain mask"), BrainModelSettings{}.skullGap, surfaceWarnings);
+  if (warnings != nullptr)
+  {
+    warnings->insert(warnings->end(), surfaceWarnings.begin(), surfaceWarnings.end());
+  }
+  return surfaces.brain;
+}
+
 ElectrodeLocalisation
 LocateElectrodes(const RegistrationImage *             ct,
                  const RegistrationImage *             mri,
@@ -530,11 +544,7 @@ MakeSyntheticElectrodeCt(const RegistrationImage *            preoperativeImage,
                                                                      (c - 0.5 * (settings.columns - 1)) * along));
     }
   }
-  // The brain's smooth surface (the model's own follows its cells' staircase).
-  std::vector<std::string> ignored;
-  const BrainSurfaces      surfaces =
-    BrainSurfacesOfMask(MaskVolume(brainMask, "brain mask"), BrainModelSettings{}.skullGap, ignored);
-  ct.preoperativeContacts = ProjectOntoSurface(planar, surfaces.brain, &down).points;
+  ct.preoperativeContacts = ProjectOntoSurface(planar, ElectrodeReferenceSurface(brainMask), &down).points;
   for (const Vector3 & contact : ct.preoperativeContacts)
   {
     ct.contacts.push_back(ToVector(truth.forwardTransform->TransformPoint(ToPoint(contact))));
@@ -542,24 +552,7 @@ MakeSyntheticElectrodeCt(const RegistrationImage *            preoperativeImage,
 
   // The head's position in the scanner: a rotation about the brain's centroid and a translation.
   ct.mriToCt = RigidTransform::New();
-  Vector3     centroid = Vector3::Zero();
-  std::size_t brainVoxels = 0;
-  for (itk::ImageRegionConstIteratorWithIndex<RegistrationLabelImage> it(brainMask, brainMask->GetBufferedRegion());
-       !it.IsAtEnd(); ++it)
-  {
-    if (it.Get() > 0)
-    {
-      itk::Point<double, 3> point;
-      brainMask->TransformIndexToPhysicalPoint(it.GetIndex(), point);
-      centroid += ToVector(point);
-      ++brainVoxels;
-    }
-  }
-  if (brainVoxels == 0)
-  {
-    throw Error("the synthetic CT's brain mask is empty");
-  }
-  ct.mriToCt->SetCenter(ToPoint(centroid / static_cast<double>(brainVoxels)));
+  ct.mriToCt->SetCenter(ToPoint(CentroidAbove(brainMask, 0.0, "brain mask of the synthetic CT")));
   const double degrees = std::acos(-1.0) / 180.0;
   ct.mriToCt->SetRotation(settings.rotation.x() * degrees, settings.rotation.y() * degrees,
                           settings.rotation.z() * degrees);
