@@ -221,43 +221,62 @@ ComponentMajor(const std::vector<double> & records, std::size_t width)
   return out;
 }
 
-// Cells of one type in a locality-preserving (Morton) order, cut into blocks of
-// consecutive cells, and the blocks coloured greedily so that blocks of one
-// colour share no node. Blocks of a colour are processed in parallel, each
-// sequentially, scattering forces without atomics; every node receives its
-// contributions in the same order whatever the number of threads.
-struct CellSchedule
-{
-  std::vector<Index> cells;         // model cell indices, colour by colour, block by block
-  std::vector<Index> blockOffsets;  // block b: cells [blockOffsets[b], blockOffsets[b + 1])
-  std::vector<Index> colourOffsets; // colour c: blocks [colourOffsets[c], colourOffsets[c + 1])
-};
-
-CellSchedule
+// The model's cells of one type, scheduled by ScheduleByColour (centres:
+// their centroids); the schedule's items are model cell indices.
+ColouredSchedule
 ScheduleCells(const Model & model, CellType type, Index blockSize)
 {
   const int           count = NodesPerCell(type);
-  std::vector<Index>  cells;
-  Eigen::AlignedBox3d box;
+  std::vector<Index>  cells, offsets{ 0 }, nodes;
+  std::vector<Vector3> centres;
   for (Index c = 0; c < static_cast<Index>(model.cells.size()); ++c)
   {
     if (model.cells[c].type == type)
     {
       cells.push_back(c);
+      Vector3 centre = Vector3::Zero();
+      for (int a = 0; a < count; ++a)
+      {
+        nodes.push_back(model.cells[c].nodes[a]);
+        centre += model.nodes[model.cells[c].nodes[a]];
+      }
+      offsets.push_back(static_cast<Index>(nodes.size()));
+      centres.push_back(centre / count);
     }
   }
-  for (const Vector3 & x : model.nodes)
+  ColouredSchedule schedule =
+    ScheduleByColour(offsets, nodes, centres, BoundingBox(model.nodes), static_cast<Index>(model.nodes.size()), blockSize);
+  for (Index & item : schedule.items)
+  {
+    item = cells[item];
+  }
+  return schedule;
+}
+
+} // namespace
+
+Eigen::AlignedBox3d
+BoundingBox(const std::vector<Vector3> & points)
+{
+  Eigen::AlignedBox3d box;
+  for (const Vector3 & x : points)
   {
     box.extend(x);
   }
+  return box;
+}
+
+ColouredSchedule
+ScheduleByColour(const std::vector<Index> &   offsets,
+                 const std::vector<Index> &   nodes,
+                 const std::vector<Vector3> & centres,
+                 const Eigen::AlignedBox3d &  box,
+                 Index                        nodeCount,
+                 Index                        blockSize)
+{
   const Vector3 extent = box.sizes().cwiseMax(1e-300);
-  auto          morton = [&](Index c) {
-    Vector3 centre = Vector3::Zero();
-    for (int a = 0; a < count; ++a)
-    {
-      centre += model.nodes[model.cells[c].nodes[a]];
-    }
-    const Vector3 unit = ((centre / count - box.min()).cwiseQuotient(extent)).cwiseMax(0.0).cwiseMin(1.0);
+  auto          morton = [&](const Vector3 & centre) {
+    const Vector3 unit = ((centre - box.min()).cwiseQuotient(extent)).cwiseMax(0.0).cwiseMin(1.0);
     std::uint64_t code = 0;
     for (int bit = 9; bit >= 0; --bit)
     {
@@ -270,26 +289,27 @@ ScheduleCells(const Model & model, CellType type, Index blockSize)
     return code;
   };
   std::vector<std::pair<std::uint64_t, Index>> keyed;
-  for (const Index c : cells)
+  for (Index item = 0; item < static_cast<Index>(centres.size()); ++item)
   {
-    keyed.emplace_back(morton(c), c);
+    keyed.emplace_back(morton(centres[item]), item);
   }
   std::stable_sort(keyed.begin(), keyed.end(), [](const auto & l, const auto & r) { return l.first < r.first; });
 
   // Greedy block colouring with a per-node bit mask of the colours touching it.
-  const Index                       blockCount = (static_cast<Index>(keyed.size()) + blockSize - 1) / blockSize;
-  std::vector<std::vector<Index>>   blocksOfColour;
-  std::vector<std::vector<std::uint64_t>> used(model.nodes.size());
+  const Index                             blockCount = (static_cast<Index>(keyed.size()) + blockSize - 1) / blockSize;
+  std::vector<std::vector<Index>>         blocksOfColour;
+  std::vector<std::vector<std::uint64_t>> used(nodeCount);
   for (Index b = 0; b < blockCount; ++b)
   {
-    const Index begin = b * blockSize;
-    const Index end = std::min<Index>(begin + blockSize, static_cast<Index>(keyed.size()));
+    const Index                begin = b * blockSize;
+    const Index                end = std::min<Index>(begin + blockSize, static_cast<Index>(keyed.size()));
     std::vector<std::uint64_t> taken;
     for (Index i = begin; i < end; ++i)
     {
-      for (int a = 0; a < count; ++a)
+      const Index item = keyed[i].second;
+      for (Index k = offsets[item]; k < offsets[item + 1]; ++k)
       {
-        const auto & mask = used[model.cells[keyed[i].second].nodes[a]];
+        const auto & mask = used[nodes[k]];
         taken.resize(std::max(taken.size(), mask.size()), 0);
         for (std::size_t w = 0; w < mask.size(); ++w)
         {
@@ -304,9 +324,10 @@ ScheduleCells(const Model & model, CellType type, Index blockSize)
     }
     for (Index i = begin; i < end; ++i)
     {
-      for (int a = 0; a < count; ++a)
+      const Index item = keyed[i].second;
+      for (Index k = offsets[item]; k < offsets[item + 1]; ++k)
       {
-        auto & mask = used[model.cells[keyed[i].second].nodes[a]];
+        auto & mask = used[nodes[k]];
         mask.resize(std::max(mask.size(), colour / 64 + 1), 0);
         mask[colour / 64] |= std::uint64_t{ 1 } << (colour % 64);
       }
@@ -318,7 +339,7 @@ ScheduleCells(const Model & model, CellType type, Index blockSize)
     blocksOfColour[colour].push_back(b);
   }
 
-  CellSchedule schedule;
+  ColouredSchedule schedule;
   schedule.blockOffsets.push_back(0);
   schedule.colourOffsets.push_back(0);
   for (const auto & blocks : blocksOfColour)
@@ -329,16 +350,14 @@ ScheduleCells(const Model & model, CellType type, Index blockSize)
       const Index end = std::min<Index>(begin + blockSize, static_cast<Index>(keyed.size()));
       for (Index i = begin; i < end; ++i)
       {
-        schedule.cells.push_back(keyed[i].second);
+        schedule.items.push_back(keyed[i].second);
       }
-      schedule.blockOffsets.push_back(static_cast<Index>(schedule.cells.size()));
+      schedule.blockOffsets.push_back(static_cast<Index>(schedule.items.size()));
     }
     schedule.colourOffsets.push_back(static_cast<Index>(schedule.blockOffsets.size()) - 1);
   }
   return schedule;
 }
-
-} // namespace
 
 FiniteElementForceModel::FiniteElementForceModel(const Model & model, const SolverSettings & settings, int threads)
   : m_Threads(std::max(1, threads))
@@ -351,15 +370,15 @@ FiniteElementForceModel::FiniteElementForceModel(const Model & model, const Solv
     m_CellTypes.push_back(cell.type);
   }
   // Kernel order: hexahedra, then tetrahedra, each colour by colour and block by block.
-  const CellSchedule hexSchedule = ScheduleCells(model, CellType::Hexahedron, kCellsPerBlock);
-  const CellSchedule tetSchedule = ScheduleCells(model, CellType::Tetrahedron, kCellsPerBlock);
-  m_ModelCell = hexSchedule.cells;
-  m_ModelCell.insert(m_ModelCell.end(), tetSchedule.cells.begin(), tetSchedule.cells.end());
+  const ColouredSchedule hexSchedule = ScheduleCells(model, CellType::Hexahedron, kCellsPerBlock);
+  const ColouredSchedule tetSchedule = ScheduleCells(model, CellType::Tetrahedron, kCellsPerBlock);
+  m_ModelCell = hexSchedule.items;
+  m_ModelCell.insert(m_ModelCell.end(), tetSchedule.items.begin(), tetSchedule.items.end());
   m_HexBlockOffsets = hexSchedule.blockOffsets;
   m_HexColourOffsets = hexSchedule.colourOffsets;
   m_TetBlockOffsets = tetSchedule.blockOffsets;
   m_TetColourOffsets = tetSchedule.colourOffsets;
-  const Index hexCount = static_cast<Index>(hexSchedule.cells.size());
+  const Index hexCount = static_cast<Index>(hexSchedule.items.size());
   const std::size_t cellCount = m_ModelCell.size();
   m_Volume.resize(cellCount);
   m_Mu.resize(cellCount);

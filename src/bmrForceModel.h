@@ -13,6 +13,7 @@
 #include "bmrSolver.h"
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 
 #include <string>
 #include <vector>
@@ -30,6 +31,32 @@ struct Energies
  *  integration units (cells or points), and the index of that unit. */
 double
 SmallestStableStep(const std::vector<double> & waveBound, const std::vector<double> & density, Index * unit);
+
+/** Work items (cells or integration points) in a locality-preserving (Morton)
+ *  order of their centres, cut into blocks of consecutive items, and the blocks
+ *  coloured greedily so that blocks of one colour share no node. Blocks of a
+ *  colour are processed in parallel, each sequentially, scattering forces
+ *  without atomics; every node then receives its contributions in the same
+ *  order whatever the number of threads. */
+struct ColouredSchedule
+{
+  std::vector<Index> items;         // item indices, colour by colour, block by block
+  std::vector<Index> blockOffsets;  // block b: items [blockOffsets[b], blockOffsets[b + 1])
+  std::vector<Index> colourOffsets; // colour c: blocks [colourOffsets[c], colourOffsets[c + 1])
+};
+
+/** Schedules items whose nodes are the rows of (offsets, nodes), with one
+ *  centre each; `box` is the frame of the Morton code (e.g. the model's nodes). */
+ColouredSchedule
+ScheduleByColour(const std::vector<Index> &   offsets,
+                 const std::vector<Index> &   nodes,
+                 const std::vector<Vector3> & centres,
+                 const Eigen::AlignedBox3d &  box,
+                 Index                        nodeCount,
+                 Index                        blockSize);
+
+Eigen::AlignedBox3d
+BoundingBox(const std::vector<Vector3> & points);
 
 /** Internal forces, masses and stable time steps of one discretization; the
  *  integrators see only this. Failures are reported by the index of the
@@ -206,6 +233,9 @@ private:
   template <typename PointMass>
   std::vector<double> LumpToNodes(const PointMass & pointMass) const;
 
+  /** Integration points per block of the parallel schedule (ScheduleByColour). */
+  static constexpr Index kPointsPerBlock = 32;
+
   int                  m_Threads;
   Index                m_NodeCount;
   ShapeFunctionTable   m_Table; // rows: integration points
@@ -215,11 +245,16 @@ private:
   std::vector<double>  m_Kappa;
   std::vector<double>  m_Density;
   std::vector<double>  m_WaveBound; // (lambda + 2 mu) n sum |grad phi|^2
-  // Transposed table: for node I, the points in its support and grad phi_I there.
-  std::vector<Index>  m_NodeOffsets;
-  std::vector<Index>  m_NodePoints;
-  std::vector<double> m_NodeGradients; // 3 per entry
-  std::vector<double> m_WeightedStress; // w_p P_p, 9 per point, per force evaluation
+  // The force kernel's copy of the table, in the order of the coloured
+  // schedule, so that one pass streams it once per step: per kernel point its
+  // integration point, weight and moduli; per entry the node and grad phi.
+  std::vector<Index>  m_KernelPoint;
+  std::vector<Index>  m_KernelBlockOffsets;
+  std::vector<Index>  m_KernelColourOffsets;
+  std::vector<Index>  m_KernelOffsets;
+  std::vector<Index>  m_KernelNodes;
+  std::vector<double> m_KernelGradients; // 3 per entry
+  std::vector<double> m_KernelMaterial;  // weight, mu, kappa per kernel point
 };
 
 } // namespace bmr

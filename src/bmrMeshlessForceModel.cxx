@@ -52,15 +52,14 @@ MeshlessForceModel::MeshlessForceModel(const Model & model, ShapeFunctionTable s
     m_WaveBound[p] = (m_Kappa[p] + 4.0 * m_Mu[p] / 3.0) * neighbours * gradientSquares;
   }
 
-  // Transpose: node -> (point, grad phi_I(x_p)), points ascending.
-  m_NodeOffsets.assign(m_NodeCount + 1, 0);
+  std::vector<Index> pointsOfNode(m_NodeCount, 0);
   for (const Index node : m_Table.nodes)
   {
-    ++m_NodeOffsets[node + 1];
+    ++pointsOfNode[node];
   }
   for (Index n = 0; n < m_NodeCount; ++n)
   {
-    if (m_NodeOffsets[n + 1] == 0)
+    if (pointsOfNode[n] == 0)
     {
       std::ostringstream message;
       const Vector3 &    x = model.nodes[n];
@@ -70,24 +69,31 @@ MeshlessForceModel::MeshlessForceModel(const Model & model, ShapeFunctionTable s
                  "or remove the node if it lies outside the body.";
       throw Error(message.str());
     }
-    m_NodeOffsets[n + 1] += m_NodeOffsets[n];
   }
-  m_NodePoints.resize(m_Table.nodes.size());
-  m_NodeGradients.resize(3 * m_Table.nodes.size());
-  std::vector<Index> fill(m_NodeOffsets.begin(), m_NodeOffsets.end() - 1);
-  for (Index p = 0; p < pointCount; ++p)
+
+  // The kernel's table in schedule order.
+  const ColouredSchedule schedule =
+    ScheduleByColour(m_Table.offsets, m_Table.nodes, m_Positions, BoundingBox(model.nodes), m_NodeCount, kPointsPerBlock);
+  m_KernelPoint = schedule.items;
+  m_KernelBlockOffsets = schedule.blockOffsets;
+  m_KernelColourOffsets = schedule.colourOffsets;
+  m_KernelOffsets.assign(1, 0);
+  m_KernelNodes.reserve(m_Table.nodes.size());
+  m_KernelGradients.reserve(m_Table.gradients.size());
+  m_KernelMaterial.reserve(3 * static_cast<std::size_t>(pointCount));
+  for (const Index p : m_KernelPoint)
   {
     for (Index k = m_Table.offsets[p]; k < m_Table.offsets[p + 1]; ++k)
     {
-      const Index slot = fill[m_Table.nodes[k]]++;
-      m_NodePoints[slot] = p;
+      m_KernelNodes.push_back(m_Table.nodes[k]);
       for (int j = 0; j < 3; ++j)
       {
-        m_NodeGradients[3 * slot + j] = m_Table.gradients[3 * k + j];
+        m_KernelGradients.push_back(m_Table.gradients[3 * k + j]);
       }
     }
+    m_KernelOffsets.push_back(static_cast<Index>(m_KernelNodes.size()));
+    m_KernelMaterial.insert(m_KernelMaterial.end(), { m_Weight[p], m_Mu[p], m_Kappa[p] });
   }
-  m_WeightedStress.assign(9 * static_cast<std::size_t>(pointCount), 0.0);
 }
 
 Eigen::Matrix3d
@@ -116,47 +122,65 @@ MeshlessForceModel::DeformationGradientAt(Index p, const double * u) const
 Index
 MeshlessForceModel::ComputeInternalForces(const double * u, double * f)
 {
-  const Index pointCount = m_Table.PointCount();
-  Index       firstInverted = std::numeric_limits<Index>::max();
-  // Pass 1: w_p P_p at every point.
-#pragma omp parallel for num_threads(m_Threads) schedule(static) reduction(min : firstInverted)
-  for (Index p = 0; p < pointCount; ++p)
+  // One pass per point: F from its neighbours, w P, and f_I += w P grad phi_I
+  // scattered to the same neighbours while their gradients are at hand.
+  // Blocks of one colour share no node, so the scatter needs no atomics and
+  // each node sums its contributions in schedule order for any thread count.
+  const std::size_t dofCount = 3 * static_cast<std::size_t>(m_NodeCount);
+  const Index *     nodes = m_KernelNodes.data();
+  const double *    gradients = m_KernelGradients.data();
+  Index             firstInverted = std::numeric_limits<Index>::max();
+#pragma omp parallel num_threads(m_Threads) reduction(min : firstInverted)
   {
-    const Eigen::Matrix3d F = DeformationGradientAt(p, u);
-    const Eigen::Matrix3d cof = Cofactor(F);
-    const double          J = F.col(0).dot(cof.col(0));
-    double *              wP = m_WeightedStress.data() + 9 * static_cast<std::size_t>(p);
-    if (!(J > 0.0))
+#pragma omp for schedule(static)
+    for (std::size_t d = 0; d < dofCount; ++d)
     {
-      firstInverted = std::min(firstInverted, p);
-      std::fill(wP, wP + 9, 0.0);
-      continue;
+      f[d] = 0.0;
     }
-    const Eigen::Matrix3d P = m_Weight[p] * FirstPiola(F, cof, J, J, m_Mu[p], m_Kappa[p]);
-    for (int i = 0; i < 3; ++i)
+    for (std::size_t colour = 0; colour + 1 < m_KernelColourOffsets.size(); ++colour)
     {
-      for (int j = 0; j < 3; ++j)
+#pragma omp for schedule(dynamic, 1)
+      for (Index block = m_KernelColourOffsets[colour]; block < m_KernelColourOffsets[colour + 1]; ++block)
       {
-        wP[3 * i + j] = P(i, j);
+        for (Index q = m_KernelBlockOffsets[block]; q < m_KernelBlockOffsets[block + 1]; ++q)
+        {
+          const Index begin = m_KernelOffsets[q], end = m_KernelOffsets[q + 1];
+          double      F[3][3] = { { 1, 0, 0 }, { 0, 1, 0 }, { 0, 0, 1 } };
+          for (Index k = begin; k < end; ++k)
+          {
+            const double * uI = u + 3 * static_cast<std::size_t>(nodes[k]);
+            const double * g = gradients + 3 * static_cast<std::size_t>(k);
+            for (int i = 0; i < 3; ++i)
+            {
+              for (int j = 0; j < 3; ++j)
+              {
+                F[i][j] += uI[i] * g[j];
+              }
+            }
+          }
+          Eigen::Matrix3d Fm;
+          Fm << F[0][0], F[0][1], F[0][2], F[1][0], F[1][1], F[1][2], F[2][0], F[2][1], F[2][2];
+          const Eigen::Matrix3d cof = Cofactor(Fm);
+          const double          J = Fm.col(0).dot(cof.col(0));
+          if (!(J > 0.0))
+          {
+            firstInverted = std::min(firstInverted, m_KernelPoint[q]);
+            continue; // forces are meaningless now; the caller stops
+          }
+          const double *        material = m_KernelMaterial.data() + 3 * static_cast<std::size_t>(q);
+          const Eigen::Matrix3d P = material[0] * FirstPiola(Fm, cof, J, J, material[1], material[2]);
+          for (Index k = begin; k < end; ++k)
+          {
+            double *       fI = f + 3 * static_cast<std::size_t>(nodes[k]);
+            const double * g = gradients + 3 * static_cast<std::size_t>(k);
+            for (int i = 0; i < 3; ++i)
+            {
+              fI[i] += P(i, 0) * g[0] + P(i, 1) * g[1] + P(i, 2) * g[2];
+            }
+          }
+        }
       }
     }
-  }
-  // Pass 2: f_I = sum_p (w P)_p grad phi_I(x_p), gathered per node in a fixed order.
-#pragma omp parallel for num_threads(m_Threads) schedule(static)
-  for (Index n = 0; n < m_NodeCount; ++n)
-  {
-    double fx = 0.0, fy = 0.0, fz = 0.0;
-    for (Index k = m_NodeOffsets[n]; k < m_NodeOffsets[n + 1]; ++k)
-    {
-      const double * wP = m_WeightedStress.data() + 9 * static_cast<std::size_t>(m_NodePoints[k]);
-      const double * g = m_NodeGradients.data() + 3 * static_cast<std::size_t>(k);
-      fx += wP[0] * g[0] + wP[1] * g[1] + wP[2] * g[2];
-      fy += wP[3] * g[0] + wP[4] * g[1] + wP[5] * g[2];
-      fz += wP[6] * g[0] + wP[7] * g[1] + wP[8] * g[2];
-    }
-    f[3 * n] = fx;
-    f[3 * n + 1] = fy;
-    f[3 * n + 2] = fz;
   }
   return firstInverted == std::numeric_limits<Index>::max() ? -1 : firstInverted;
 }
