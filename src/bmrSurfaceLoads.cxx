@@ -343,6 +343,8 @@ namespace
 {
 // A directed projection's ray starts this far (mm) before the point: outside the brain for a point on its surface.
 constexpr double kProjectionReach = 50.0;
+// Passes of the neighbour-median refinement of the exposed surface's matches.
+constexpr int kMatchRefinements = 2;
 
 /** The parameter t of the first intersection of the ray point + t direction,
  *  t > -reach, with the surface (Moeller-Trumbore against every triangle),
@@ -483,33 +485,89 @@ DisplacementsBetweenSurfaces(const Model &               model,
     throw Error(std::string(function) + ": no visible vertex of the preoperative surface meets the " +
                 intraoperativeSurface.name + " along the match direction " + FormatPoint(*settings.matchDirection));
   }
-  // Closest points jump where the motion is larger than the features (the rim
-  // of a sulcus or of the fissure: the match lands on the other side). A
-  // match that differs from the median of its neighbours by more than
-  // max(1 mm, 20 %) is an outlier and left out.
-  std::vector<Vector3> points, displacements;
-  std::size_t          outliers = 0;
-  for (std::size_t k = 0; k < scanned.size(); ++k)
-  {
-    std::array<std::vector<double>, 3> neighbours;
-    for (std::size_t j = 0; j < scanned.size(); ++j)
+  // Closest points (and rays) jump where the motion is larger than the
+  // features: at the rim of a sulcus or of the fissure the match lands on the
+  // other side. Each match is therefore refined from its neighbours: a robust
+  // local linear fit of their matches (over the lateral coordinates, so that
+  // the prediction is unbiased where the motion varies and at the patch's
+  // edge) predicts where the vertex went, and the closest point of the
+  // displaced surface to that prediction is its match (the prediction's error
+  // is mostly normal to the surface, so the snap removes it while the
+  // neighbours' tangential motion stays). A match that still differs from the
+  // prediction by more than max(1 mm, 20 %) is an outlier.
+  auto acceptable = [](const Vector3 & value, const Vector3 & predicted, double slack) {
+    return (value - predicted).norm() <= slack * std::max(1.0, 0.2 * predicted.norm());
+  };
+  auto neighbourPredictions = [&](const std::vector<Vector3> & values) {
+    std::vector<Vector3> predictions(values.size());
+    for (std::size_t k = 0; k < scanned.size(); ++k)
     {
-      if ((scanned[j] - scanned[k]).norm() <= 2.5 * spacing)
+      std::vector<std::size_t>           neighbours;
+      std::array<std::vector<double>, 3> components;
+      for (std::size_t j = 0; j < scanned.size(); ++j)
       {
-        for (int axis = 0; axis < 3; ++axis)
+        if ((scanned[j] - scanned[k]).norm() <= 2.5 * spacing)
         {
-          neighbours[axis].push_back(matched[j][axis]);
+          neighbours.push_back(j);
+          for (int axis = 0; axis < 3; ++axis)
+          {
+            components[axis].push_back(values[j][axis]);
+          }
         }
       }
+      Vector3 median;
+      for (int axis = 0; axis < 3; ++axis)
+      {
+        auto & component = components[axis];
+        std::nth_element(component.begin(), component.begin() + component.size() / 2, component.end());
+        median[axis] = component[component.size() / 2];
+      }
+      // Weighted least squares of value = a + B (lateral offset): first over
+      // the neighbours near the median (3 times the outlier bound), then over
+      // those near that fit.
+      Vector3 predicted = median;
+      for (const double slack : { 3.0, 1.0 })
+      {
+        Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();
+        Eigen::Matrix3d right = Eigen::Matrix3d::Zero(); // column axis: sum of basis * value
+        int             used = 0;
+        for (const std::size_t j : neighbours)
+        {
+          if (!acceptable(values[j], predicted, slack))
+          {
+            continue;
+          }
+          const Vector3 offset = scanned[j] - scanned[k];
+          const Vector3 basis(1.0, offset.dot(across1), offset.dot(across2));
+          normal += basis * basis.transpose();
+          right += basis * values[j].transpose();
+          ++used;
+        }
+        const Eigen::FullPivLU<Eigen::Matrix3d> lu(normal);
+        if (used < 6 || lu.rank() < 3)
+        {
+          break; // too few for a plane: keep the median
+        }
+        predicted = lu.solve(right).row(0).transpose();
+      }
+      predictions[k] = predicted;
     }
-    Vector3 median;
-    for (int axis = 0; axis < 3; ++axis)
+    return predictions;
+  };
+  for (int pass = 0; pass < kMatchRefinements; ++pass)
+  {
+    const std::vector<Vector3> predictions = neighbourPredictions(matched);
+    for (std::size_t k = 0; k < scanned.size(); ++k)
     {
-      auto & values = neighbours[axis];
-      std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
-      median[axis] = values[values.size() / 2];
+      matched[k] = surface.Closest(scanned[k] + predictions[k]).point - scanned[k];
     }
-    if ((matched[k] - median).norm() > std::max(1.0, 0.2 * median.norm()))
+  }
+  const std::vector<Vector3> predictions = neighbourPredictions(matched);
+  std::vector<Vector3>       points, displacements;
+  std::size_t                outliers = 0;
+  for (std::size_t k = 0; k < scanned.size(); ++k)
+  {
+    if (!acceptable(matched[k], predictions[k], 1.0))
     {
       ++outliers;
       continue;
