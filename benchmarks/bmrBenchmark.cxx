@@ -454,7 +454,8 @@ RunBrainCase(double spacing, const std::string & kind, int threads, int throughp
     const double entries = static_cast<double>(table.nodes.size());
     out["table_entries"] = entries;
     out["mean_neighbours"] = entries / std::max<Index>(1, table.PointCount());
-    out["table_bytes"] = entries * (sizeof(Index) + 8.0 + 24.0) * 2.0;
+    // The per-point table (node, value, gradient) and the force kernel's copy in schedule order (node, gradient).
+    out["table_bytes"] = entries * ((sizeof(Index) + 8.0 + 24.0) + (sizeof(Index) + 24.0));
   }
   return out;
 }
@@ -1014,8 +1015,9 @@ Driver(const Options & options, const std::string & self)
            << "spacing, EBCIEM), then the same dynamic relaxation to 0.01 mm. Precomputation: \"integration points\" is "
            << "bmr::MakeMeshlessFromCells (background grid, inside test, materials); \"solver construction\" is the "
            << "bmr::Solver constructor (k-d tree neighbour search, MLS shape functions and derivatives at the integration "
-           << "points and the nodes, force model, transposed tables). Shape-function table memory = entries x (4 + 8 + 24) "
-           << "bytes (node index, value, gradient) x 2 (the per-integration-point table and its per-node transpose), "
+           << "points and the nodes, force model, the force kernel's schedule). Shape-function table memory = entries x "
+           << "((4 + 8 + 24) + (4 + 24)) bytes (the per-integration-point table: node index, value, gradient; the force "
+           << "kernel's copy in its schedule's order: node index, gradient), "
            << "entries = integration points x mean neighbours (estimate; the nodal EBCIEM table is not counted). "
            << "Medians over the rounds.\n\n"
            << "| Threads | Integration points | Points / node | Mean neighbours / point | Table entries | Table memory MiB | "

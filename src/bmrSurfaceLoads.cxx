@@ -601,8 +601,9 @@ DisplacementsBetweenSurfaces(const Model &               model,
   {
     report->rejectedPoints += outliers;
     report->warnings.push_back(std::to_string(outliers) + " of " + std::to_string(scanned.size()) +
-                               " exposed-surface matches differ from their neighbours' by more than max(1 mm, 20%) "
-                               "(closest points across a sulcus or the fissure) and are left out of the load");
+                               " exposed-surface matches differ from their neighbours' local fit by more than max(1 mm, 20%) "
+                               "even after being refined from it (matches across a sulcus or the fissure) and are "
+                               "left out of the load");
   }
   if (report != nullptr && missed > 0)
   {

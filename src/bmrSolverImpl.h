@@ -1,0 +1,120 @@
+// Private to the core: the solver's state shared by its translation units
+// (bmrSolver.cxx: set-up, constraints, the step's checks and the result;
+// bmrSolverContact.cxx: rigid surfaces and tools; bmrSolverIntegrators.cxx:
+// dynamic relaxation and explicit dynamics).
+#ifndef bmrSolverImpl_h
+#define bmrSolverImpl_h
+
+#include "bmrSolver.h"
+
+#include "bmrContact.h"
+#include "bmrEssentialBoundary.h"
+#include "bmrForceModel.h"
+#include "bmrMeshless.h"
+#include "bmrToolContact.h"
+#include "bmrToolStress.h"
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace bmr
+{
+
+struct ConstrainedDof
+{
+  Index  dof;
+  double value; // mm at full load
+  int    curve; // index into the solver's curves; -1 for fixed (value 0)
+};
+
+inline std::string
+StepLabel(int step)
+{
+  return "step " + std::to_string(step);
+}
+
+struct Solver::Impl
+{
+  Model                                      model;
+  SolverSettings                             settings;
+  int                                        threads = 1;
+  std::unique_ptr<ForceModel>                forces;
+  std::vector<std::unique_ptr<RigidContact>> contacts;
+  std::vector<std::unique_ptr<ToolContact>>  tools;
+  std::vector<ToolLoad>                      toolLoads; // of the last step
+  std::vector<std::unique_ptr<ToolStressRegion>> stressRegions; // per tool; null without a region
+  std::vector<Vector3>                       correctedForces;   // of the last step, per tool
+  std::vector<double>                        physicalMass;
+  std::vector<ConstrainedDof>                constrained;
+  std::vector<LoadCurve>                     curves;
+  std::vector<char>                          dofConstrained;
+  std::vector<char>                          nodeConstrained;
+  std::vector<double>                        gravityForce; // N at full load
+  std::vector<std::string>                   components;
+  double                                     criticalTimeStep = 0.0;
+  Index                                      criticalCell = -1;
+  double                                     lengthScale = 1.0;
+
+  // Meshless only: shape functions at the nodes (physical displacement =
+  // Phi u), the EBCIEM projection (built per solve, with that solve's masses),
+  // and the contact slave nodes with a buffer of their physical displacements.
+  bool                               meshless = false;
+  std::unique_ptr<MovingLeastSquares> shapeFunctions;
+  ShapeFunctionTable                 nodeShapes;
+  std::unique_ptr<EssentialBoundary> essential;
+  std::vector<Index>                 contactSlaves;
+  // Meshless contact, per step: interpolated positions projected onto the
+  // surfaces, the slaves penetrating at the last detection with the surface
+  // normals there (per contact), per node in contact its normal and target
+  // n . u, those slaves (ascending) and, per slave, sum_K phi_K^2 (n . M_K^-1 n)
+  // over its movable parameters; the parameters (dofs) that EBCIEM's
+  // constrained rows interpolate.
+  std::vector<double>                projectedBuffer;
+  std::vector<char>                  penetrating;
+  std::vector<Vector3>               slaveNormals;
+  std::vector<Vector3>               contactNormals;
+  std::vector<double>                contactTargets;
+  std::vector<Index>                 activeSlaves;
+  std::vector<double>                activeNorms;
+  std::vector<char>                  essentialSupport;
+  std::vector<double>                constraintTargets; // EBCIEM, per step
+
+  Impl(const Model & m, const SolverSettings & s);
+  void        CheckSettings() const;
+  void        BuildConstraints();
+  void        ApplyConstraints(double * u, const std::vector<double> & curveFactors);
+  void        PrepareEssentialBoundary(const std::vector<double> & mass);
+  void        EnforceContact(double * u, std::vector<char> & inContact, const std::vector<double> & inverseMass);
+  /** `time`: seconds in explicit dynamics; in dynamic relaxation the fraction
+   *  of each tool's trajectory (a ramp from its first to its last pose). */
+  void        EnforceTools(double * u, const double * previous, std::vector<char> & inContact,
+                           const std::vector<double> & inverseMass, double alpha, double time);
+  /** Appends the tools' poses and last-step loads to their histories. */
+  void        RecordTools(std::vector<ToolHistory> & histories) const;
+  void        EnforceMeshlessContact(double * u, std::vector<char> & inContact, const std::vector<double> & inverseMass);
+  std::vector<double> PhysicalDisplacements(const std::vector<double> & u) const;
+  void        CentralDifferenceStep(const std::vector<double> & u,
+                                    const std::vector<double> & uPrevious,
+                                    const std::vector<double> & f,
+                                    const std::vector<double> & inverseMass,
+                                    double                      alpha,
+                                    double                      beta,
+                                    double                      gravityFactor,
+                                    const std::vector<double> & curveFactors,
+                                    std::vector<double> &       uNext,
+                                    std::vector<char> &         inContact,
+                                    double                      toolTime);
+  void        CheckForces(Index inverted, int step, bool explicitDynamics, double timeStep) const;
+  void        CheckIncrement(const std::vector<double> & next, const std::vector<double> & current, Index bad, int step,
+                             bool explicitDynamics, double timeStep) const;
+  void        CheckHexahedronCorners(const std::vector<double> & u, int step) const;
+  SolveResult Finish(const std::vector<double> & u, const std::vector<char> & inContact, double gravityFactor, int steps);
+  double      LargestEigenvalueEstimate(const std::vector<double> & mass);
+  SolveResult SolveDynamicRelaxation(const ProgressCallback & progress);
+  SolveResult SolveExplicitDynamics(const ProgressCallback & progress, const FrameCallback & frames);
+};
+
+} // namespace bmr
+
+#endif

@@ -1,0 +1,518 @@
+#include "bmrSolverImpl.h"
+
+#include "bmrShape.h"
+#include "bmrUnits.h"
+
+#include <Eigen/Geometry>
+#include <omp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <deque>
+#include <limits>
+#include <sstream>
+
+namespace bmr
+{
+
+namespace
+{
+
+// Dynamic relaxation: power iterations for the largest eigenvalue, the margin
+// put on that estimate, the increment growth over one adaptation window that
+// counts as divergence, and the restarts allowed, each with masses this much heavier.
+constexpr int    kPowerIterations = 30;
+constexpr double kEigenvalueMargin = 1.1;
+constexpr double kGrowthLimit = 10.0;
+constexpr double kSignificantIncrement = 1e-4; // of the body's size
+constexpr int    kMaxRestarts = 6;
+constexpr double kRestartMassFactor = 2.0;
+
+// Fixed block partition: sums do not depend on the number of threads.
+constexpr Index kReductionBlocks = 64;
+
+template <typename Term>
+double
+DeterministicSum(Index count, int threads, const Term & term)
+{
+  double partial[kReductionBlocks];
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (Index b = 0; b < kReductionBlocks; ++b)
+  {
+    const Index begin = static_cast<Index>(static_cast<std::int64_t>(count) * b / kReductionBlocks);
+    const Index end = static_cast<Index>(static_cast<std::int64_t>(count) * (b + 1) / kReductionBlocks);
+    double      sum = 0.0;
+    for (Index i = begin; i < end; ++i)
+    {
+      sum += term(i);
+    }
+    partial[b] = sum;
+  }
+  double total = 0.0;
+  for (const double p : partial)
+  {
+    total += p;
+  }
+  return total;
+}
+
+// Size of one step's change of the displacements, in one pass over the dofs:
+// largest and root-sum-square increment, and the first unconstrained dof whose
+// increment is not finite or larger than `limit`.
+struct IncrementStatistics
+{
+  double maxAbs = 0.0;
+  double norm = 0.0;
+  Index  firstBad = -1;
+};
+
+IncrementStatistics
+MeasureIncrement(const std::vector<double> & next,
+                 const std::vector<double> & current,
+                 const std::vector<char> &   constrained,
+                 double                      limit,
+                 int                         threads)
+{
+  const Index count = static_cast<Index>(next.size());
+  double      maxima[kReductionBlocks], sums[kReductionBlocks];
+  Index       bad[kReductionBlocks];
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (Index b = 0; b < kReductionBlocks; ++b)
+  {
+    const Index begin = static_cast<Index>(static_cast<std::int64_t>(count) * b / kReductionBlocks);
+    const Index end = static_cast<Index>(static_cast<std::int64_t>(count) * (b + 1) / kReductionBlocks);
+    double      largest = 0.0, sum = 0.0;
+    Index       firstBad = -1;
+    for (Index d = begin; d < end; ++d)
+    {
+      const double du = std::abs(next[d] - current[d]);
+      // A prescribed jump is the user's load, not instability.
+      if (!(du <= limit) && firstBad < 0 && !constrained[d])
+      {
+        firstBad = d;
+      }
+      largest = std::max(largest, du);
+      sum += du * du;
+    }
+    maxima[b] = largest;
+    sums[b] = sum;
+    bad[b] = firstBad;
+  }
+  IncrementStatistics statistics;
+  for (Index b = 0; b < kReductionBlocks; ++b)
+  {
+    statistics.maxAbs = std::max(statistics.maxAbs, maxima[b]);
+    statistics.norm += sums[b];
+    if (statistics.firstBad < 0)
+    {
+      statistics.firstBad = bad[b];
+    }
+  }
+  statistics.norm = std::sqrt(statistics.norm);
+  return statistics;
+}
+} // namespace
+
+double
+Solver::Impl::LargestEigenvalueEstimate(const std::vector<double> & mass)
+{
+  // Power iteration on M^-1 K at the reference state, K v by the force of a
+  // tiny displacement (linear there). A fixed pseudo-random start and fixed
+  // sums keep it deterministic.
+  const Index         dofCount = static_cast<Index>(3 * model.nodes.size());
+  std::vector<double> v(dofCount), f(dofCount);
+  std::uint64_t       state = 0x9E3779B97F4A7C15ull;
+  for (double & x : v)
+  {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    x = static_cast<double>(state >> 11) * 0x1.0p-53 - 0.5;
+  }
+  double estimate = 0.0;
+  for (int iteration = 0; iteration < kPowerIterations; ++iteration)
+  {
+    const double norm = std::sqrt(DeterministicSum(dofCount, threads, [&](Index d) { return mass[d / 3] * v[d] * v[d]; }));
+    const double largest = *std::max_element(v.begin(), v.end(), [](double l, double r) { return std::abs(l) < std::abs(r); });
+    const double scale = 1e-8 * lengthScale / std::max(std::abs(largest), 1e-300);
+    for (double & x : v)
+    {
+      x *= scale;
+    }
+    CheckForces(forces->ComputeInternalForces(v.data(), f.data()), 0, false, 1.0);
+    const double numerator = DeterministicSum(dofCount, threads, [&](Index d) { return v[d] * f[d]; });
+    const double denominator = norm * norm * scale * scale;
+    estimate = numerator / denominator;
+    for (Index d = 0; d < dofCount; ++d)
+    {
+      v[d] = f[d] / mass[d / 3];
+    }
+  }
+  return estimate;
+}
+
+SolveResult
+Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
+{
+  // Pseudo-time step 1 and masses scaled cell by cell to the cells' stiffness,
+  // which preconditions the iteration by the local stiffness (stiffness
+  // contrasts and graded meshes cost nothing extra). The element bound on the
+  // largest eigenvalue is pessimistic for an assembled mesh (2 to 4 times), so
+  // the masses are then scaled globally to a power-iteration estimate of it:
+  // fewer steps for the same stability margin (safety_factor).
+  constexpr double    h = 1.0;
+  const double        safety = settings.timeStepSafetyFactor;
+  const double        omegaMax = 2.0 * safety / h;
+  const Index         dofCount = static_cast<Index>(3 * model.nodes.size());
+  std::vector<double> mass = forces->ScaledMasses(h, 1.0); // element bound: omega_max <= 2
+  const double        boundScale = 1.0 / (safety * safety);
+  const double        largest = LargestEigenvalueEstimate(mass);
+  const double massScale = std::clamp(kEigenvalueMargin * largest / (omegaMax * omegaMax), 1e-3 * boundScale, boundScale);
+
+  std::vector<double> u(dofCount, 0.0), uPrevious(dofCount, 0.0), uNext(dofCount, 0.0);
+  std::vector<double> f(dofCount, 0.0), fPrevious(dofCount, 0.0), inverseMass(dofCount);
+  auto                scaleMasses = [&](double factor) {
+    for (double & m : mass)
+    {
+      m *= factor;
+    }
+    for (Index d = 0; d < dofCount; ++d)
+    {
+      inverseMass[d] = 1.0 / mass[d / 3];
+    }
+  };
+  scaleMasses(massScale);
+  PrepareEssentialBoundary(mass); // uniform rescaling on restart leaves the projection unchanged
+  std::vector<char>   inContact(model.nodes.size(), 0);
+  std::vector<double> curveFactors(curves.size(), 0.0);
+
+  // Damping for the current estimate of the lowest eigenvalue: critical damping
+  // of that mode, c = omega sqrt(4 - h^2 omega^2), double root sqrt(beta).
+  double lowestEigenvalue = 0.01 * omegaMax * omegaMax;
+  double alpha = 0.0, beta = 0.0;
+  auto   betaFor = [&](double lambda) {
+    const double c = std::sqrt(lambda) * std::sqrt(std::max(0.0, 4.0 - h * h * lambda));
+    return (2.0 - c * h) / (2.0 + c * h);
+  };
+  auto setDamping = [&](double lambda) {
+    lowestEigenvalue = std::clamp(lambda, 1e-16 * omegaMax * omegaMax, omegaMax * omegaMax);
+    const double omega = std::sqrt(lowestEigenvalue);
+    const double c = omega * std::sqrt(std::max(0.0, 4.0 - h * h * lowestEigenvalue));
+    alpha = 2.0 * h * h / (2.0 + c * h);
+    beta = (2.0 - c * h) / (2.0 + c * h);
+  };
+  setDamping(lowestEigenvalue);
+  // The smallest lowest-eigenvalue estimate since the loads were applied: the
+  // error estimate uses its rate, as the current estimate can jump up (to
+  // the higher modes that dominate right after a restart or a contact event)
+  // and would then declare convergence while the slowest mode still creeps.
+  double slowestEigenvalue = std::numeric_limits<double>::infinity();
+
+  const int          window = settings.adaptInterval;
+  std::deque<double> incrementNorms; // last window + 1 values of ||du||_2
+  double             estimatedError = std::numeric_limits<double>::infinity();
+  double             rate = 1.0;
+  int                satisfied = 0;
+  int                step = 0;
+  bool               converged = false;
+  double             gravityFactor = 0.0;
+  int                restarts = 0;
+  auto               loadFactor = [&](const LoadCurve & curve, int k) {
+    return curve.Factor(static_cast<double>(k) / settings.loadSteps);
+  };
+
+  // Checkpoint for restarts: stiffening under large deformation can outgrow
+  // the reference-state estimate of the largest eigenvalue. Dynamic relaxation
+  // only seeks the steady state, so it may restart from the last good state at
+  // rest with heavier masses.
+  std::vector<double>         checkpoint(u);
+  int                         checkpointStep = 0;
+  std::unique_ptr<SolveError> firstFailure;
+
+  for (step = 0; step < settings.maxSteps; ++step)
+  {
+    try
+    {
+      CheckForces(forces->ComputeInternalForces(u.data(), f.data()), step, false, h);
+
+      if (step > 0 && step % window == 0)
+      {
+        // Rayleigh quotient of the last increment: tends to the lowest eigenvalue
+        // as the higher modes die out.
+        const double numerator = DeterministicSum(dofCount, threads, [&](Index d) {
+          return dofConstrained[d] ? 0.0 : (u[d] - uPrevious[d]) * (f[d] - fPrevious[d]);
+        });
+        const double denominator = DeterministicSum(dofCount, threads, [&](Index d) {
+          const double du = u[d] - uPrevious[d];
+          return dofConstrained[d] ? 0.0 : mass[d / 3] * du * du;
+        });
+        if (numerator > 0.0 && denominator > 0.0)
+        {
+          setDamping(numerator / denominator);
+          if (step > settings.loadSteps)
+          {
+            slowestEigenvalue = std::min(slowestEigenvalue, lowestEigenvalue);
+          }
+        }
+      }
+
+      gravityFactor = gravityForce.empty() ? 0.0 : loadFactor(model.bodyForceCurve, step);
+      for (std::size_t k = 0; k < curves.size(); ++k)
+      {
+        curveFactors[k] = loadFactor(curves[k], step + 1);
+      }
+      CentralDifferenceStep(u, uPrevious, f, inverseMass, alpha, beta, gravityFactor, curveFactors, uNext, inContact,
+                            LoadCurve{}.Factor(static_cast<double>(step + 1) / settings.loadSteps));
+
+      const IncrementStatistics increment = MeasureIncrement(uNext, u, dofConstrained, lengthScale, threads);
+      CheckIncrement(uNext, u, increment.firstBad, step, false, h);
+      incrementNorms.push_back(increment.norm);
+      if (static_cast<int>(incrementNorms.size()) > window + 1)
+      {
+        incrementNorms.pop_front();
+      }
+      // Divergence: increments growing tenfold within a window once the loads
+      // are applied, and no longer negligible (round-off and contact events
+      // near convergence may jump by large factors from tiny values).
+      if (step + 1 > settings.loadSteps && static_cast<int>(incrementNorms.size()) == window + 1 &&
+          incrementNorms.back() > kGrowthLimit * incrementNorms.front() &&
+          increment.maxAbs > kSignificantIncrement * lengthScale)
+      {
+        std::ostringstream message;
+        message << "dynamic relaxation diverged at " << StepLabel(step) << ": the displacement increments grew "
+                << kGrowthLimit << "-fold within " << window
+                << " steps. Likely cause: stiffening beyond the time-step estimate (lower safety_factor).";
+        throw SolveError(message.str(), step, -1);
+      }
+      std::swap(uPrevious, u);
+      std::swap(u, uNext);
+      std::swap(f, fPrevious);
+
+      // Termination (Joldes et al. 2009): distance to the solution estimated as
+      // rate / (1 - rate) * ||du||_inf, with the rate the largest of the observed
+      // decay and the theoretical rate sqrt(beta) of the current and of the
+      // slowest lowest-mode estimate.
+      if (step + 1 >= settings.loadSteps && static_cast<int>(incrementNorms.size()) == window + 1)
+      {
+        const double observed = incrementNorms.front() > 0.0
+                                  ? std::pow(incrementNorms.back() / incrementNorms.front(), 1.0 / window)
+                                  : 0.0;
+        const double slowest = std::isfinite(slowestEigenvalue) ? betaFor(slowestEigenvalue) : beta;
+        rate = std::max(observed, std::sqrt(std::max(std::max(beta, slowest), 0.0)));
+        estimatedError = rate < 1.0 ? rate / (1.0 - rate) * increment.maxAbs : std::numeric_limits<double>::infinity();
+        satisfied = estimatedError < settings.tolerance ? satisfied + 1 : 0;
+        if (satisfied >= window)
+        {
+          converged = true;
+          ++step;
+          break;
+        }
+      }
+      if ((step + 1) % window == 0)
+      {
+        checkpoint = u;
+        checkpointStep = step + 1;
+      }
+    }
+    catch (const SolveError & failure)
+    {
+      if (!firstFailure)
+      {
+        firstFailure = std::make_unique<SolveError>(failure);
+      }
+      if (restarts == kMaxRestarts)
+      {
+        // The first failure names the cell or node where it started.
+        throw SolveError(std::string(firstFailure->what()) + " Restarting " + std::to_string(kMaxRestarts) +
+                           " times from the last good state with heavier masses did not help.",
+                         firstFailure->Step(), firstFailure->Element());
+      }
+      ++restarts;
+      scaleMasses(kRestartMassFactor);
+      setDamping(lowestEigenvalue / kRestartMassFactor);
+      slowestEigenvalue /= kRestartMassFactor;
+      u = checkpoint;
+      uPrevious = checkpoint;
+      step = checkpointStep - 1;
+      incrementNorms.clear();
+      satisfied = 0;
+      continue;
+    }
+    if (progress && (step + 1) % 200 == 0)
+    {
+      progress(step + 1, -1.0, estimatedError);
+    }
+  }
+
+  SolveResult result = Finish(u, inContact, gravityFactor, step);
+  if (!tools.empty())
+  {
+    RecordTools(result.tools); // the steady state; the work of pseudo-time steps means nothing
+    for (ToolHistory & history : result.tools)
+    {
+      history.work = 0.0;
+    }
+  }
+  result.converged = converged;
+  result.steps = step;
+  result.timeStep = h;
+  result.estimatedError = estimatedError;
+  result.convergenceRate = rate;
+  result.restarts = restarts;
+  std::ostringstream message;
+  if (converged)
+  {
+    message << "converged: estimated error " << estimatedError << " mm < tolerance " << settings.tolerance << " mm";
+  }
+  else
+  {
+    message << "NOT CONVERGED: estimated error " << estimatedError << " mm after " << step
+            << " steps is above the tolerance " << settings.tolerance
+            << " mm. Increase max_steps, loosen the tolerance, or check that the model is constrained "
+               "against rigid-body motion.";
+  }
+  if (restarts > 0)
+  {
+    message << " (" << restarts << " restart(s) with heavier masses after the deformation stiffened the model)";
+  }
+  result.message = message.str();
+  return result;
+}
+
+SolveResult
+Solver::Impl::SolveExplicitDynamics(const ProgressCallback & progress, const FrameCallback & frames)
+{
+  const double requested = settings.timeStep > 0.0 ? settings.timeStep : settings.timeStepSafetyFactor * criticalTimeStep;
+  const double stepCount = std::ceil(settings.endTime / requested - 1e-9);
+  // The step counter is an int: a larger count would wrap and "reach" the end time at once.
+  if (!(stepCount <= static_cast<double>(std::numeric_limits<int>::max())))
+  {
+    std::ostringstream message;
+    message << "solver setting end_time " << settings.endTime << " s needs " << stepCount << " steps of " << requested
+            << " s, more than the " << std::numeric_limits<int>::max()
+            << " an explicit dynamics run can take; shorten end_time or use dynamic relaxation for a steady state.";
+    throw Error(message.str());
+  }
+  const int    steps = std::max(1, static_cast<int>(stepCount));
+  const double h = settings.endTime / steps; // land exactly on the end time
+  const double c = settings.dampingCoefficient;
+  const double alpha = 2.0 * h * h / (2.0 + c * h);
+  const double beta = (2.0 - c * h) / (2.0 + c * h);
+  const Index  dofCount = static_cast<Index>(3 * model.nodes.size());
+
+  std::vector<double> u(dofCount, 0.0), uPrevious(dofCount, 0.0), uNext(dofCount, 0.0);
+  std::vector<double> f(dofCount, 0.0), inverseMass(dofCount);
+  for (Index d = 0; d < dofCount; ++d)
+  {
+    inverseMass[d] = 1.0 / physicalMass[d / 3];
+  }
+  PrepareEssentialBoundary(physicalMass);
+  std::vector<char>   inContact(model.nodes.size(), 0);
+  std::vector<double> curveFactors(curves.size(), 0.0);
+  auto                loadFactor = [](const LoadCurve & curve, double time) {
+    return curve.shape == LoadCurve::Shape::Step ? 1.0 : curve.Factor(time / curve.rampTime);
+  };
+  double gravityFactor = 0.0;
+  const int reportEvery = std::max(1, steps / 200);
+  std::vector<ToolHistory> toolHistories;
+
+  // Frames at t = 0, every output interval, and at the end time.
+  const bool           framesWanted = frames && settings.outputInterval > 0.0;
+  int                  nextFrame = 1;
+  std::vector<Vector3> frameDisplacements(model.nodes.size());
+  auto                 emitFrame = [&](int step) {
+    for (std::size_t n = 0; n < model.nodes.size(); ++n)
+    {
+      frameDisplacements[n] = Vector3(u[3 * n], u[3 * n + 1], u[3 * n + 2]);
+    }
+    const Energies energies = forces->ComputeEnergies(u.data());
+    const double   kinetic = step == 0 ? 0.0
+                                       : 0.5 * DeterministicSum(dofCount, threads, [&](Index d) {
+                                           const double v = (u[d] - uPrevious[d]) / h;
+                                           return physicalMass[d / 3] * v * v;
+                                         });
+    frames(SolveFrame{ step * h, step, frameDisplacements,
+                       energies.strain * units::InternalEnergyToJoule,
+                       kinetic * units::InternalEnergyToJoule });
+  };
+  if (framesWanted)
+  {
+    emitFrame(0);
+  }
+
+  for (int step = 0; step < steps; ++step)
+  {
+    CheckForces(forces->ComputeInternalForces(u.data(), f.data()), step, true, h);
+    gravityFactor = gravityForce.empty() ? 0.0 : loadFactor(model.bodyForceCurve, step * h);
+    if (step == 0)
+    {
+      // Start at rest at t = 0, not at t = -h/2: u(-h) such that the first step
+      // gives u(h) = a(0) h^2 / 2 (otherwise the solution lags by half a step).
+      for (Index d = 0; d < dofCount; ++d)
+      {
+        const double acceleration = ((gravityForce.empty() ? 0.0 : gravityFactor * gravityForce[d]) - f[d]) * inverseMass[d];
+        uPrevious[d] = dofConstrained[d] ? 0.0 : (alpha - 0.5 * h * h) * acceleration / beta;
+      }
+    }
+    for (std::size_t k = 0; k < curves.size(); ++k)
+    {
+      curveFactors[k] = loadFactor(curves[k], (step + 1) * h);
+    }
+    CentralDifferenceStep(u, uPrevious, f, inverseMass, alpha, beta, gravityFactor, curveFactors, uNext, inContact,
+                          (step + 1) * h);
+    CheckIncrement(uNext, u, MeasureIncrement(uNext, u, dofConstrained, lengthScale, threads).firstBad, step, true, h);
+    std::swap(uPrevious, u);
+    std::swap(u, uNext);
+    for (std::size_t k = 0; k < stressRegions.size(); ++k)
+    {
+      if (stressRegions[k])
+      {
+        correctedForces[k] = toolLoads[k].force + stressRegions[k]->Update(u.data(), h, tools[k]->TouchingNodes(), threads);
+      }
+    }
+    if (!tools.empty())
+    {
+      RecordTools(toolHistories);
+    }
+    if (framesWanted && (step + 1 == steps || (step + 1) * h >= nextFrame * settings.outputInterval - 1e-9 * h))
+    {
+      emitFrame(step + 1);
+      nextFrame = static_cast<int>(std::floor((step + 1) * h / settings.outputInterval + 1e-9)) + 1;
+    }
+    if (progress && (step + 1) % reportEvery == 0)
+    {
+      progress(step + 1, static_cast<double>(step + 1) / steps, 0.0);
+    }
+  }
+
+  SolveResult result = Finish(u, inContact, gravityFactor, steps);
+  for (std::size_t k = 0; k < stressRegions.size() && k < toolHistories.size(); ++k)
+  {
+    if (stressRegions[k])
+    {
+      toolHistories[k].stressCells = stressRegions[k]->Cells();
+      toolHistories[k].ogdenStress = stressRegions[k]->OgdenStress();
+      toolHistories[k].neoHookeanStress = stressRegions[k]->NeoHookeanStress();
+    }
+  }
+  result.tools = std::move(toolHistories);
+  result.converged = true;
+  result.steps = steps;
+  result.timeStep = h;
+  // Velocity at the end time: v(n) = (v(n - 1/2) + h/2 a(n)) / (1 + c h / 2);
+  // prescribed components by backward difference.
+  forces->ComputeInternalForces(u.data(), f.data());
+  result.kineticEnergy = 0.5 *
+                         DeterministicSum(dofCount, threads, [&](Index d) {
+                           double v = (u[d] - uPrevious[d]) / h;
+                           if (!dofConstrained[d])
+                           {
+                             const double external = gravityForce.empty() ? 0.0 : gravityFactor * gravityForce[d];
+                             v = (v + 0.5 * h * (external - f[d]) * inverseMass[d]) / (1.0 + 0.5 * c * h);
+                           }
+                           return physicalMass[d / 3] * v * v;
+                         }) *
+                         units::InternalEnergyToJoule;
+  result.message = "reached end time " + std::to_string(settings.endTime) + " s in " + std::to_string(steps) + " steps";
+  return result;
+}
+} // namespace bmr
