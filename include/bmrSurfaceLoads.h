@@ -101,8 +101,11 @@ DisplacementsFromSparsePoints(const Model &                model,
  *  scanner looking into the craniotomy sees them: per lateral cell of
  *  `spacing` mm, the highest vertex whose normal is within 60 degrees of
  *  the view. Each is matched to its closest point on the
- *  `intraoperativeSurface` (or along settings.matchDirection), and the
- *  displacements are interpolated to the exposed nodes as in (b).
+ *  `intraoperativeSurface` (or along settings.matchDirection); each match is
+ *  then refined twice from a robust local linear fit of its neighbours'
+ *  matches (the closest point of the surface to the fit's prediction), a
+ *  match still more than max(1 mm, 20 %) from that fit is left out with a
+ *  warning, and the displacements are interpolated to the exposed nodes as in (b).
  *
  *  Why not (a): the nodes of a staircase hexahedral surface lie up to half a
  *  cell off the brain surface, and nodes on the walls of a sulcus or of the

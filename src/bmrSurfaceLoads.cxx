@@ -343,7 +343,7 @@ namespace
 {
 // A directed projection's ray starts this far (mm) before the point: outside the brain for a point on its surface.
 constexpr double kProjectionReach = 50.0;
-// Passes of the neighbour-median refinement of the exposed surface's matches.
+// Passes of the refinement of the exposed surface's matches from their neighbours' local fit.
 constexpr int kMatchRefinements = 2;
 
 /** The parameter t of the first intersection of the ray point + t direction,
@@ -522,9 +522,9 @@ DisplacementsBetweenSurfaces(const Model &               model,
         std::nth_element(component.begin(), component.begin() + component.size() / 2, component.end());
         median[axis] = component[component.size() / 2];
       }
-      // Weighted least squares of value = a + B (lateral offset): first over
-      // the neighbours near the median (3 times the outlier bound), then over
-      // those near that fit.
+      // Least squares of value = a + B (lateral offset), first over the
+      // neighbours within 3 times the outlier bound of their median, then
+      // over those within the bound of that fit.
       Vector3 predicted = median;
       for (const double slack : { 3.0, 1.0 })
       {
