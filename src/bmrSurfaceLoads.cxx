@@ -498,21 +498,29 @@ DisplacementsBetweenSurfaces(const Model &               model,
   auto acceptable = [](const Vector3 & value, const Vector3 & predicted, double slack) {
     return (value - predicted).norm() <= slack * std::max(1.0, 0.2 * predicted.norm());
   };
+  // The scanned vertices stay put, so their neighbourhoods are found once.
+  std::vector<std::vector<std::size_t>> neighbourhoods(scanned.size());
+  for (std::size_t k = 0; k < scanned.size(); ++k)
+  {
+    for (std::size_t j = 0; j < scanned.size(); ++j)
+    {
+      if ((scanned[j] - scanned[k]).norm() <= 2.5 * spacing)
+      {
+        neighbourhoods[k].push_back(j);
+      }
+    }
+  }
   auto neighbourPredictions = [&](const std::vector<Vector3> & values) {
     std::vector<Vector3> predictions(values.size());
     for (std::size_t k = 0; k < scanned.size(); ++k)
     {
-      std::vector<std::size_t>           neighbours;
+      const std::vector<std::size_t> &   neighbours = neighbourhoods[k];
       std::array<std::vector<double>, 3> components;
-      for (std::size_t j = 0; j < scanned.size(); ++j)
+      for (const std::size_t j : neighbours)
       {
-        if ((scanned[j] - scanned[k]).norm() <= 2.5 * spacing)
+        for (int axis = 0; axis < 3; ++axis)
         {
-          neighbours.push_back(j);
-          for (int axis = 0; axis < 3; ++axis)
-          {
-            components[axis].push_back(values[j][axis]);
-          }
+          components[axis].push_back(values[j][axis]);
         }
       }
       Vector3 median;
