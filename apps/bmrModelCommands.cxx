@@ -1,3 +1,7 @@
+// The model commands of `biomech`: model, register and the single steps
+// (classify, mask, grid, surfaces, loads). Over 800 lines on purpose: they
+// share the option groups below, and another translation unit would compile
+// these ITK headers once more in every build (slow on 2 cores).
 #include "bmrModelCommands.h"
 
 // ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.

@@ -8,6 +8,8 @@
 // node because the MLS shape functions are not polynomials. A homogeneous
 // deformation, which the linear basis reproduces exactly, is therefore met only
 // to the integration error; the tolerances below are that error, measured.
+// Over 800 lines: the tests of one component (the meshless solver), which
+// share its fixtures; split by topic they would repeat them.
 #include "bmrMeshless.h"
 #include "bmrScene.h"
 #include "bmrTemporaryFolderTest.h"

@@ -2,6 +2,8 @@
 // and skull-base regions) and loads from intraoperative measurements
 // (closest-point correspondence, thin-plate interpolation of sparse
 // displacements, CSV reader). Units: mm.
+// Over 800 lines: surfaces and the loads made from them share their
+// synthetic brains and skulls.
 #include "bmrBrainSurfaces.h"
 #include "bmrMeshGenerators.h"
 #include "bmrSurfaceLoads.h"

@@ -3,6 +3,8 @@
 // T1 of ITK's examples, bad input, and material mapping against analytic
 // cell averages.
 // ITK headers first: ITK's bundled Eigen must come before the system Eigen.
+// Over 800 lines: the tests of one stage (classification and mapping), which
+// share their synthetic images.
 #include "itkCommand.h"
 #include "itkImageFileReader.h"
 #include "itkImageRegionIteratorWithIndex.h"

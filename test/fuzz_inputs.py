@@ -1,6 +1,9 @@
 #!/usr/bin/env python3
 """Fuzzes the scene parser and the `biomech` command line.
 
+Over 800 lines: the seed inputs and the mutations of both targets, which
+share the runner and the checks of each run's outcome.
+
 Takes tiny valid scenes (each solves in well under a second) and tiny valid
 argument lists, mutates them (deleted keys, wrong types, huge, zero, negative
 or non-finite numbers, NaN / Infinity / 1e999 written into the JSON text,

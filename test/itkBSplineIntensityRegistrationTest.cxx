@@ -5,6 +5,8 @@
 // with nothing written.
 //
 // ITK headers first: ITK's bundled Eigen must come before the system Eigen.
+// Over 800 lines: the tests of one filter and its command, which share their
+// images.
 #include "itkBSplineIntensityRegistrationFilter.h"
 #include "itkBiomechanicalTransformIO.h"
 #include "itkDisplacementFieldTransform.h"

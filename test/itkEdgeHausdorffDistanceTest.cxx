@@ -4,6 +4,8 @@
 // brute-force nearest-edge search, slice mode, mask, bad input, Colin27.
 //
 // ITK headers first: ITK's bundled Eigen must come before the system Eigen.
+// Over 800 lines: the tests of one filter and its command, which share their
+// images and the brute-force reference.
 #include "itkDirectedHausdorffDistanceImageFilter.h"
 #include "itkEdgeHausdorffDistanceImageFilter.h"
 #include "itkExtractImageFilter.h"

@@ -160,6 +160,14 @@ RunWithoutGil(ProgressReporter & reporter, Call && call) -> decltype(call())
   }
 }
 
+/** Binds files, model building and loads (bmrPythonModelBuilding.cxx). */
+void
+BindFiles(py::module_ & module);
+void
+BindModelBuilding(py::module_ & module);
+void
+BindLoads(py::module_ & module);
+
 /** Binds the ITK layer (bmrPythonImages.cxx). */
 void
 BindImages(py::module_ & module);

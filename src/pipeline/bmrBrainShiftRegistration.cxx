@@ -1,3 +1,6 @@
+// The one-call registration: the chain of the module's ITK filters from the
+// preoperative image to the warped image and its evaluation. Over 800 lines
+// on purpose: one chain, and one translation unit for ITK's slow templates.
 #include "bmrBrainShiftRegistration.h"
 
 // ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.

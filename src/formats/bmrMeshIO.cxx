@@ -1,3 +1,6 @@
+// VTK files of the module: volume meshes, results, surfaces, integration
+// points, and the atomic writes every output goes through. Over 800 lines:
+// the readers and writers share the conversions and the error handling.
 #include "bmrMeshIO.h"
 
 #include <vtkCellArray.h>

@@ -27,6 +27,10 @@ constexpr int HexahedronCornerOffsets[8][3] = { { 0, 0, 0 }, { 1, 0, 0 }, { 1, 1
 constexpr int KuhnTetrahedra[6][4] = { { 0, 1, 2, 6 }, { 0, 5, 1, 6 }, { 0, 2, 3, 6 },
                                        { 0, 3, 7, 6 }, { 0, 4, 5, 6 }, { 0, 7, 4, 6 } };
 
+// Hourglass base vectors xi2 xi3, xi3 xi1, xi1 xi2, xi1 xi2 xi3 at the nodes.
+constexpr double kHourglassBase[8][4] = { { 1, 1, 1, -1 },  { 1, -1, -1, 1 }, { -1, -1, 1, -1 }, { -1, 1, -1, 1 },
+                                          { -1, -1, 1, 1 }, { -1, 1, -1, -1 }, { 1, 1, 1, 1 },  { 1, -1, -1, -1 } };
+
 /** Natural coordinates of the hexahedron's nodes in VTK order. */
 inline const Eigen::Matrix<double, 8, 3> &
 HexahedronNaturalCoordinates()

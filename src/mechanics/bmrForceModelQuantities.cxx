@@ -1,0 +1,281 @@
+// The finite-element model's quantities derived from its cells and state:
+// lumped and scaled masses, critical time step, energies, Cauchy stress,
+// nodal pressures, and the description of a cell or of the model.
+#include "bmrForceModel.h"
+
+#include "bmrNeoHookean.h"
+#include "bmrShape.h"
+#include "bmrUnits.h"
+
+#include <Eigen/Dense>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace bmr
+{
+
+namespace
+{
+
+template <int N>
+inline Eigen::Matrix3d
+DeformationGradient(const double * u, const std::array<Index, N> & nodes, const double * B)
+{
+  Eigen::Matrix3d F = Eigen::Matrix3d::Identity();
+  for (int a = 0; a < N; ++a)
+  {
+    const double * ua = u + 3 * static_cast<std::size_t>(nodes[a]);
+    const double * Ba = B + 3 * a;
+    for (int i = 0; i < 3; ++i)
+    {
+      for (int j = 0; j < 3; ++j)
+      {
+        F(i, j) += ua[i] * Ba[j];
+      }
+    }
+  }
+  return F;
+}
+
+// Hourglass mode amplitudes m_alpha = Gamma_alpha^T u, with the Flanagan-Belytschko
+// vectors Gamma = h - B (X^T h) expanded so that only X^T h (3x4) is stored:
+// m_alpha = h_alpha^T u - (F - I) (X^T h)_alpha.
+inline void
+HourglassModes(const double (&u)[8][3], const Eigen::Matrix3d & F, const double * XH, double (&modes)[4][3])
+{
+  for (int alpha = 0; alpha < 4; ++alpha)
+  {
+    for (int i = 0; i < 3; ++i)
+    {
+      double m = 0.0;
+      for (int a = 0; a < 8; ++a)
+      {
+        m += kHourglassBase[a][alpha] * u[a][i];
+      }
+      for (int j = 0; j < 3; ++j)
+      {
+        m -= (F(i, j) - (i == j ? 1.0 : 0.0)) * XH[4 * j + alpha];
+      }
+      modes[alpha][i] = m;
+    }
+  }
+}
+
+} // namespace
+
+template <typename CellMass>
+std::vector<double>
+FiniteElementForceModel::LumpToNodes(const CellMass & cellMass) const
+{
+  std::vector<double> masses(m_NodeCount, 0.0);
+  auto                add = [&](Index k, const Index * nodes, int count) {
+    const double share = cellMass(k) / count;
+    for (int a = 0; a < count; ++a)
+    {
+      masses[nodes[a]] += share;
+    }
+  };
+  for (Index e = 0; e < HexahedronCount(); ++e)
+  {
+    add(e, m_HexNodes[e].data(), 8);
+  }
+  for (Index t = 0; t < TetrahedronCount(); ++t)
+  {
+    add(HexahedronCount() + t, m_TetNodes[t].data(), 4);
+  }
+  return masses;
+}
+
+std::vector<double>
+FiniteElementForceModel::LumpedMasses() const
+{
+  return LumpToNodes([this](Index k) { return m_Density[k] * m_Volume[k]; });
+}
+
+std::vector<double>
+FiniteElementForceModel::ScaledMasses(double timeStep, double safety) const
+{
+  // Critical step 2 / sqrt(q M / rho) = timeStep / safety  =>  rho = q M (timeStep / safety)^2 / 4.
+  const double factor = 0.25 * (timeStep / safety) * (timeStep / safety);
+  return LumpToNodes([this, factor](Index k) { return factor * m_WaveBound[k] * m_Volume[k]; });
+}
+
+double
+SmallestStableStep(const std::vector<double> & waveBound, const std::vector<double> & density, Index * unit)
+{
+  double smallest = std::numeric_limits<double>::infinity();
+  Index  where = -1;
+  for (std::size_t k = 0; k < waveBound.size(); ++k)
+  {
+    const double step = 2.0 / std::sqrt(waveBound[k] / density[k]);
+    if (step < smallest)
+    {
+      smallest = step;
+      where = static_cast<Index>(k);
+    }
+  }
+  if (unit)
+  {
+    *unit = where;
+  }
+  return smallest;
+}
+
+double
+FiniteElementForceModel::CriticalTimeStep(Index * cell) const
+{
+  Index        kernelCell = -1;
+  const double step = SmallestStableStep(m_WaveBound, m_Density, &kernelCell);
+  if (cell)
+  {
+    *cell = kernelCell < 0 ? -1 : m_ModelCell[kernelCell];
+  }
+  return step;
+}
+
+Energies
+FiniteElementForceModel::ComputeEnergies(const double * u) const
+{
+  Energies    energies;
+  const Index hexCount = HexahedronCount();
+  for (Index e = 0; e < hexCount; ++e)
+  {
+    const Eigen::Matrix3d F = DeformationGradient<8>(u, m_HexNodes[e], ComponentsOf<24>(m_HexB, e).data());
+    const double          J = F.determinant();
+    energies.strain += m_Volume[e] * StrainEnergyDensity(F, J, J, m_Mu[e], m_Kappa[e]);
+    double ue[8][3];
+    for (int a = 0; a < 8; ++a)
+    {
+      for (int i = 0; i < 3; ++i)
+      {
+        ue[a][i] = u[3 * static_cast<std::size_t>(m_HexNodes[e][a]) + i];
+      }
+    }
+    double modes[4][3];
+    HourglassModes(ue, F, ComponentsOf<12>(m_HexXH, e).data(), modes);
+    for (const auto & mode : modes)
+    {
+      energies.hourglass += 0.5 * m_HexHourglassStiffness[e] * (mode[0] * mode[0] + mode[1] * mode[1] + mode[2] * mode[2]);
+    }
+  }
+  // ANP: the isochoric energy per cell, the volumetric one per node (the
+  // potential of the nodal pressures).
+  const bool averaged = UsesAverageNodalPressure();
+  for (Index t = 0; t < TetrahedronCount(); ++t)
+  {
+    const Eigen::Matrix3d F = DeformationGradient<4>(u, m_TetNodes[t], ComponentsOf<12>(m_TetB, t).data());
+    const double          J = F.determinant();
+    const Index           k = hexCount + t;
+    energies.strain += m_Volume[k] * StrainEnergyDensity(F, J, J, m_Mu[k], m_TetAveraged[t] > 0.0 ? 0.0 : m_Kappa[k]);
+  }
+  if (averaged)
+  {
+    const std::vector<double> pressure = NodalPressures(u);
+    for (Index n = 0; n < m_NodeCount; ++n)
+    {
+      if (m_NodalBulkModulus[n] > 0.0)
+      {
+        energies.strain += 0.5 * m_NodalVolume[n] * pressure[n] * pressure[n] / m_NodalBulkModulus[n];
+      }
+    }
+  }
+  energies.strain += energies.hourglass;
+  return energies;
+}
+
+std::vector<Eigen::Matrix3d>
+FiniteElementForceModel::CauchyStress(const double * u) const
+{
+  std::vector<Eigen::Matrix3d> stress(m_ModelCell.size());
+  const Index                  hexCount = HexahedronCount();
+  const std::vector<double>    nodalPressure = UsesAverageNodalPressure() ? NodalPressures(u) : std::vector<double>{};
+  for (std::size_t k = 0; k < m_ModelCell.size(); ++k)
+  {
+    const Index     index = static_cast<Index>(k);
+    Eigen::Matrix3d F;
+    double          volumeRatio = 0.0;
+    if (index < hexCount)
+    {
+      F = DeformationGradient<8>(u, m_HexNodes[index], ComponentsOf<24>(m_HexB, index).data());
+      volumeRatio = F.determinant();
+    }
+    else
+    {
+      const Index t = index - hexCount;
+      F = DeformationGradient<4>(u, m_TetNodes[t], ComponentsOf<12>(m_TetB, t).data());
+      // FirstPiola's volumetric term kappa (volumeRatio - 1) is the cell's pressure.
+      volumeRatio = 1.0 + TetrahedronPressure(t, F.determinant(), nodalPressure) / m_Kappa[k];
+    }
+    const Eigen::Matrix3d cof = Cofactor(F);
+    const double          J = F.col(0).dot(cof.col(0));
+    const Eigen::Matrix3d P = FirstPiola(F, cof, J, volumeRatio, m_Mu[k], m_Kappa[k]);
+    stress[m_ModelCell[k]] = (P * F.transpose() / J) * units::InternalToPascal;
+  }
+  return stress;
+}
+
+std::vector<double>
+FiniteElementForceModel::NodalPressures(const double * u) const
+{
+  std::vector<double> tetJ(TetrahedronCount());
+  for (Index t = 0; t < TetrahedronCount(); ++t)
+  {
+    tetJ[t] = DeformationGradient<4>(u, m_TetNodes[t], ComponentsOf<12>(m_TetB, t).data()).determinant();
+  }
+  std::vector<double> pressure(m_NodeCount, 0.0);
+  for (Index n = 0; n < m_NodeCount; ++n)
+  {
+    pressure[n] = NodalPressure(n, tetJ.data());
+  }
+  return pressure;
+}
+
+double
+FiniteElementForceModel::NodalPressure(Index n, const double * tetJacobian) const
+{
+  // The mean of J - 1, not of J: exactly 0 at rest, and no cancellation.
+  double dilatation = 0.0;
+  for (Index k = m_NodeTetOffsets[n]; k < m_NodeTetOffsets[n + 1]; ++k)
+  {
+    dilatation += m_NodeTetWeights[k] * (tetJacobian[m_NodeTets[k]] - 1.0);
+  }
+  return m_NodalBulkModulus[n] * dilatation;
+}
+
+double
+FiniteElementForceModel::TetrahedronPressure(Index t, double J, const std::vector<double> & nodalPressure) const
+{
+  if (nodalPressure.empty() || m_TetAveraged[t] == 0.0)
+  {
+    return m_Kappa[HexahedronCount() + t] * (J - 1.0);
+  }
+  const auto & nodes = m_TetNodes[t];
+  return 0.25 * (nodalPressure[nodes[0]] + nodalPressure[nodes[1]] + nodalPressure[nodes[2]] + nodalPressure[nodes[3]]);
+}
+
+std::string
+FiniteElementForceModel::Describe(Index cell) const
+{
+  return std::string(CellTypeName(m_CellTypes[cell])) + " cell " + std::to_string(cell);
+}
+
+void
+FiniteElementForceModel::AddComponents(std::vector<std::string> & components) const
+{
+  if (HexahedronCount() > 0)
+  {
+    components.push_back("hexahedra");
+    if (m_HourglassControl)
+    {
+      components.push_back("hourglass-control");
+    }
+  }
+  if (TetrahedronCount() > 0)
+  {
+    components.push_back(UsesAverageNodalPressure() ? "anp-tetrahedra" : "linear-tetrahedra");
+  }
+}
+
+} // namespace bmr

@@ -1,0 +1,3 @@
+// Not compiled: a mechanics source that reaches up into the formats layer,
+// which the layering check must refuse.
+#include "bmrScene.h"
