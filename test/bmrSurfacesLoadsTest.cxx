@@ -158,6 +158,37 @@ PlanePatch(double x0, double x1, double y0, double y1, double z)
 // Surfaces
 // ---------------------------------------------------------------------------
 
+TEST(BrainSurface, ClosedOrientedSurfaceCheckRefusesOpenFlippedAndRepeatedTriangles)
+{
+  // A tetrahedron's boundary, every face outward: closed and oriented.
+  bmr::ContactSurface tetrahedron;
+  tetrahedron.vertices = { Vector3(0, 0, 0), Vector3(1, 0, 0), Vector3(0, 1, 0), Vector3(0, 0, 1) };
+  tetrahedron.triangles = { { 0, 2, 1 }, { 0, 1, 3 }, { 0, 3, 2 }, { 1, 2, 3 } };
+  ASSERT_TRUE(bmr::IsClosedOrientedSurface(tetrahedron));
+  EXPECT_GT(bmr::EnclosedVolume(tetrahedron), 0.0);
+
+  bmr::ContactSurface open = tetrahedron;
+  open.triangles.pop_back();
+  EXPECT_FALSE(bmr::IsClosedOrientedSurface(open));
+
+  bmr::ContactSurface flipped = tetrahedron;
+  std::swap(flipped.triangles[3][1], flipped.triangles[3][2]);
+  EXPECT_FALSE(bmr::IsClosedOrientedSurface(flipped));
+
+  // A face twice (e.g. two triangles glued onto one): its edges occur twice.
+  bmr::ContactSurface repeated = tetrahedron;
+  repeated.triangles.push_back(repeated.triangles[0]);
+  EXPECT_FALSE(bmr::IsClosedOrientedSurface(repeated));
+
+  // The check is on edges: two tetrahedra sharing only a vertex pass it.
+  bmr::ContactSurface pinched = tetrahedron;
+  pinched.vertices.insert(pinched.vertices.end(), { Vector3(-1, 0, 0), Vector3(0, -1, 0), Vector3(0, 0, -1) });
+  pinched.triangles.insert(pinched.triangles.end(), { { 0, 4, 5 }, { 0, 6, 4 }, { 0, 5, 6 }, { 4, 6, 5 } });
+  EXPECT_TRUE(bmr::IsClosedOrientedSurface(pinched));
+
+  EXPECT_FALSE(bmr::IsClosedOrientedSurface(bmr::ContactSurface{}));
+}
+
 TEST(BrainSurface, SphereMaskGivesClosedSphereAndSkullAtGap)
 {
   const double radius = 30.0, gap = 2.0;
