@@ -605,6 +605,7 @@ RunDemo(DemoOptions options)
                                 options.truth.craniotomyCentre.z() } },
     { "craniotomy_radius_mm", options.truth.craniotomyRadius },
     { "target_shift_mm", options.truth.targetShift },
+    { "free_rim", options.truth.freeRim },
     { "shift_mm", truth.shift },
     { "gravity_mm_s2", { truth.gravity.x(), truth.gravity.y(), truth.gravity.z() } },
     { "gravity_g", truth.gravity.norm() / 9810.0 },
@@ -666,6 +667,11 @@ AddDemoCommand(CLI::App & app)
     ->capture_default_str();
   demo->add_option("--shift", options->truth.targetShift, "Largest displacement of the exposed surface (mm)")
     ->capture_default_str();
+  demo->add_option("--free-rim", options->truth.freeRim,
+                   "Width of the craniotomy's rim left to the model, as a fraction of its radius (0: the sag is "
+                   "pinned at the rim; 0.2 for shifts of 15 mm and more)")
+    ->capture_default_str()
+    ->check(CLI::Range(0.0, 0.9));
   demo->add_option("--gravity", options->truth.gravity, "Gravity on the brain (g), towards the brain's centroid")
     ->capture_default_str();
   demo->add_option("--poisson-ratio", options->truth.poissonRatio, "Poisson's ratio of parenchyma and tumour")

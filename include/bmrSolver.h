@@ -38,6 +38,15 @@ struct SolverSettings
    *  incompressible tissue does not lock (see docs/solver.md). */
   double hourglassCoefficient = 0.2;
 
+  /** Bulk modulus (Pa) with which a cell or integration point resists
+   *  collapse below half its reference volume (the collapse barrier of
+   *  docs/solver.md: soft CSF squeezed by stiffer tissue would otherwise be
+   *  crushed until it inverts). 0: the volume-weighted median bulk modulus of
+   *  the model, i.e. that of its bulk tissue. A unit stiffer than this keeps its
+   *  own. Masses are scaled for it, so dynamic relaxation stays stable when the
+   *  barrier engages. */
+  double collapseBulkModulus = 0.0;
+
   /** Fraction of the critical time step actually used. */
   double timeStepSafetyFactor = 0.8;
   /** Explicit dynamics: time step in s; 0 = automatic (critical step x safety). */

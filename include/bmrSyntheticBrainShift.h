@@ -84,6 +84,13 @@ struct SyntheticBrainShiftSettings
    *  folds the soft CSF cells first (4 mm hexahedra folded at 0.84 g before
    *  the exposed surface had sunk 10 mm). */
   double targetShift = 10.0;
+  /** Width of the opening's rim, as a fraction of its radius, whose exposed
+   *  nodes are left to the model (neither moved nor touching the skull): the
+   *  sag is prescribed only for r < (1 - freeRim) R. 0 pins the sag's zero at
+   *  the rim; shifts of 15 mm and more need about 0.2, because a ring held
+   *  fixed around a deep sag folds the cells at the ring (25 mm on Colin27:
+   *  docs/model-building.md). */
+  double freeRim = 0.0;
   double gravity = 0.3; // g
   /** The displaced surface reaches this far beyond the craniotomy (mm). */
   double scanMargin = 10.0;

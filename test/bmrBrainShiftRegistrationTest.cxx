@@ -47,7 +47,7 @@ CoarseTruth(double gravity)
 
 bmr::BrainShiftRegistrationResult
 RegisterFromTrackedPoints(const bmr::SyntheticBrainShift & truth, const bmr::SyntheticBrainShiftSettings & scene,
-                          double elementSize)
+                          double elementSize, bmr::ImageGridKind kind = bmr::ImageGridKind::Hexahedra)
 {
   const Colin27 &                    colin = Colin27::Get();
   bmr::BrainShiftRegistrationInputs inputs;
@@ -57,6 +57,7 @@ RegisterFromTrackedPoints(const bmr::SyntheticBrainShift & truth, const bmr::Syn
   inputs.intraoperative.image = truth.intraoperativeImage;
   inputs.intraoperative.imageBrainMask = truth.intraoperativeBrainMask;
   bmr::BrainShiftRegistrationSettings settings;
+  settings.model.grid.kind = kind;
   settings.model.grid.elementSize = elementSize;
   settings.model.craniotomyCentre = scene.craniotomyCentre;
   settings.model.craniotomyRadius = scene.craniotomyRadius;
@@ -97,6 +98,41 @@ TEST(BrainShiftRegistration, ReducedDemoRegistersBetterThanNoRegistration)
   ASSERT_TRUE(result.unregistered.valid && result.registered.valid) << result.registered.message;
   EXPECT_GT(result.registered.fractionWithinThreshold, result.unregistered.fractionWithinThreshold + 0.1);
   EXPECT_LT(result.registered.Percentile(95), result.unregistered.Percentile(95));
+}
+
+// A 25 mm shift (issue 17): the ground truth with a free rim (the opening's
+// outer fifth left to the model) on 6 mm ANP tetrahedra, the registration on
+// 7 mm ANP tetrahedra from the tracked points. Both converge without an
+// inverted cell because of the collapse barrier (soft CSF squeezed by
+// parenchyma holds at half its volume) and the slower load ramp after an
+// inversion. Measured at the study's settings (5 mm truth): p95 1.50 mm
+// against 8.34 mm without registration.
+TEST(BrainShiftRegistration, TwentyFiveMillimetreShiftOnTetrahedra)
+{
+  if (!HaveColin27())
+  {
+    GTEST_SKIP() << "Colin27 (mricron-data) is not installed";
+  }
+  const Colin27 &                  colin = Colin27::Get();
+  bmr::SyntheticBrainShiftSettings scene;
+  scene.targetShift = 25.0;
+  scene.freeRim = 0.2;
+  scene.grid.kind = bmr::ImageGridKind::Tetrahedra;
+  scene.grid.elementSize = 6.0;
+  const bmr::SyntheticBrainShift truth = bmr::MakeSyntheticBrainShift(colin.image, colin.mask, scene);
+  ASSERT_TRUE(truth.solve.converged) << truth.solve.message;
+  EXPECT_NEAR(truth.shift, scene.targetShift, 0.05 * scene.targetShift);
+
+  const auto result = RegisterFromTrackedPoints(truth, scene, 7.0, bmr::ImageGridKind::Tetrahedra);
+  ASSERT_TRUE(result.solve.converged) << result.solve.message;
+  const auto none = bmr::MeasureDisplacementError(nullptr, truth.truthTransform, truth.intraoperativeBrainOnPreoperativeGrid);
+  const auto registered =
+    bmr::MeasureDisplacementError(result.transform, truth.truthTransform, truth.intraoperativeBrainOnPreoperativeGrid);
+  RecordProperty("p95_mm", std::to_string(registered.p95));
+  RecordProperty("unregistered_p95_mm", std::to_string(none.p95));
+  EXPECT_NEAR(none.max, scene.targetShift, 1.0);
+  EXPECT_LT(registered.p95, 0.3 * none.p95);
+  EXPECT_LT(registered.p95, 2.5);
 }
 
 // The two other sources of the exposed surface's motion: the displaced

@@ -41,6 +41,10 @@ struct NeoHookean
 {
   double mu = 0.0;
   double kappa = 0.0;
+  /** Bulk modulus of the collapse barrier below half the reference volume
+   *  (docs/solver.md): pressure -Kc (0.5 / J - 1)^2 for J < 0.5. The solver
+   *  gives every cell at least its own kappa. */
+  double collapseModulus = 0.0;
 
   explicit NeoHookean(const Material & m)
     : mu(m.ShearModulus())
@@ -51,13 +55,19 @@ struct NeoHookean
     , kappa(bulkModulus)
   {}
 
-  /** Cauchy stress (Pa): sigma = mu J^(-5/3) dev(b) + kappa (J - 1) I, b = F F^T. */
+  /** Pressure of the collapse barrier (Pa). */
+  double CollapsePressure(double J) const
+  {
+    return J < 0.5 ? -collapseModulus * (0.5 / J - 1.0) * (0.5 / J - 1.0) : 0.0;
+  }
+
+  /** Cauchy stress (Pa): sigma = mu J^(-5/3) dev(b) + (kappa (J - 1) + p_collapse(J)) I, b = F F^T. */
   Matrix3 Cauchy(const Matrix3 & F) const
   {
     const double  J = F.determinant();
     const Matrix3 b = F * F.transpose();
     const Matrix3 devB = b - b.trace() / 3.0 * Matrix3::Identity();
-    return mu * std::pow(J, -5.0 / 3.0) * devB + kappa * (J - 1.0) * Matrix3::Identity();
+    return mu * std::pow(J, -5.0 / 3.0) * devB + (kappa * (J - 1.0) + CollapsePressure(J)) * Matrix3::Identity();
   }
 
   /** First Piola-Kirchhoff stress (Pa): P = J sigma F^-T. */
@@ -71,7 +81,9 @@ struct NeoHookean
   {
     const double J = F.determinant();
     const double I1bar = std::pow(J, -2.0 / 3.0) * (F.transpose() * F).trace();
-    return 0.5 * mu * (I1bar - 3.0) + 0.5 * kappa * (J - 1.0) * (J - 1.0);
+    // The barrier's energy: the integral of -p_collapse from J to 0.5.
+    const double collapse = J < 0.5 ? collapseModulus * (0.25 / J - J + std::log(2.0 * J)) : 0.0;
+    return 0.5 * mu * (I1bar - 3.0) + 0.5 * kappa * (J - 1.0) * (J - 1.0) + collapse;
   }
 };
 

@@ -594,6 +594,7 @@ BindSolver(py::module_ & module)
       },
       [](SolverSettings & settings, const std::string & name) { settings.tetrahedron = ParseTetrahedron(name); })
     .def_readwrite("hourglass_coefficient", &SolverSettings::hourglassCoefficient)
+    .def_readwrite("collapse_bulk_modulus", &SolverSettings::collapseBulkModulus)
     .def_readwrite("time_step_safety_factor", &SolverSettings::timeStepSafetyFactor)
     .def_readwrite("time_step", &SolverSettings::timeStep)
     .def_readwrite("end_time", &SolverSettings::endTime)

@@ -49,7 +49,8 @@ BindSyntheticBrainShift(py::module_ & module)
   module.def(
     "make_synthetic_brain_shift",
     [](const py::object & image, const py::object & brainMask, const py::object & craniotomyCentre,
-       double craniotomyRadius, double shift, double gravity, double elementSize, const py::object & intraoperativeSpacing,
+       double craniotomyRadius, double shift, double freeRim, double gravity, double elementSize,
+       const py::object & intraoperativeSpacing,
        double noise, const std::string & noiseModel, const std::string & contrast, double biasField,
        double fieldOfView, const py::object & tumourCentre, double tumourRadius, double tumourStiffness,
        const py::object & resectionMargin, std::uint32_t seed, int threads, const py::object & progress) {
@@ -59,6 +60,7 @@ BindSyntheticBrainShift(py::module_ & module)
       settings.craniotomyCentre = VectorFromObject(craniotomyCentre, "craniotomy_centre");
       settings.craniotomyRadius = craniotomyRadius;
       settings.targetShift = shift;
+      settings.freeRim = freeRim;
       settings.gravity = gravity;
       settings.grid.elementSize = elementSize;
       settings.intraoperativeSpacing = VectorFromObject(intraoperativeSpacing, "intraoperative_spacing");
@@ -96,7 +98,8 @@ BindSyntheticBrainShift(py::module_ & module)
                                                   SyntheticBrainShiftSettings{}.craniotomyCentre.y(),
                                                   SyntheticBrainShiftSettings{}.craniotomyCentre.z()),
     py::arg("craniotomy_radius") = SyntheticBrainShiftSettings{}.craniotomyRadius,
-    py::arg("shift") = SyntheticBrainShiftSettings{}.targetShift, py::arg("gravity") = SyntheticBrainShiftSettings{}.gravity,
+    py::arg("shift") = SyntheticBrainShiftSettings{}.targetShift, py::arg("free_rim") = SyntheticBrainShiftSettings{}.freeRim,
+    py::arg("gravity") = SyntheticBrainShiftSettings{}.gravity,
     py::arg("element_size") = SyntheticBrainShiftSettings{}.grid.elementSize,
     py::arg("intraoperative_spacing") = py::make_tuple(SyntheticBrainShiftSettings{}.intraoperativeSpacing.x(),
                                                        SyntheticBrainShiftSettings{}.intraoperativeSpacing.y(),

@@ -384,7 +384,7 @@ SceneParser::ParseSolver()
   }
   solver->AllowOnly({ "integrator", "tetrahedron", "tolerance", "max_steps", "load_steps", "adapt_interval",
                       "time_step", "safety_factor", "end_time", "damping", "hourglass_coefficient", "threads",
-                      "compute_stress", "output_interval" });
+                      "compute_stress", "output_interval", "collapse_bulk_modulus" });
   SolverSettings & settings = m_Scene.settings;
   if (const auto value = solver->Optional("integrator"))
   {
@@ -444,6 +444,10 @@ SceneParser::ParseSolver()
     {
       value->Fail("must lie in [0, 1] (0.2 is the default)");
     }
+  }
+  if (const auto value = solver->Optional("collapse_bulk_modulus"))
+  {
+    settings.collapseBulkModulus = value->NonNegativeNumber();
   }
   if (const auto value = solver->Optional("threads"))
   {

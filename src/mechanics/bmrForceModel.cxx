@@ -321,6 +321,9 @@ FiniteElementForceModel::FiniteElementForceModel(const Model & model, const Solv
   m_Kappa.resize(cellCount);
   m_Density.resize(cellCount);
   m_WaveBound.resize(cellCount);
+  // The volumetric part of each cell's wave-number bound (n B:B) and the
+  // modulus the bound was made for, to raise it for the collapse barrier below.
+  std::vector<double> volumetricWaveNumber(cellCount), waveModulus(cellCount);
 
   Eigen::Matrix<double, 8, 4> hourglassBase;
   for (int a = 0; a < 8; ++a)
@@ -391,6 +394,7 @@ FiniteElementForceModel::FiniteElementForceModel(const Model & model, const Solv
       m_HexHourglassStiffness.push_back(hourglassStiffness);
       m_Volume[k] = integrals.volume;
       m_WaveBound[k] = 8.0 * BB + hourglassStiffness * gammaNorm / (integrals.volume * pWaveModulus);
+      volumetricWaveNumber[k] = 8.0 * BB;
     }
     else
     {
@@ -412,10 +416,12 @@ FiniteElementForceModel::FiniteElementForceModel(const Model & model, const Solv
       }
       m_Volume[k] = TetrahedronVolume(model.nodes[nodes[0]], model.nodes[nodes[1]], model.nodes[nodes[2]], model.nodes[nodes[3]]);
       m_WaveBound[k] = 4.0 * B.squaredNorm();
+      volumetricWaveNumber[k] = m_WaveBound[k];
     }
     // Largest eigenvalue of the cell's stiffness over its lumped mass is at most
     // (lambda + 2 mu) / rho * q (Rayleigh bound); stored here without the density.
     m_WaveBound[k] *= pWaveModulus;
+    waveModulus[k] = pWaveModulus;
   }
 
   // Component-major storage: the vectorised kernels read 8 cells' values at once.
@@ -495,9 +501,20 @@ FiniteElementForceModel::FiniteElementForceModel(const Model & model, const Solv
         {
           kappa += 0.25 * m_NodalBulkModulus[n];
         }
-        m_WaveBound[k] *= std::max(1.0, (kappa + 4.0 * m_Mu[k] / 3.0) / (m_Kappa[k] + 4.0 * m_Mu[k] / 3.0));
+        const double factor = std::max(1.0, (kappa + 4.0 * m_Mu[k] / 3.0) / (m_Kappa[k] + 4.0 * m_Mu[k] / 3.0));
+        m_WaveBound[k] *= factor;
+        waveModulus[k] *= factor;
       }
     }
+  }
+
+  // The bound once the collapse barrier engages, for the masses of dynamic
+  // relaxation: a collapsing soft cell must not outrun the time step.
+  m_Collapse = CollapseModuli(m_Kappa, m_Volume, settings.collapseBulkModulus);
+  m_CollapseWaveBound.resize(cellCount);
+  for (std::size_t k = 0; k < cellCount; ++k)
+  {
+    m_CollapseWaveBound[k] = volumetricWaveNumber[k] * std::max(0.0, m_Collapse[k] - waveModulus[k]);
   }
 }
 
@@ -660,7 +677,8 @@ FiniteElementForceModel::AddHexahedronForces(Index begin, Index end, const doubl
         I1 += F[i][j] * F[i][j];
       }
     }
-    const double cofactorFactor = m_Kappa[e] * (J - 1.0) - isochoric * I1 / (3.0 * J);
+    const double cofactorFactor =
+      m_Kappa[e] * (J - 1.0) + CollapsePressure(J, m_Collapse[e]) - isochoric * I1 / (3.0 * J);
     const double V = m_Volume[e];
     const double k = m_HexHourglassStiffness[e];
     // Hourglass forces k Gamma m folded in: k h m directly, and -k B (X^T h) m
@@ -769,7 +787,8 @@ FiniteElementForceModel::AddTetrahedronForces(Index begin, Index end, const doub
     const double isochoric = m_Mu[k] * InverseCubeRootSquared(J);
     const double I1 = F[0][0] * F[0][0] + F[0][1] * F[0][1] + F[0][2] * F[0][2] + F[1][0] * F[1][0] +
                       F[1][1] * F[1][1] + F[1][2] * F[1][2] + F[2][0] * F[2][0] + F[2][1] * F[2][1] + F[2][2] * F[2][2];
-    const double cofactorFactor = pressure - isochoric * I1 / (3.0 * J);
+    // The collapse barrier acts on the cell's own J, which ANP leaves free.
+    const double cofactorFactor = pressure + CollapsePressure(J, m_Collapse[k]) - isochoric * I1 / (3.0 * J);
     const double V = m_Volume[k];
     double       A[3][3]; // V P
     for (int i = 0; i < 3; ++i)

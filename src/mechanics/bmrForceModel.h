@@ -58,6 +58,13 @@ ScheduleByColour(const std::vector<Index> &   offsets,
 Eigen::AlignedBox3d
 BoundingBox(const std::vector<Vector3> & points);
 
+/** The collapse barrier's bulk modulus per unit (cell or integration point;
+ *  internal units): the larger of the unit's own kappa and the model's, which
+ *  is `settingPascal` or, for 0, the volume-weighted median of the units'
+ *  kappa (the bulk tissue's). */
+std::vector<double>
+CollapseModuli(const std::vector<double> & kappa, const std::vector<double> & volume, double settingPascal);
+
 /** Internal forces, masses and stable time steps of one discretization; the
  *  integrators see only this. Failures are reported by the index of the
  *  integration unit (model cell, or integration point), which Describe() names. */
@@ -77,8 +84,10 @@ public:
   virtual std::vector<double> LumpedMasses() const = 0;
 
   /** Lumped nodal masses chosen so that every unit's critical time step equals
-   *  timeStep / safety (mass scaling of dynamic relaxation). */
-  virtual std::vector<double> ScaledMasses(double timeStep, double safety) const = 0;
+   *  timeStep / safety (mass scaling of dynamic relaxation); with `collapse`,
+   *  for the stiffness a unit has once its collapse barrier engages (soft
+   *  units get heavier), else for the reference state. */
+  virtual std::vector<double> ScaledMasses(double timeStep, double safety, bool collapse) const = 0;
 
   /** Smallest unit critical time step (s) for the physical densities, and its unit. */
   virtual double CriticalTimeStep(Index * unit = nullptr) const = 0;
@@ -108,7 +117,7 @@ public:
 
   Index                        ComputeInternalForces(const double * u, double * f) override;
   std::vector<double>          LumpedMasses() const override;
-  std::vector<double>          ScaledMasses(double timeStep, double safety) const override;
+  std::vector<double>          ScaledMasses(double timeStep, double safety, bool collapse) const override;
   double                       CriticalTimeStep(Index * cell = nullptr) const override;
   Energies                     ComputeEnergies(const double * u) const override;
   std::vector<Eigen::Matrix3d> CauchyStress(const double * u) const override;
@@ -189,8 +198,10 @@ private:
   std::vector<double> m_Volume;
   std::vector<double> m_Mu;
   std::vector<double> m_Kappa;
+  std::vector<double> m_Collapse; // the collapse barrier's bulk modulus (CollapseModuli)
   std::vector<double> m_Density;
   std::vector<double> m_WaveBound;
+  std::vector<double> m_CollapseWaveBound; // added to m_WaveBound once the collapse barrier engages
   std::vector<Index>  m_ModelCell;
 
   // Kernel cells are stored colour by colour, block by block; blocks of one
@@ -212,13 +223,14 @@ public:
   /** `shapeFunctions`: the table at model.meshless.integrationPoints, with
    *  gradients. Throws bmr::Error for a node in the support of no integration
    *  point (it would have neither mass nor stiffness). */
-  MeshlessForceModel(const Model & model, ShapeFunctionTable shapeFunctions, int threads);
+  MeshlessForceModel(const Model & model, ShapeFunctionTable shapeFunctions, const SolverSettings & settings,
+                     int threads);
 
   Index                        NodeCount() const override { return m_NodeCount; }
   Index                        PointCount() const { return m_Table.PointCount(); }
   Index                        ComputeInternalForces(const double * u, double * f) override;
   std::vector<double>          LumpedMasses() const override;
-  std::vector<double>          ScaledMasses(double timeStep, double safety) const override;
+  std::vector<double>          ScaledMasses(double timeStep, double safety, bool collapse) const override;
   double                       CriticalTimeStep(Index * point = nullptr) const override;
   Energies                     ComputeEnergies(const double * u) const override;
   std::vector<Eigen::Matrix3d> CauchyStress(const double * u) const override;
@@ -243,8 +255,10 @@ private:
   std::vector<double>  m_Weight;    // mm^3
   std::vector<double>  m_Mu;        // internal units
   std::vector<double>  m_Kappa;
+  std::vector<double>  m_Collapse;  // the collapse barrier's bulk modulus (CollapseModuli)
   std::vector<double>  m_Density;
   std::vector<double>  m_WaveBound; // (lambda + 2 mu) n sum |grad phi|^2
+  std::vector<double>  m_CollapseWaveBound; // added to m_WaveBound once the collapse barrier engages
   // The force kernel's copy of the table, in the order of the coloured
   // schedule, so that one pass streams it once per step: per kernel point its
   // integration point, weight and moduli; per entry the node and grad phi.
@@ -257,7 +271,7 @@ private:
   std::vector<Index>  m_KernelOffsets;
   std::vector<Index>  m_KernelNodes;
   std::vector<double> m_KernelGradients; // 3 per entry
-  std::vector<double> m_KernelMaterial;  // weight, mu, kappa per kernel point
+  std::vector<double> m_KernelMaterial;  // weight, mu, kappa, collapse modulus per kernel point
 };
 
 } // namespace bmr

@@ -95,11 +95,50 @@ FiniteElementForceModel::LumpedMasses() const
 }
 
 std::vector<double>
-FiniteElementForceModel::ScaledMasses(double timeStep, double safety) const
+FiniteElementForceModel::ScaledMasses(double timeStep, double safety, bool collapse) const
 {
   // Critical step 2 / sqrt(q M / rho) = timeStep / safety  =>  rho = q M (timeStep / safety)^2 / 4.
   const double factor = 0.25 * (timeStep / safety) * (timeStep / safety);
-  return LumpToNodes([this, factor](Index k) { return factor * m_WaveBound[k] * m_Volume[k]; });
+  return LumpToNodes([this, factor, collapse](Index k) {
+    return factor * (m_WaveBound[k] + (collapse ? m_CollapseWaveBound[k] : 0.0)) * m_Volume[k];
+  });
+}
+
+std::vector<double>
+CollapseModuli(const std::vector<double> & kappa, const std::vector<double> & volume, double settingPascal)
+{
+  double modelModulus = settingPascal * units::PascalToInternal;
+  if (settingPascal == 0.0 && !kappa.empty())
+  {
+    // Volume-weighted median: the modulus below which half of the body lies.
+    std::vector<std::size_t> order(kappa.size());
+    for (std::size_t k = 0; k < order.size(); ++k)
+    {
+      order[k] = k;
+    }
+    std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return kappa[a] < kappa[b]; });
+    double total = 0.0;
+    for (const double v : volume)
+    {
+      total += v;
+    }
+    double below = 0.0;
+    for (const std::size_t k : order)
+    {
+      below += volume[k];
+      modelModulus = kappa[k];
+      if (below >= 0.5 * total)
+      {
+        break;
+      }
+    }
+  }
+  std::vector<double> moduli(kappa.size());
+  for (std::size_t k = 0; k < kappa.size(); ++k)
+  {
+    moduli[k] = std::max(kappa[k], modelModulus);
+  }
+  return moduli;
 }
 
 double
@@ -144,7 +183,7 @@ FiniteElementForceModel::ComputeEnergies(const double * u) const
   {
     const Eigen::Matrix3d F = DeformationGradient<8>(u, m_HexNodes[e], ComponentsOf<24>(m_HexB, e).data());
     const double          J = F.determinant();
-    energies.strain += m_Volume[e] * StrainEnergyDensity(F, J, J, m_Mu[e], m_Kappa[e]);
+    energies.strain += m_Volume[e] * StrainEnergyDensity(F, J, J, m_Mu[e], m_Kappa[e], m_Collapse[e]);
     double ue[8][3];
     for (int a = 0; a < 8; ++a)
     {
@@ -168,7 +207,8 @@ FiniteElementForceModel::ComputeEnergies(const double * u) const
     const Eigen::Matrix3d F = DeformationGradient<4>(u, m_TetNodes[t], ComponentsOf<12>(m_TetB, t).data());
     const double          J = F.determinant();
     const Index           k = hexCount + t;
-    energies.strain += m_Volume[k] * StrainEnergyDensity(F, J, J, m_Mu[k], m_TetAveraged[t] > 0.0 ? 0.0 : m_Kappa[k]);
+    energies.strain +=
+      m_Volume[k] * StrainEnergyDensity(F, J, J, m_Mu[k], m_TetAveraged[t] > 0.0 ? 0.0 : m_Kappa[k], m_Collapse[k]);
   }
   if (averaged)
   {
@@ -210,7 +250,7 @@ FiniteElementForceModel::CauchyStress(const double * u) const
     }
     const Eigen::Matrix3d cof = Cofactor(F);
     const double          J = F.col(0).dot(cof.col(0));
-    const Eigen::Matrix3d P = FirstPiola(F, cof, J, volumeRatio, m_Mu[k], m_Kappa[k]);
+    const Eigen::Matrix3d P = FirstPiola(F, cof, J, volumeRatio, m_Mu[k], m_Kappa[k], m_Collapse[k]);
     stress[m_ModelCell[k]] = (P * F.transpose() / J) * units::InternalToPascal;
   }
   return stress;

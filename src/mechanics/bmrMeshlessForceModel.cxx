@@ -13,7 +13,10 @@
 namespace bmr
 {
 
-MeshlessForceModel::MeshlessForceModel(const Model & model, ShapeFunctionTable shapeFunctions, int threads)
+MeshlessForceModel::MeshlessForceModel(const Model &          model,
+                                       ShapeFunctionTable     shapeFunctions,
+                                       const SolverSettings & settings,
+                                       int                    threads)
   : m_Threads(std::max(1, threads))
   , m_NodeCount(static_cast<Index>(model.nodes.size()))
   , m_Table(std::move(shapeFunctions))
@@ -51,6 +54,14 @@ MeshlessForceModel::MeshlessForceModel(const Model & model, ShapeFunctionTable s
     const Index neighbours = m_Table.offsets[p + 1] - m_Table.offsets[p];
     m_WaveBound[p] = (m_Kappa[p] + 4.0 * m_Mu[p] / 3.0) * neighbours * gradientSquares;
   }
+  // The bound once the collapse barrier engages (masses of dynamic relaxation).
+  m_Collapse = CollapseModuli(m_Kappa, m_Weight, settings.collapseBulkModulus);
+  m_CollapseWaveBound.resize(pointCount);
+  for (Index p = 0; p < pointCount; ++p)
+  {
+    const double modulus = m_Kappa[p] + 4.0 * m_Mu[p] / 3.0;
+    m_CollapseWaveBound[p] = m_WaveBound[p] / modulus * std::max(0.0, m_Collapse[p] - modulus);
+  }
 
   std::vector<Index> pointsOfNode(m_NodeCount, 0);
   for (const Index node : m_Table.nodes)
@@ -80,7 +91,7 @@ MeshlessForceModel::MeshlessForceModel(const Model & model, ShapeFunctionTable s
   m_KernelOffsets.assign(1, 0);
   m_KernelNodes.reserve(m_Table.nodes.size());
   m_KernelGradients.reserve(m_Table.gradients.size());
-  m_KernelMaterial.reserve(3 * static_cast<std::size_t>(pointCount));
+  m_KernelMaterial.reserve(4 * static_cast<std::size_t>(pointCount));
   for (const Index p : m_KernelPoint)
   {
     for (Index k = m_Table.offsets[p]; k < m_Table.offsets[p + 1]; ++k)
@@ -92,7 +103,7 @@ MeshlessForceModel::MeshlessForceModel(const Model & model, ShapeFunctionTable s
       }
     }
     m_KernelOffsets.push_back(static_cast<Index>(m_KernelNodes.size()));
-    m_KernelMaterial.insert(m_KernelMaterial.end(), { m_Weight[p], m_Mu[p], m_Kappa[p] });
+    m_KernelMaterial.insert(m_KernelMaterial.end(), { m_Weight[p], m_Mu[p], m_Kappa[p], m_Collapse[p] });
   }
 }
 
@@ -167,8 +178,8 @@ MeshlessForceModel::ComputeInternalForces(const double * u, double * f)
             firstInverted = std::min(firstInverted, m_KernelPoint[q]);
             continue; // forces are meaningless now; the caller stops
           }
-          const double *        material = m_KernelMaterial.data() + 3 * static_cast<std::size_t>(q);
-          const Eigen::Matrix3d P = material[0] * FirstPiola(Fm, cof, J, J, material[1], material[2]);
+          const double *        material = m_KernelMaterial.data() + 4 * static_cast<std::size_t>(q);
+          const Eigen::Matrix3d P = material[0] * FirstPiola(Fm, cof, J, J, material[1], material[2], material[3]);
           for (Index k = begin; k < end; ++k)
           {
             double *       fI = f + 3 * static_cast<std::size_t>(nodes[k]);
@@ -209,10 +220,12 @@ MeshlessForceModel::LumpedMasses() const
 }
 
 std::vector<double>
-MeshlessForceModel::ScaledMasses(double timeStep, double safety) const
+MeshlessForceModel::ScaledMasses(double timeStep, double safety, bool collapse) const
 {
   const double factor = 0.25 * (timeStep / safety) * (timeStep / safety);
-  return LumpToNodes([this, factor](Index p) { return factor * m_WaveBound[p] * m_Weight[p]; });
+  return LumpToNodes([this, factor, collapse](Index p) {
+    return factor * (m_WaveBound[p] + (collapse ? m_CollapseWaveBound[p] : 0.0)) * m_Weight[p];
+  });
 }
 
 double
@@ -229,7 +242,7 @@ MeshlessForceModel::ComputeEnergies(const double * u) const
   {
     const Eigen::Matrix3d F = DeformationGradientAt(p, u);
     const double          J = F.determinant();
-    energies.strain += m_Weight[p] * StrainEnergyDensity(F, J, J, m_Mu[p], m_Kappa[p]);
+    energies.strain += m_Weight[p] * StrainEnergyDensity(F, J, J, m_Mu[p], m_Kappa[p], m_Collapse[p]);
   }
   return energies;
 }
@@ -243,7 +256,7 @@ MeshlessForceModel::CauchyStress(const double * u) const
     const Eigen::Matrix3d F = DeformationGradientAt(p, u);
     const Eigen::Matrix3d cof = Cofactor(F);
     const double          J = F.col(0).dot(cof.col(0));
-    const Eigen::Matrix3d P = FirstPiola(F, cof, J, J, m_Mu[p], m_Kappa[p]);
+    const Eigen::Matrix3d P = FirstPiola(F, cof, J, J, m_Mu[p], m_Kappa[p], m_Collapse[p]);
     stress[p] = (P * F.transpose() / J) * units::InternalToPascal;
   }
   return stress;

@@ -1,10 +1,14 @@
 // Compressible neo-Hookean law shared by the finite-element and meshless force
-// models (private to the core): W = mu/2 (J^-2/3 I1 - 3) + kappa/2 (J - 1)^2.
+// models (private to the core): W = mu/2 (J^-2/3 I1 - 3) + kappa/2 (J - 1)^2,
+// plus a collapse barrier below half the reference volume (CollapsePressure).
 #ifndef bmrNeoHookean_h
 #define bmrNeoHookean_h
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+
+#include <algorithm>
+#include <cmath>
 
 #include <cstdint>
 #include <cstring>
@@ -44,23 +48,60 @@ InverseCubeRootSquared(double J)
   return 1.0 / (x * x);
 }
 
+// Volume ratio below which a cell or integration point resists further collapse.
+constexpr double kCollapseVolumeRatio = 0.5;
+
+// Pressure of the collapse barrier at the unit's own volume ratio J: 0 for
+// J >= Jc = kCollapseVolumeRatio, -Kc (Jc / J - 1)^2 below (C1 at Jc, unbounded
+// as J -> 0). Why: the volumetric term kappa (J - 1) resists collapse with at
+// most kappa (4 Pa for CSF of 10 Pa, nu 0.1; 170 Pa for fluid-like CSF), and an
+// ANP tetrahedron's own J is not constrained at all, only its nodes' averages;
+// so a soft cell squeezed by the tissue around it is crushed until it inverts
+// (20-25 mm shifts of Colin27). Physically the fluid has drained and the walls
+// of the space meet: below half its volume the cell takes the bulk modulus Kc
+// of the tissue around it (SolverSettings::collapseBulkModulus).
+inline double
+CollapsePressure(double J, double collapseModulus)
+{
+  const double closing = std::max(0.0, kCollapseVolumeRatio / J - 1.0);
+  return -collapseModulus * closing * closing;
+}
+
+// The barrier's energy per reference volume: the integral of -CollapsePressure from J to Jc.
+inline double
+CollapseEnergy(double J, double collapseModulus)
+{
+  constexpr double Jc = kCollapseVolumeRatio;
+  return J >= Jc ? 0.0 : collapseModulus * (Jc * Jc / J - J + 2.0 * Jc * std::log(J / Jc));
+}
+
 // First Piola-Kirchhoff stress of the compressible neo-Hookean solid,
-// W = mu/2 (J^-2/3 I1 - 3) + kappa/2 (J - 1)^2. The volumetric part takes the
-// dilatation `volumeRatio` (the element's own J, or the averaged nodal J of the
-// ANP tetrahedron); the isochoric part always uses the element's F.
+// W = mu/2 (J^-2/3 I1 - 3) + kappa/2 (J - 1)^2, with the collapse barrier. The
+// volumetric part takes the dilatation `volumeRatio` (the element's own J, or
+// the averaged nodal J of the ANP tetrahedron); the isochoric part and the
+// barrier always use the element's own F and J.
 inline Eigen::Matrix3d
-FirstPiola(const Eigen::Matrix3d & F, const Eigen::Matrix3d & cof, double J, double volumeRatio, double mu, double kappa)
+FirstPiola(const Eigen::Matrix3d & F,
+           const Eigen::Matrix3d & cof,
+           double                  J,
+           double                  volumeRatio,
+           double                  mu,
+           double                  kappa,
+           double                  collapseModulus)
 {
   const double isochoricFactor = mu * InverseCubeRootSquared(J);
   const double I1 = F.squaredNorm();
-  return isochoricFactor * F + (kappa * (volumeRatio - 1.0) - isochoricFactor * I1 / (3.0 * J)) * cof;
+  return isochoricFactor * F + (kappa * (volumeRatio - 1.0) + CollapsePressure(J, collapseModulus) -
+                                isochoricFactor * I1 / (3.0 * J)) *
+                                 cof;
 }
 
 inline double
-StrainEnergyDensity(const Eigen::Matrix3d & F, double J, double volumeRatio, double mu, double kappa)
+StrainEnergyDensity(const Eigen::Matrix3d & F, double J, double volumeRatio, double mu, double kappa,
+                    double collapseModulus)
 {
   return 0.5 * mu * (F.squaredNorm() * InverseCubeRootSquared(J) - 3.0) +
-         0.5 * kappa * (volumeRatio - 1.0) * (volumeRatio - 1.0);
+         0.5 * kappa * (volumeRatio - 1.0) * (volumeRatio - 1.0) + CollapseEnergy(J, collapseModulus);
 }
 
 } // namespace bmr

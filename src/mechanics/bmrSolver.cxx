@@ -28,7 +28,8 @@ Solver::Impl::Impl(const Model & m, const SolverSettings & s)
   {
     shapeFunctions = MovingLeastSquares::ForModel(model);
     forces = std::make_unique<MeshlessForceModel>(
-      model, shapeFunctions->Evaluate(model.meshless.integrationPoints, true, threads, "integration point"), threads);
+      model, shapeFunctions->Evaluate(model.meshless.integrationPoints, true, threads, "integration point"), settings,
+      threads);
     nodeShapes = shapeFunctions->Evaluate(model.nodes, false, threads, "node");
   }
   else
@@ -151,6 +152,8 @@ Solver::Impl::CheckSettings() const
   require(settings.hourglassCoefficient >= 0.0 && settings.hourglassCoefficient <= 1.0,
           "hourglass_coefficient must lie in [0, 1]; 0.2 is the default.");
   require(settings.timeStep >= 0.0, "time_step must be 0 (automatic) or positive.");
+  require(settings.collapseBulkModulus >= 0.0 && std::isfinite(settings.collapseBulkModulus),
+          "collapse_bulk_modulus must be 0 (the model's median bulk modulus) or a positive number of Pa.");
   require(settings.dampingCoefficient >= 0.0, "damping must not be negative.");
   require(settings.outputInterval >= 0.0 && std::isfinite(settings.outputInterval),
           "output_interval must be 0 (no frames) or a positive number of seconds.");

@@ -26,6 +26,7 @@ constexpr int    kPowerIterations = 30;
 constexpr double kEigenvalueMargin = 1.1;
 constexpr double kGrowthLimit = 10.0;
 constexpr double kSignificantIncrement = 1e-4; // of the body's size
+constexpr double kRoundOffIncrement = 1e-12;   // of the body's size: a state at rest to round-off
 constexpr int    kMaxRestarts = 6;
 constexpr double kRestartMassFactor = 2.0;
 
@@ -163,10 +164,15 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   const double        safety = settings.timeStepSafetyFactor;
   const double        omegaMax = 2.0 * safety / h;
   const Index         dofCount = static_cast<Index>(3 * model.nodes.size());
-  std::vector<double> mass = forces->ScaledMasses(h, 1.0); // element bound: omega_max <= 2
+  // The global scale comes from the reference state's masses; it is then
+  // applied to the masses made for the collapse barrier's stiffness, which
+  // the reference state does not show (in a body of soft cells alone the
+  // estimate would otherwise scale the barrier's masses away).
+  std::vector<double> mass = forces->ScaledMasses(h, 1.0, false); // element bound: omega_max <= 2
   const double        boundScale = 1.0 / (safety * safety);
   const double        largest = LargestEigenvalueEstimate(mass);
   const double massScale = std::clamp(kEigenvalueMargin * largest / (omegaMax * omegaMax), 1e-3 * boundScale, boundScale);
+  mass = forces->ScaledMasses(h, 1.0, true);
 
   std::vector<double> u(dofCount, 0.0), uPrevious(dofCount, 0.0), uNext(dofCount, 0.0);
   std::vector<double> f(dofCount, 0.0), fPrevious(dofCount, 0.0), inverseMass(dofCount);
@@ -216,9 +222,18 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   bool               converged = false;
   double             gravityFactor = 0.0;
   int                restarts = 0;
-  auto               loadFactor = [&](const LoadCurve & curve, int k) {
-    return curve.Factor(static_cast<double>(k) / settings.loadSteps);
-  };
+  // The load ramp: the loads' curves are at rampPosition(k) in [0, 1] at step
+  // k, and fully applied from step rampEndStep on. A failure while the loads
+  // still ramp (a cell inverted where the body had not caught up with a
+  // fast-moving boundary: 25 mm shifts of Colin27) restarts with the rest of
+  // the ramp twice as slow, as well as with heavier masses.
+  double rampOrigin = 0.0;
+  int    rampOriginStep = 0;
+  double rampLength = settings.loadSteps;
+  int    rampEndStep = settings.loadSteps;
+  int    rampSlowdowns = 0;
+  auto   rampPosition = [&](int k) { return std::min(1.0, rampOrigin + (k - rampOriginStep) / rampLength); };
+  auto   loadFactor = [&](const LoadCurve & curve, int k) { return curve.Factor(rampPosition(k)); };
 
   // Checkpoint for restarts: stiffening under large deformation can outgrow
   // the reference-state estimate of the largest eigenvalue. Dynamic relaxation
@@ -248,7 +263,7 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
         if (numerator > 0.0 && denominator > 0.0)
         {
           setDamping(numerator / denominator);
-          if (step > settings.loadSteps)
+          if (step > rampEndStep)
           {
             slowestEigenvalue = std::min(slowestEigenvalue, lowestEigenvalue);
           }
@@ -261,7 +276,7 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
         curveFactors[k] = loadFactor(curves[k], step + 1);
       }
       CentralDifferenceStep(u, uPrevious, f, inverseMass, alpha, beta, gravityFactor, curveFactors, uNext, inContact,
-                            LoadCurve{}.Factor(static_cast<double>(step + 1) / settings.loadSteps));
+                            LoadCurve{}.Factor(rampPosition(step + 1)));
 
       const IncrementStatistics increment = MeasureIncrement(uNext, u, dofConstrained, lengthScale, threads);
       CheckIncrement(uNext, u, increment.firstBad, step, false, h);
@@ -273,7 +288,7 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
       // Divergence: increments growing tenfold within a window once the loads
       // are applied, and no longer negligible (round-off and contact events
       // near convergence may jump by large factors from tiny values).
-      if (step + 1 > settings.loadSteps && static_cast<int>(incrementNorms.size()) == window + 1 &&
+      if (step + 1 > rampEndStep && static_cast<int>(incrementNorms.size()) == window + 1 &&
           incrementNorms.back() > kGrowthLimit * incrementNorms.front() &&
           increment.maxAbs > kSignificantIncrement * lengthScale)
       {
@@ -291,7 +306,7 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
       // rate / (1 - rate) * ||du||_inf, with the rate the largest of the observed
       // decay and the theoretical rate sqrt(beta) of the current and of the
       // slowest lowest-mode estimate.
-      if (step + 1 >= settings.loadSteps && static_cast<int>(incrementNorms.size()) == window + 1)
+      if (step + 1 >= rampEndStep && static_cast<int>(incrementNorms.size()) == window + 1)
       {
         const double observed = incrementNorms.front() > 0.0
                                   ? std::pow(incrementNorms.back() / incrementNorms.front(), 1.0 / window)
@@ -299,6 +314,13 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
         const double slowest = std::isfinite(slowestEigenvalue) ? betaFor(slowestEigenvalue) : beta;
         rate = std::max(observed, std::sqrt(std::max(std::max(beta, slowest), 0.0)));
         estimatedError = rate < 1.0 ? rate / (1.0 - rate) * increment.maxAbs : std::numeric_limits<double>::infinity();
+        if (increment.maxAbs <= kRoundOffIncrement * lengthScale)
+        {
+          // Increments of round-off have no decay rate (their ratio is noise,
+          // often above 1); a state at rest to round-off is in equilibrium,
+          // as any force out of balance would move it.
+          estimatedError = increment.maxAbs;
+        }
         satisfied = estimatedError < settings.tolerance ? satisfied + 1 : 0;
         if (satisfied >= window)
         {
@@ -323,10 +345,22 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
       {
         // The first failure names the cell or node where it started.
         throw SolveError(std::string(firstFailure->what()) + " Restarting " + std::to_string(kMaxRestarts) +
-                           " times from the last good state with heavier masses did not help.",
+                           " times from the last good state with heavier masses" +
+                           (rampSlowdowns > 0 ? " and a load ramp up to " + std::to_string(1 << rampSlowdowns) +
+                                                  " times slower"
+                                              : std::string()) +
+                           " did not help.",
                          firstFailure->Step(), firstFailure->Element());
       }
       ++restarts;
+      if (checkpointStep < rampEndStep)
+      {
+        rampOrigin = rampPosition(checkpointStep);
+        rampOriginStep = checkpointStep;
+        rampLength *= 2.0;
+        rampEndStep = rampOriginStep + static_cast<int>(std::ceil((1.0 - rampOrigin) * rampLength - 1e-9));
+        ++rampSlowdowns;
+      }
       scaleMasses(kRestartMassFactor);
       setDamping(lowestEigenvalue / kRestartMassFactor);
       slowestEigenvalue /= kRestartMassFactor;
@@ -372,7 +406,12 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   }
   if (restarts > 0)
   {
-    message << " (" << restarts << " restart(s) with heavier masses after the deformation stiffened the model)";
+    message << " (" << restarts << " restart(s) with heavier masses after the deformation stiffened the model";
+    if (rampSlowdowns > 0)
+    {
+      message << ", " << rampSlowdowns << " of them with a load ramp twice as slow";
+    }
+    message << ")";
   }
   result.message = message.str();
   return result;

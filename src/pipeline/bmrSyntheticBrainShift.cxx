@@ -323,6 +323,11 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
   {
     throw Error("MakeSyntheticBrainShift: the target shift must be > 0 mm");
   }
+  if (!(settings.freeRim >= 0.0 && settings.freeRim < 1.0))
+  {
+    throw Error("MakeSyntheticBrainShift: the free rim is a fraction of the craniotomy's radius in [0, 1) (0.2 for "
+                "shifts of 15 mm and more)");
+  }
   if (!(settings.biasField >= 0.0 && settings.biasField < 1.0))
   {
     throw Error("MakeSyntheticBrainShift: the bias field's amplitude must be in [0, 1) (0.2: +-20 %)");
@@ -406,15 +411,19 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
   for (const Index node : truth.model.exposedNodes)
   {
     const double r = (model.nodes[node] - settings.craniotomyCentre).norm() / settings.craniotomyRadius;
+    if (r > 1.0 - settings.freeRim)
+    {
+      continue; // the free rim: the model decides how the opening's edge follows
+    }
     sag.nodes.push_back(node);
     sag.displacements.push_back(settings.targetShift * std::max(0.0, 1.0 - r * r) * down);
   }
   model.prescribedDisplacements = { sag };
-  // The exposed nodes are moved, not in contact.
+  // The exposed nodes are moved or free, not in contact: the skull is open there.
   if (!model.contactSurfaces.empty())
   {
     std::vector<char> exposed(model.nodes.size(), 0);
-    for (const Index node : sag.nodes)
+    for (const Index node : truth.model.exposedNodes)
     {
       exposed[node] = 1;
     }
