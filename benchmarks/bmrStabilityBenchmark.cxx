@@ -544,9 +544,13 @@ main(int argc, char ** argv)
     const Options options = ParseOptions(argc, argv);
     for (const std::string & path : { options.output, options.json })
     {
-      // Before minutes of solves, not after.
+      // Before minutes of solves, not after. (absolute("") throws: skip an option not given.)
+      if (path.empty())
+      {
+        continue;
+      }
       const std::filesystem::path folder = std::filesystem::absolute(path).parent_path();
-      if (!path.empty() && !std::filesystem::is_directory(folder))
+      if (!std::filesystem::is_directory(folder))
       {
         throw std::runtime_error("cannot write '" + path + "': folder '" + folder.string() + "' does not exist");
       }
