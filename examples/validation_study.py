@@ -278,12 +278,11 @@ def main():
         with open(os.path.join(arguments.docs, "validation.md"), "w") as handle:
             handle.write(markdown(earlier["runs"], earlier.get("machine", "")))
         return
+    if arguments.large_shifts:
+        arguments.scenes = LARGE_SCENES
     scenes = SCENES[:1] if arguments.reduced else SCENES
     if arguments.scenes:
         scenes = [scene for scene in SCENES if scene[0] in arguments.scenes]
-    if arguments.large_shifts:
-        arguments.scenes = LARGE_SCENES
-        scenes = [scene for scene in SCENES if scene[0] in LARGE_SCENES]
     load = os.getloadavg()[0]
     runs = []
     for name, centre, extra, variants in scenes:

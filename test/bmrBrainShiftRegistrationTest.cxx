@@ -742,7 +742,21 @@ TEST(BrainShiftRegistration, ResectionCavityAndFieldOfViewInTheIntraoperativeIma
   EXPECT_GT(image->GetPixel(index), 1.3 * brain[brain.size() / 2]);
   EXPECT_EQ(resected.intraoperativeBrainMask->GetPixel(index), 0);
 
-  // Bad input: a resection without a tumour.
+  // Bad input: a resection without a tumour; a free rim that is not a fraction of the radius (named, before any work).
   scene.tumourRadius = 0.0;
   EXPECT_THROW(bmr::MakeSyntheticBrainShift(colin.image, colin.mask, scene), bmr::Error);
+  scene.resectionMargin = -1.0;
+  for (double freeRim : { -0.1, 1.0, std::nan("") })
+  {
+    scene.freeRim = freeRim;
+    try
+    {
+      bmr::MakeSyntheticBrainShift(colin.image, colin.mask, scene);
+      ADD_FAILURE() << "free rim " << freeRim << " accepted";
+    }
+    catch (const bmr::Error & error)
+    {
+      EXPECT_NE(std::string(error.what()).find("free rim"), std::string::npos) << error.what();
+    }
+  }
 }

@@ -266,6 +266,27 @@ TEST(Failure, InversionWhileTheLoadsRampSlowsTheRamp)
   EXPECT_LT(difference, 1e-4);
 }
 
+// A collapse modulus that is negative or not a number is named before any work.
+TEST(Failure, BadCollapseModulusIsNamed)
+{
+  for (double modulus : { -1.0, std::nan("") })
+  {
+    Model model = MakeBlockMesh(Vector3(3, 3, 3), { 3, 3, 3 }, GridCells::Hexahedra, MakeMaterial(3000.0, 0.45));
+    model.fixedConstraints.push_back({ "zmin", { true, true, true } });
+    SolverSettings settings;
+    settings.collapseBulkModulus = modulus;
+    try
+    {
+      Solver(model, settings).Solve();
+      ADD_FAILURE() << "collapse modulus " << modulus << " accepted";
+    }
+    catch (const Error & e)
+    {
+      EXPECT_TRUE(Contains(e.what(), "collapse_bulk_modulus")) << e.what();
+    }
+  }
+}
+
 // One-point hexahedra check J only at the cell centre, where it can stay
 // positive while the cell is folded at its corners. A node pushed 1.5 mm down
 // through the 1 mm cell below it must not come back as a converged result

@@ -382,14 +382,11 @@ TEST(Locking, SoftCsfSqueezedByParenchymaHoldsWithTheCollapseBarrier)
         {
           continue;
         }
-        Matrix3 reference, deformed;
-        for (int a = 1; a < 4; ++a)
-        {
-          reference.col(a - 1) = model.nodes[cell.nodes[a]] - model.nodes[cell.nodes[0]];
-          deformed.col(a - 1) = reference.col(a - 1) + result.displacements[cell.nodes[a]] -
-                                result.displacements[cell.nodes[0]];
-        }
-        *smallestCsfVolumeRatio = std::min(*smallestCsfVolumeRatio, deformed.determinant() / reference.determinant());
+        auto volume = [&](double scale) {
+          auto x = [&](int a) { return model.nodes[cell.nodes[a]] + scale * result.displacements[cell.nodes[a]]; };
+          return TetrahedronVolume(x(0), x(1), x(2), x(3));
+        };
+        *smallestCsfVolumeRatio = std::min(*smallestCsfVolumeRatio, volume(1.0) / volume(0.0));
       }
     }
     return result;

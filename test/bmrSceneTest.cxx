@@ -101,7 +101,8 @@ TEST_F(SceneTest, EveryFieldIsMapped)
     "body_side": "outside", "flip_normals": true, "slave_node_set": "skin"}])");
   scene["solver"] = json::parse(R"({"integrator": "explicit_dynamics", "tetrahedron": "linear", "tolerance": 0.002,
     "max_steps": 1234, "load_steps": 77, "adapt_interval": 9, "time_step": 1e-5, "safety_factor": 0.6,
-    "end_time": 0.3, "damping": 12.5, "hourglass_coefficient": 0.1, "threads": 2, "compute_stress": true})");
+    "end_time": 0.3, "damping": 12.5, "hourglass_coefficient": 0.1, "threads": 2, "compute_stress": true,
+    "collapse_bulk_modulus": 25000})");
   scene["output"] = json::parse(R"({"vtu": "out/r.vtu", "report": "out/r.json"})");
 
   const bmr::Scene parsed = Parse(scene);
@@ -191,6 +192,7 @@ TEST_F(SceneTest, EveryFieldIsMapped)
   EXPECT_EQ(settings.endTime, 0.3);
   EXPECT_EQ(settings.dampingCoefficient, 12.5);
   EXPECT_EQ(settings.hourglassCoefficient, 0.1);
+  EXPECT_EQ(settings.collapseBulkModulus, 25000.0);
   EXPECT_EQ(settings.threads, 2);
   EXPECT_TRUE(settings.computeStress);
 
@@ -207,6 +209,7 @@ TEST_F(SceneTest, DefaultsFollowTheDocumentation)
   EXPECT_EQ(parsed.settings.tolerance, defaults.tolerance);
   EXPECT_EQ(parsed.settings.maxSteps, defaults.maxSteps);
   EXPECT_EQ(parsed.settings.hourglassCoefficient, 0.2);
+  EXPECT_EQ(parsed.settings.collapseBulkModulus, 0.0); // the model's median bulk modulus
   EXPECT_EQ(parsed.settings.timeStepSafetyFactor, 0.8);
   EXPECT_FALSE(parsed.settings.computeStress);
   EXPECT_EQ(parsed.model.materials[0].density, 1000.0);
@@ -440,6 +443,8 @@ TEST_F(SceneTest, BadInputsNameTheOffendingKey)
     { "safety factor above 1", [](json & s) { s["solver"] = { { "safety_factor", 1.5 } }; }, { "solver.safety_factor" } },
     { "zero tolerance", [](json & s) { s["solver"] = { { "tolerance", 0 } }; }, { "solver.tolerance" } },
     { "negative threads", [](json & s) { s["solver"] = { { "threads", -1 } }; }, { "solver.threads" } },
+    { "negative collapse modulus", [](json & s) { s["solver"] = { { "collapse_bulk_modulus", -1 } }; },
+      { "solver.collapse_bulk_modulus" } },
     { "result not vtu", [](json & s) { s["output"] = { { "vtu", "result.txt" } }; }, { "output.vtu", ".vtu" } },
     { "unknown output key", [](json & s) { s["output"] = { { "vtk", "r.vtk" } }; }, { "output.vtk", "unknown key" } },
   };

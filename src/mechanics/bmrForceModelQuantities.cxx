@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numeric>
 
 namespace bmr
 {
@@ -112,17 +113,10 @@ CollapseModuli(const std::vector<double> & kappa, const std::vector<double> & vo
   {
     // Volume-weighted median: the modulus below which half of the body lies.
     std::vector<std::size_t> order(kappa.size());
-    for (std::size_t k = 0; k < order.size(); ++k)
-    {
-      order[k] = k;
-    }
+    std::iota(order.begin(), order.end(), std::size_t{ 0 });
     std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return kappa[a] < kappa[b]; });
-    double total = 0.0;
-    for (const double v : volume)
-    {
-      total += v;
-    }
-    double below = 0.0;
+    const double total = std::accumulate(volume.begin(), volume.end(), 0.0);
+    double       below = 0.0;
     for (const std::size_t k : order)
     {
       below += volume[k];
