@@ -161,10 +161,14 @@ Solver::Impl::EnforceMeshlessContact(double * u, std::vector<char> & inContact, 
         }
       }
     }
+    // The projections in turn: Kaczmarz sweeps until the gaps close, then
+    // EBCIEM's projection if the sweeps moved parameters it constrains, then
+    // sweeps again, until the gaps stay closed after a projection. (A
+    // projection after every sweep cost 13 % of the meshless Colin27 solve.)
+    double essentialChange = 0.0; // largest change of a parameter EBCIEM constrains since its last projection
     for (int sweep = 0; sweep < kSweeps; ++sweep)
     {
       double largest = 0.0;
-      bool   movedEssential = false;
       for (std::size_t a = 0; a < activeSlaves.size(); ++a)
       {
         const Index     node = activeSlaves[a];
@@ -183,18 +187,26 @@ Solver::Impl::EnforceMeshlessContact(double * u, std::vector<char> & inContact, 
             const Index  d = 3 * nodeShapes.nodes[k] + i;
             const double change = multiplier * nodeShapes.values[k] * n[i] * weight(d);
             u[d] += change;
-            movedEssential = movedEssential || (essential && change != 0.0 && essentialSupport[d]);
+            if (essential && essentialSupport[d])
+            {
+              essentialChange = std::max(essentialChange, std::abs(change));
+            }
           }
         }
       }
       if (largest <= tolerance)
       {
-        break;
-      }
-      if (movedEssential)
-      {
+        if (essentialChange <= tolerance)
+        {
+          break;
+        }
         essential->Impose(u, constraintTargets);
+        essentialChange = 0.0;
       }
+    }
+    if (essentialChange > 0.0)
+    {
+      essential->Impose(u, constraintTargets); // the prescribed values are exact; the gaps within the sweeps' reach
     }
   }
 }
