@@ -17,6 +17,7 @@
 #include <fstream>
 #include <iostream>
 #include <map>
+#include <limits>
 #include <set>
 
 namespace
@@ -248,6 +249,15 @@ TEST(ImageGridMeshless, CloudCoversTheBody)
     const double       r = std::pow(x[0] / 35.0, 2) + std::pow(x[1] / 31.0, 2) + std::pow(x[2] / 27.0, 2);
     ASSERT_LE(r, 1.0) << node.transpose();
   }
+  // No two nodes of the cloud within h/2: CGAL's surface vertices closer
+  // than that are thinned (clusters of close nodes leave modes of almost no
+  // stiffness; docs/model-building.md).
+  const double h = 6.0;
+  double       closest = std::numeric_limits<double>::max();
+  for (std::size_t a = 0; a < grid.model.nodes.size(); ++a)
+    for (std::size_t b = a + 1; b < grid.model.nodes.size(); ++b)
+      closest = std::min(closest, (grid.model.nodes[a] - grid.model.nodes[b]).norm());
+  EXPECT_GE(closest, 0.5 * h);
   // Shape functions evaluate at every integration point (coverage).
   const bmr::MovingLeastSquares mls(grid.model.nodes, grid.model.meshless.shapeFunctions);
   const auto table = mls.Evaluate(grid.model.meshless.integrationPoints, false);
