@@ -109,7 +109,10 @@ TEST(BrainShiftRegistration, ReducedDemoRegistersBetterThanNoRegistration)
 // parenchyma holds at half its volume) and the slower load ramp after an
 // inversion. Measured at the study's settings (5 mm truth): p95 1.50 mm
 // against 8.34 mm without registration.
-TEST(BrainShiftRegistration, TwentyFiveMillimetreShiftOnTetrahedra)
+// A 25 mm shift registered on both finite-element grids: 7 mm ANP tetrahedra
+// and 5 mm hexahedra (at the demo's 5 mm truth, 2026-11-26: p95 1.51 and
+// 1.37 mm, no registration 8.34 mm).
+TEST(BrainShiftRegistration, TwentyFiveMillimetreShiftOnTetrahedraAndHexahedra)
 {
   if (!HaveColin27())
   {
@@ -124,17 +127,24 @@ TEST(BrainShiftRegistration, TwentyFiveMillimetreShiftOnTetrahedra)
   const bmr::SyntheticBrainShift truth = bmr::MakeSyntheticBrainShift(colin.image, colin.mask, scene);
   ASSERT_TRUE(truth.solve.converged) << truth.solve.message;
   EXPECT_NEAR(truth.shift, scene.targetShift, 0.05 * scene.targetShift);
-
-  const auto result = RegisterFromTrackedPoints(truth, scene, 7.0, bmr::ImageGridKind::Tetrahedra);
-  ASSERT_TRUE(result.solve.converged) << result.solve.message;
   const auto none = bmr::MeasureDisplacementError(nullptr, truth.truthTransform, truth.intraoperativeBrainOnPreoperativeGrid);
-  const auto registered =
-    bmr::MeasureDisplacementError(result.transform, truth.truthTransform, truth.intraoperativeBrainOnPreoperativeGrid);
-  RecordProperty("p95_mm", std::to_string(registered.p95));
-  RecordProperty("unregistered_p95_mm", std::to_string(none.p95));
   EXPECT_NEAR(none.max, scene.targetShift, 1.0);
-  EXPECT_LT(registered.p95, 0.3 * none.p95);
-  EXPECT_LT(registered.p95, 2.5);
+  RecordProperty("unregistered_p95_mm", std::to_string(none.p95));
+
+  const std::vector<std::pair<bmr::ImageGridKind, double>> grids = { { bmr::ImageGridKind::Tetrahedra, 7.0 },
+                                                                     { bmr::ImageGridKind::Hexahedra, 5.0 } };
+  for (const auto & [kind, size] : grids)
+  {
+    SCOPED_TRACE(kind == bmr::ImageGridKind::Tetrahedra ? "tetrahedra" : "hexahedra");
+    const auto result = RegisterFromTrackedPoints(truth, scene, size, kind);
+    ASSERT_TRUE(result.solve.converged) << result.solve.message;
+    const auto registered =
+      bmr::MeasureDisplacementError(result.transform, truth.truthTransform, truth.intraoperativeBrainOnPreoperativeGrid);
+    RecordProperty(kind == bmr::ImageGridKind::Tetrahedra ? "tetrahedra_p95_mm" : "hexahedra_p95_mm",
+                   std::to_string(registered.p95));
+    EXPECT_LT(registered.p95, 0.3 * none.p95);
+    EXPECT_LT(registered.p95, 2.5);
+  }
 }
 
 // The two other sources of the exposed surface's motion: the displaced
