@@ -182,53 +182,47 @@ struct RegionOptions
 
   bool HasCraniotomy() const { return !craniotomyCentre.empty() || !craniotomyMask.empty(); }
 
+  /** The exposed surface nodes of the craniotomy (bmr::ExposedSurfaceNodes checks the region). */
   std::vector<Index> ExposedNodes(const Model & model, const std::vector<Index> & surface) const
   {
-    if (!craniotomyCentre.empty() && !craniotomyMask.empty())
-    {
-      throw Error("give the craniotomy either as a sphere (--craniotomy-centre, --craniotomy-radius) or as "
-                  "--craniotomy-mask, not both");
-    }
+    LabelVolume      mask;
+    CraniotomyRegion region = Sphere();
     if (!craniotomyMask.empty())
     {
-      const LabelVolume region = ReadMaskVolume(craniotomyMask, "craniotomy mask", nullptr);
-      const auto        nodes = SurfaceNodesInMask(model, surface, region);
-      if (nodes.empty())
-      {
-        throw Error("the craniotomy mask '" + craniotomyMask + "' selects no node of the brain surface; "
-                    "it must overlap the brain's boundary");
-      }
-      return nodes;
+      mask = ReadMaskVolume(craniotomyMask, "craniotomy mask", nullptr);
+      region.mask = &mask;
     }
-    if (craniotomyRadius <= 0.0)
-    {
-      throw Error("--craniotomy-centre needs --craniotomy-radius > 0 (mm)");
-    }
-    return SurfaceNodesInSphere(model, surface, ThreeValues(craniotomyCentre, "--craniotomy-centre"), craniotomyRadius);
+    return ExposedSurfaceNodes(model, surface, region);
   }
 
-  /** The craniotomy and the skull base of the one-call model builder. */
+  /** The craniotomy and the skull base of the one-call model builder (which checks the region). */
   void Apply(BrainModelSettings & settings) const
   {
-    if (!craniotomyCentre.empty() && !craniotomyMask.empty())
-    {
-      throw Error("give the craniotomy either as a sphere (--craniotomy-centre, --craniotomy-radius) or as "
-                  "--craniotomy-mask, not both");
-    }
-    if (!craniotomyCentre.empty())
-    {
-      if (craniotomyRadius <= 0.0)
-      {
-        throw Error("--craniotomy-centre needs --craniotomy-radius > 0 (mm)");
-      }
-      settings.craniotomyCentre = ThreeValues(craniotomyCentre, "--craniotomy-centre");
-      settings.craniotomyRadius = craniotomyRadius;
-    }
+    const CraniotomyRegion sphere = Sphere();
+    settings.craniotomyCentre = sphere.centre;
+    settings.craniotomyRadius = sphere.radius;
     if (!craniotomyMask.empty())
     {
       settings.craniotomyMask = ReadMaskImage(craniotomyMask, "craniotomy mask");
     }
     settings.skullBase.height = skullBaseHeight;
+  }
+
+private:
+  /** The sphere of --craniotomy-centre and --craniotomy-radius (radius 0 when no centre is given). */
+  CraniotomyRegion Sphere() const
+  {
+    CraniotomyRegion region;
+    if (!craniotomyCentre.empty())
+    {
+      if (!(craniotomyRadius > 0.0))
+      {
+        throw Error("--craniotomy-centre needs --craniotomy-radius > 0 (mm)");
+      }
+      region.centre = ThreeValues(craniotomyCentre, "--craniotomy-centre");
+      region.radius = craniotomyRadius;
+    }
+    return region;
   }
 };
 

@@ -6,7 +6,7 @@
 //     -> hexahedral grid of the brain        (itk::BiomechanicalGridImageFilter)
 //     -> materials from the memberships      (itk::BiomechanicalMaterialMappingFilter)
 //     -> brain and skull surfaces            (itk::BrainSurfaceMeshSource)
-//     -> fixed skull base, craniotomy, contact nodes (bmr regions on the model)
+//     -> fixed skull base, craniotomy, contact nodes (itk::BiomechanicalRegionsFilter)
 //     -> craniotomy loaded by sparse intraoperative
 //        displacements                       (itk::BiomechanicalLoadsFilter)
 //     -> nonlinear solve to steady state     (itk::BiomechanicalDeformationFilter,
@@ -45,6 +45,7 @@
 #include "itkBiomechanicalImageConversion.h"
 #include "itkBiomechanicalLoadsFilter.h"
 #include "itkBiomechanicalMaterialMappingFilter.h"
+#include "itkBiomechanicalRegionsFilter.h"
 #include "itkBiomechanicalTransformIO.h"
 #include "itkBrainSurfaceMeshSource.h"
 #include "itkDisplacementPointSetToBSplineTransformFilter.h"
@@ -207,68 +208,51 @@ Run(int argc, char * argv[])
   mapping->SetMemberships(classifier->GetOutput());
   mapping->Update();
   warnings.insert(warnings.end(), mapping->GetWarnings().begin(), mapping->GetWarnings().end());
-  bmr::Model model = mapping->GetOutput()->GetModel(); // a copy: the regions are added below
-  std::cout << "materials  " << model.materials.size() << " distinct mixtures (" << clock.Lap("materials") << " s)\n";
+  std::cout << "materials  " << mapping->GetOutput()->GetModel().materials.size() << " distinct mixtures (" << clock.Lap("materials") << " s)\n";
 
   // 5. Surfaces of the body the grid discretises, not of the mask: the corners
   // of a staircase grid stick out of the mask by up to half a cell and must
   // still lie inside the skull.
   auto surfaces = itk::BrainSurfaceMeshSource<MaskImageType>::New();
   surfaces->SetInput(itk::MakeImageFromBiomechanicalVolume<MaskImageType>(
-    bmr::RasterizeCells(model, itk::MakeBiomechanicalGeometry(mask.GetPointer()))));
+    bmr::RasterizeCells(grid->GetModel(), itk::MakeBiomechanicalGeometry(mask.GetPointer()))));
   surfaces->SetSkullGap(1.5); // mm of CSF between brain and skull
   surfaces->Update();
   std::cout << "surfaces   brain " << surfaces->GetBrainSurface().triangles.size() << " triangles, skull "
             << surfaces->GetSkullSurface().triangles.size() << " triangles (" << clock.Lap("surfaces") << " s)\n";
 
-  // 6. Regions of the model's surface nodes.
-  const std::vector<bmr::Index> surfaceNodes = model.NodeSet("surface");
-  //    The skull base and brain stem hold the brain: fixed.
-  model.nodeSets["skull_base"] = bmr::SkullBaseNodes(model, surfaceNodes);
-  model.fixedConstraints.push_back(bmr::FixedConstraint{ "skull_base" });
-  //    The exposed surface, which the measurements load (all of it: sparse
-  //    points are interpolated to every exposed node).
-  model.nodeSets["exposed"] = bmr::SurfaceNodesInSphere(model, surfaceNodes, craniotomyCentre, craniotomyRadius);
-  //    Every other surface node may slide along the rigid skull or leave it.
-  std::vector<char> constrained(model.nodes.size(), 0);
-  for (const std::string set : { "skull_base", "exposed" })
-  {
-    for (const bmr::Index node : model.nodeSets[set])
-    {
-      constrained[node] = 1;
-    }
-  }
-  std::vector<bmr::Index> contactNodes;
-  for (const bmr::Index node : surfaceNodes)
-  {
-    if (!constrained[node])
-    {
-      contactNodes.push_back(node);
-    }
-  }
-  model.nodeSets["contact"] = contactNodes;
-  auto regions = itk::BiomechanicalModelObject::New();
-  regions->SetModel(model);
+  // 6. Regions of the model's surface nodes: the skull base and brain stem
+  // hold the brain (fixed); the craniotomy's surface is exposed, and the
+  // measurements load it (all of it: sparse points are interpolated to every
+  // exposed node); every other surface node may slide along the rigid skull
+  // or leave it (node set "contact").
+  auto regions = itk::BiomechanicalRegionsFilter<MaskImageType>::New();
+  regions->SetModelInput(mapping->GetOutput());
+  regions->SetCraniotomyCentre(craniotomyCentre);
+  regions->SetCraniotomyRadius(craniotomyRadius);
+  regions->Update();
+  const bmr::Model & model = regions->GetOutput()->GetModel();
+  const std::size_t  contactNodes = model.NodeSet("contact").size();
 
   //    The loads: the sparse displacements, interpolated (thin-plate spline)
   //    to every exposed node, as a point set of the exposed nodes.
   using PointSetType = itk::DisplacementPointSetType<3>;
   auto loads = itk::BiomechanicalLoadsFilter<PointSetType>::New();
-  loads->SetModelInput(regions);
+  loads->SetModelInput(regions->GetOutput());
   loads->SetSparseDisplacements(itk::MakeDisplacementPointSet<PointSetType>(measured.points, measured.displacements));
   loads->Update();
   const bmr::LoadReport & loadReport = loads->GetLoadReport();
   warnings.insert(warnings.end(), loadReport.warnings.begin(), loadReport.warnings.end());
   const std::size_t loadedNodes = loads->GetOutput()->GetNumberOfPoints();
-  std::cout << "regions    " << model.nodeSets["skull_base"].size() << " fixed, " << loadedNodes
+  std::cout << "regions    " << model.NodeSet("skull_base").size() << " fixed, " << loadedNodes
             << " loaded from " << loadReport.usedPoints << " measurements (" << loadReport.rejectedPoints
-            << " rejected), " << contactNodes.size() << " may touch the skull (" << clock.Lap("regions") << " s)\n";
+            << " rejected), " << contactNodes << " may touch the skull (" << clock.Lap("regions") << " s)\n";
 
   // 7. Steady state of the nonlinear model under the enforced displacements,
   // the skull (the body stays inside it) as contact surface of the nodes in
   // the model's "contact" set. 0.01 mm: far below the 0.1 mm the registration needs.
   auto deformation = itk::BiomechanicalDeformationFilter<PointSetType>::New();
-  deformation->SetModelInput(regions);
+  deformation->SetModelInput(regions->GetOutput());
   deformation->SetPrescribedDisplacements(loads->GetOutput());
   deformation->SetContactSurface(surfaces->GetSkullOutput());
   bmr::SolverSettings settings;

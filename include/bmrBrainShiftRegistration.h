@@ -18,6 +18,7 @@
 // ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.
 #include "itkBSplineTransform.h"
 #include "itkImage.h"
+#include "itkBiomechanicalModelObject.h"
 
 #include "bmrBrainSurfaces.h"
 #include "bmrFuzzyCMeans.h"
@@ -149,7 +150,7 @@ struct BrainModelSettings
   Vector3                             craniotomyCentre = Vector3::Zero();
   double                              craniotomyRadius = 0.0;
   RegistrationLabelImage::ConstPointer craniotomyMask;
-  /** Brain-skull contact of every surface node that is neither fixed nor loaded. */
+  /** Brain-skull contact of every surface node that is neither fixed nor exposed (itk::BiomechanicalRegionsFilter). */
   bool contact = true;
   /** Body acceleration (mm/s^2); zero: none (registration loads by displacements only). */
   Vector3 gravity = Vector3::Zero();
@@ -180,7 +181,9 @@ struct IntraoperativeData
 
 struct BrainModel
 {
-  Model                    model;    // fixed skull base, prescribed exposed-surface displacements, contact
+  /** The model as one scene: fixed skull base, prescribed exposed-surface
+   *  displacements, contact (what `biomech model` writes). */
+  Model                    model;
   BrainSurfaces            surfaces; // preoperative brain surface and the skull (contact master)
   TissueClassification     classification;
   LabelVolume              brainMask;
@@ -189,6 +192,14 @@ struct BrainModel
   PrescribedDisplacement   load;
   LoadReport               loadReport;
   std::vector<std::string> warnings;
+  /** The same model as the pipeline hands it to itk::BiomechanicalDeformationFilter:
+   *  the regions filter's output (materials, node sets "skull_base" (fixed),
+   *  "exposed", "contact", gravity; no loads, no contact surface), the loads
+   *  filter's point set (null without measurements) and the skull mesh (null
+   *  without contact). */
+  itk::BiomechanicalModelObject::Pointer           pipelineModel;
+  itk::DisplacementPointSetType<3>::Pointer        prescribedDisplacements;
+  itk::BiomechanicalSurfaceMeshType::Pointer       contactSurface;
 };
 
 /** Builds the model of `image` inside `brainMask` (null: atlas skull stripping

@@ -120,6 +120,33 @@ SurfaceNodesInMask(const Model &              model,
                    const LabelVolume &        regionMask,
                    double                     tolerance = -1.0);
 
+/** The craniotomy, the opening of the skull whose surface nodes are exposed:
+ *  a sphere (radius > 0 mm) or a mask (non-zero voxels, on any grid), not both. */
+struct CraniotomyRegion
+{
+  Vector3 centre = Vector3::Zero();
+  double  radius = 0.0;
+  /** Not owned; must outlive the call. */
+  const LabelVolume * mask = nullptr;
+
+  bool
+  Given() const
+  {
+    return radius > 0.0 || mask != nullptr;
+  }
+};
+
+/** The one check of a craniotomy region, shared by the filters, the command
+ *  line and Python: a sphere or a mask, not both, and one of them given.
+ *  Throws bmr::Error saying what to give. */
+void
+CheckCraniotomyRegion(const CraniotomyRegion & region);
+
+/** The exposed surface nodes: those of the craniotomy region
+ *  (SurfaceNodesInSphere or SurfaceNodesInMask), after CheckCraniotomyRegion. */
+std::vector<Index>
+ExposedSurfaceNodes(const Model & model, const std::vector<Index> & surfaceNodes, const CraniotomyRegion & region);
+
 struct SkullBaseSettings
 {
   /** Height (mm) of the fixed band above the lowest surface node, measured

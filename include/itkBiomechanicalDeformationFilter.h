@@ -65,7 +65,7 @@ namespace itk
  * \ingroup BiomechanicalRegistration
  */
 template <typename TDisplacementPointSet = DisplacementPointSetType<3>,
-          typename TSurfaceMesh = Mesh<double, 3, DefaultStaticMeshTraits<double, 3, 3, double, double>>>
+          typename TSurfaceMesh = BiomechanicalSurfaceMeshType>
 class ITK_TEMPLATE_EXPORT BiomechanicalDeformationFilter : public ProcessObject
 {
 public:

@@ -151,10 +151,16 @@ public:
   {
     return itkDynamicCastInDebugMode<BiomechanicalModelObject *>(this->ProcessObject::GetOutput(1));
   }
+  /** For a meshless point cloud: the tetrahedra whose region its
+   *  integration points cover (the body, e.g. to rasterise for its surfaces);
+   *  empty for a finite-element grid. */
+  const bmr::Model & GetMeshlessBody() const { return m_Grid.meshlessBody; }
   /** Image label of each cell of the last update (empty for meshless). */
   const std::vector<int> & GetCellLabels() const { return m_Grid.cellLabels; }
   /** Size and quality figures of the last update. */
   const bmr::GridQuality & GetQuality() const { return m_Grid.quality; }
+  /** Warnings of the last update (also sent through itkWarningMacro). */
+  const std::vector<std::string> & GetWarnings() const { return m_Warnings; }
 
 protected:
   BiomechanicalGridImageFilter();
@@ -169,6 +175,7 @@ protected:
 private:
   bmr::ImageGridSettings m_Settings;
   bmr::ImageGrid         m_Grid;
+  std::vector<std::string> m_Warnings;
 };
 
 } // namespace itk

@@ -72,17 +72,17 @@ BiomechanicalGridImageFilter<TLabelImage>::GenerateData()
     labels.values[n] = static_cast<std::uint8_t>(value);
   }
 
-  std::vector<std::string> warnings;
+  m_Warnings.clear();
   try
   {
-    m_Grid = bmr::MakeGridFromLabels(labels, m_Settings, &warnings);
+    m_Grid = bmr::MakeGridFromLabels(labels, m_Settings, &m_Warnings);
   }
   catch (const bmr::Error & error)
   {
     m_Grid = bmr::ImageGrid{};
     itkExceptionMacro(<< error.what());
   }
-  for (const auto & warning : warnings)
+  for (const auto & warning : m_Warnings)
   {
     itkWarningMacro(<< warning);
   }

@@ -11,6 +11,7 @@
 
 #include "bmrSurfaceLoads.h"
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -44,10 +45,13 @@ namespace itk
  *
  * Settings: MaxDistance (mm, default 10: farther measurements are rejected
  * with a warning naming them), Smoothing (mm, default 0: an interpolating
- * spline), ExposedNodeSet, ScanReach and ScanSpacing (mm, defaults 10 and 5).
+ * spline), ExposedNodeSet, ScanReach and ScanSpacing (mm, defaults 10 and 5),
+ * MatchDirection (surface to surface: the direction a scanner looks along;
+ * unset, the default: the preoperative surface's normals).
  *
  * Output: the loaded exposed nodes (reference positions, mm) carrying their
- * displacements (mm). GetLoadReport() gives the points used and rejected and
+ * displacements (mm); GetPrescribedDisplacement() gives the same load with
+ * the nodes' indices (bmr::PrescribedDisplacement). GetLoadReport() gives the points used and rejected and
  * the correspondence distances; warnings also go through itkWarningMacro.
  * Errors of the core (no exposed nodes, every measurement rejected, a NaN
  * coordinate, ...) are thrown as itk::ExceptionObject with its message.
@@ -55,7 +59,7 @@ namespace itk
  * \ingroup BiomechanicalRegistration
  */
 template <typename TDisplacementPointSet = DisplacementPointSetType<3>,
-          typename TSurfaceMesh = Mesh<double, 3, DefaultStaticMeshTraits<double, 3, 3, double, double>>>
+          typename TSurfaceMesh = BiomechanicalSurfaceMeshType>
 class ITK_TEMPLATE_EXPORT BiomechanicalLoadsFilter : public ProcessObject
 {
 public:
@@ -95,6 +99,20 @@ public:
   itkGetConstMacro(ScanReach, double);
   itkSetMacro(ScanSpacing, double);
   itkGetConstMacro(ScanSpacing, double);
+  void
+  SetMatchDirection(const std::optional<bmr::Vector3> & direction)
+  {
+    if (direction != m_MatchDirection)
+    {
+      m_MatchDirection = direction;
+      this->Modified();
+    }
+  }
+  const std::optional<bmr::Vector3> &
+  GetMatchDirection() const
+  {
+    return m_MatchDirection;
+  }
 
   DisplacementPointSetType *
   GetOutput()
@@ -106,6 +124,12 @@ public:
   GetLoadReport() const
   {
     return m_Report;
+  }
+  /** The output's load with the indices of its nodes (the model's node numbering). */
+  const bmr::PrescribedDisplacement &
+  GetPrescribedDisplacement() const
+  {
+    return m_Load;
   }
 
 protected:
@@ -139,6 +163,7 @@ protected:
     DisplacementPointSetType * output = this->GetOutput();
     output->Initialize();
     m_Report = bmr::LoadReport{};
+    m_Load = bmr::PrescribedDisplacement{};
     const ModelObjectType *          input = this->GetModelInput();
     const DisplacementPointSetType * sparse = this->GetSparseDisplacements();
     const SurfaceMeshType *          surface = this->GetIntraoperativeSurface();
@@ -161,6 +186,7 @@ protected:
     bmr::SurfaceLoadSettings        settings;
     settings.maxDistance = m_MaxDistance;
     settings.smoothing = m_Smoothing;
+    settings.matchDirection = m_MatchDirection;
     bmr::PrescribedDisplacement load;
     try
     {
@@ -213,6 +239,7 @@ protected:
       positions.push_back(model.nodes[node]);
     }
     FillDisplacementPointSet(output, positions, load.displacements);
+    m_Load = std::move(load);
   }
 
   void
@@ -222,6 +249,7 @@ protected:
     os << indent << "ExposedNodeSet: " << m_ExposedNodeSet << std::endl;
     os << indent << "MaxDistance: " << m_MaxDistance << " mm, Smoothing: " << m_Smoothing << " mm" << std::endl;
     os << indent << "ScanReach: " << m_ScanReach << " mm, ScanSpacing: " << m_ScanSpacing << " mm" << std::endl;
+    os << indent << "MatchDirection: " << (m_MatchDirection ? "given" : "surface normals") << std::endl;
   }
 
 private:
@@ -230,7 +258,9 @@ private:
   double          m_Smoothing{ 0.0 };
   double          m_ScanReach{ 10.0 };
   double          m_ScanSpacing{ 5.0 };
-  bmr::LoadReport m_Report;
+  std::optional<bmr::Vector3>  m_MatchDirection;
+  bmr::LoadReport             m_Report;
+  bmr::PrescribedDisplacement m_Load;
 };
 
 } // namespace itk

@@ -3,7 +3,12 @@
 
 #include "itkCommonEnums.h"
 #include "itkDataObject.h"
+#include "itkDefaultStaticMeshTraits.h"
+#include "itkMesh.h"
+#include "itkPointSet.h"
+#include "itkVector.h"
 #include "itkObjectFactory.h"
+#include "itkTriangleCell.h"
 
 #include "bmrModel.h"
 
@@ -13,6 +18,18 @@
 
 namespace itk
 {
+
+/** Reference positions carrying displacements, both in double precision
+ * (itk::PointSet's default coordinates are float): the loads, the solution,
+ * the transform fitter's input. */
+template <unsigned int VDimension>
+using DisplacementPointSetType =
+  PointSet<Vector<double, VDimension>, VDimension,
+           DefaultStaticMeshTraits<Vector<double, VDimension>, VDimension, VDimension, double, double>>;
+
+/** A triangle surface in double precision (mm): brain and skull surfaces,
+ * intraoperative surfaces, contact masters. */
+using BiomechanicalSurfaceMeshType = Mesh<double, 3, DefaultStaticMeshTraits<double, 3, 3, double, double>>;
 
 /** \class BiomechanicalModelObject
  * \brief A biomechanical model (bmr::Model) as a pipeline data object.
@@ -129,6 +146,50 @@ MakeContactSurfaceFromMesh(const TMesh * mesh, const std::string & what)
     surface.triangles.push_back(triangle);
   }
   return surface;
+}
+
+/** The core's surface as a triangle itk::Mesh (mm): the inverse of
+ *  MakeContactSurfaceFromMesh, points and triangles in the surface's order. */
+template <typename TMesh>
+void
+FillMeshFromContactSurface(const bmr::ContactSurface & surface, TMesh * mesh)
+{
+  using CellType = typename TMesh::CellType;
+  using CellAutoPointer = typename CellType::CellAutoPointer;
+
+  mesh->Initialize();
+  auto points = TMesh::PointsContainer::New();
+  points->Reserve(surface.vertices.size());
+  for (std::size_t v = 0; v < surface.vertices.size(); ++v)
+  {
+    typename TMesh::PointType p;
+    for (unsigned int d = 0; d < 3; ++d)
+    {
+      p[d] = surface.vertices[v][d];
+    }
+    points->SetElement(v, p);
+  }
+  mesh->SetPoints(points);
+  for (std::size_t t = 0; t < surface.triangles.size(); ++t)
+  {
+    CellAutoPointer cell;
+    cell.TakeOwnership(new TriangleCell<CellType>);
+    for (unsigned int k = 0; k < 3; ++k)
+    {
+      cell->SetPointId(k, static_cast<typename TMesh::PointIdentifier>(surface.triangles[t][k]));
+    }
+    mesh->SetCell(t, cell);
+  }
+}
+
+/** A new triangle itk::Mesh of the core's surface (see FillMeshFromContactSurface). */
+template <typename TMesh>
+typename TMesh::Pointer
+MakeMeshFromContactSurface(const bmr::ContactSurface & surface)
+{
+  auto mesh = TMesh::New();
+  FillMeshFromContactSurface(surface, mesh.GetPointer());
+  return mesh;
 }
 
 } // namespace itk

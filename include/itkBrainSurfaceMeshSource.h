@@ -8,6 +8,7 @@
 #include "itkImageToMeshFilter.h"
 #include "itkDefaultStaticMeshTraits.h"
 #include "itkMesh.h"
+#include "itkBiomechanicalModelObject.h"
 
 #include "bmrBrainSurfaces.h" // after ITK: ITK's bundled Eigen must come first
 
@@ -58,7 +59,7 @@ namespace itk
  * \ingroup BiomechanicalRegistration
  */
 template <typename TMaskImage,
-          typename TOutputMesh = Mesh<double, 3, DefaultStaticMeshTraits<double, 3, 3, double, double>>>
+          typename TOutputMesh = BiomechanicalSurfaceMeshType>
 class ITK_TEMPLATE_EXPORT BrainSurfaceMeshSource : public ImageToMeshFilter<TMaskImage, TOutputMesh>
 {
 public:
@@ -134,9 +135,6 @@ protected:
   PrintSelf(std::ostream & os, Indent indent) const override;
 
 private:
-  static void
-  FillMesh(const bmr::ContactSurface & surface, OutputMeshType * mesh);
-
   double             m_SkullGap{ 1.5 };
   int                m_SmoothingIterations{ 20 };
   double             m_SmoothingPassBand{ 0.1 };

@@ -32,40 +32,6 @@ BrainSurfaceMeshSource<TMaskImage, TOutputMesh>::GetSkullOutput() -> OutputMeshT
 
 template <typename TMaskImage, typename TOutputMesh>
 void
-BrainSurfaceMeshSource<TMaskImage, TOutputMesh>::FillMesh(const bmr::ContactSurface & surface, OutputMeshType * mesh)
-{
-  using PointType = typename OutputMeshType::PointType;
-  using CellType = typename OutputMeshType::CellType;
-  using CellAutoPointer = typename CellType::CellAutoPointer;
-  using TriangleType = TriangleCell<CellType>;
-
-  mesh->Initialize();
-  auto points = OutputMeshType::PointsContainer::New();
-  points->Reserve(surface.vertices.size());
-  for (std::size_t v = 0; v < surface.vertices.size(); ++v)
-  {
-    PointType p;
-    for (unsigned int d = 0; d < 3; ++d)
-    {
-      p[d] = surface.vertices[v][d];
-    }
-    points->SetElement(v, p);
-  }
-  mesh->SetPoints(points);
-  for (std::size_t t = 0; t < surface.triangles.size(); ++t)
-  {
-    CellAutoPointer cell;
-    cell.TakeOwnership(new TriangleType);
-    for (unsigned int k = 0; k < 3; ++k)
-    {
-      cell->SetPointId(k, static_cast<typename OutputMeshType::PointIdentifier>(surface.triangles[t][k]));
-    }
-    mesh->SetCell(t, cell);
-  }
-}
-
-template <typename TMaskImage, typename TOutputMesh>
-void
 BrainSurfaceMeshSource<TMaskImage, TOutputMesh>::GenerateData()
 {
   const MaskImageType * mask = this->GetInput(0);
@@ -174,8 +140,8 @@ BrainSurfaceMeshSource<TMaskImage, TOutputMesh>::GenerateData()
   }
   this->UpdateProgress(0.9f);
 
-  FillMesh(m_Surfaces.brain, this->GetOutput());
-  FillMesh(m_Surfaces.skull, this->GetSkullOutput());
+  FillMeshFromContactSurface(m_Surfaces.brain, this->GetOutput());
+  FillMeshFromContactSurface(m_Surfaces.skull, this->GetSkullOutput());
   this->UpdateProgress(1.0f);
 }
 

@@ -13,6 +13,8 @@
 #include "itkProcessObject.h"
 #include "itkVector.h"
 
+#include "itkBiomechanicalModelObject.h" // DisplacementPointSetType
+
 #include "bmrModel.h"
 
 #include <string>
@@ -20,13 +22,6 @@
 
 namespace itk
 {
-
-/** Reference positions carrying displacements, both in double precision
- * (itk::PointSet's default coordinates are float). */
-template <unsigned int VDimension>
-using DisplacementPointSetType =
-  PointSet<Vector<double, VDimension>, VDimension,
-           DefaultStaticMeshTraits<Vector<double, VDimension>, VDimension, VDimension, double, double>>;
 
 /** How well a fitted B-spline reproduces the data (mm). */
 struct BSplineFitReport

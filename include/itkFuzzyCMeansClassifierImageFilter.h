@@ -93,6 +93,12 @@ public:
   }
   itkGetConstMacro(NumberOfIterations, unsigned int);
   itkGetConstMacro(Converged, bool);
+  /** Warnings of the last update (e.g. no convergence; also sent through itkWarningMacro). */
+  const std::vector<std::string> &
+  GetWarnings() const
+  {
+    return m_Warnings;
+  }
 
   /** The hard label map (second output). */
   LabelImageType *
@@ -130,6 +136,7 @@ private:
   std::vector<double> m_Centroids;
   unsigned int        m_NumberOfIterations{ 0 };
   bool                m_Converged{ false };
+  std::vector<std::string> m_Warnings;
 };
 
 namespace FuzzyCMeansDetail

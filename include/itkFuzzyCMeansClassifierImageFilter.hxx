@@ -87,7 +87,7 @@ FuzzyCMeansClassifierImageFilter<TInputImage, TMaskImage>::GenerateData()
   settings.maxIterations = static_cast<int>(std::min<unsigned int>(m_MaximumNumberOfIterations, 1u << 30));
 
   bmr::TissueClassification classification;
-  std::vector<std::string>  warnings;
+  m_Warnings.clear();
   try
   {
     const bmr::ScalarVolume intensities = MakeBiomechanicalVolume<float>(input);
@@ -101,13 +101,13 @@ FuzzyCMeansClassifierImageFilter<TInputImage, TMaskImage>::GenerateData()
       mask ? &maskVolume : nullptr,
       settings,
       [this](double fraction) { this->UpdateProgress(static_cast<float>(fraction)); },
-      &warnings);
+      &m_Warnings);
   }
   catch (const bmr::Error & error)
   {
     itkExceptionMacro(<< error.what());
   }
-  for (const std::string & warning : warnings)
+  for (const std::string & warning : m_Warnings)
   {
     itkWarningMacro(<< warning);
   }

@@ -15,6 +15,9 @@
 #include "itkBrainSurfaceMeshSource.h"
 #include "itkCommand.h"
 #include "itkBiomechanicalMaterialMappingFilter.h"
+#include "itkBiomechanicalRegionsFilter.h"
+#include "itkBinaryThresholdImageFilter.h"
+#include "itkTransformWarpImageFilter.h"
 #include "itkDisplacementPointSetToBSplineTransformFilter.h"
 #include "itkFuzzyCMeansClassifierImageFilter.h"
 #include "itkImage.h"
@@ -24,6 +27,11 @@
 #include "bmrMaterialMapping.h"
 #include "bmrMeshless.h"
 #include "bmrTestUtilities.h"
+
+#include "bmrColin27.h"
+#include "bmrMeshIO.h"
+#include "bmrTemporaryFolderTest.h"
+#include "itkBiomechanicalTransformIO.h"
 
 #include <gtest/gtest.h>
 
@@ -604,6 +612,141 @@ TEST(LoadsFilter, SparsePointsAndASurfaceLoadTheExposedNodes)
   {
     EXPECT_NE(std::string(error.GetDescription()).find("'opening'"), std::string::npos) << error.GetDescription();
   }
+}
+
+// ---------------------------------------------------------------------------
+// The whole registration as an ITK pipeline of the module's filters.
+// ---------------------------------------------------------------------------
+
+class BrainShiftPipelineTest : public TemporaryFolderTest
+{};
+
+/** A user's pipeline, composed here filter by filter as
+ *  examples/BrainShiftRegistrationExample.cxx does, gives on the same inputs
+ *  what `biomech register` gives (bmr::RegisterBrainShift): the same nodal
+ *  displacements (to 1e-9 mm), the same B-spline transform and the same
+ *  warped image. Colin27, 8 mm hexahedra, the example's sparse displacements. */
+TEST_F(BrainShiftPipelineTest, FiltersComposedByHandMatchTheRegisterCommand)
+{
+  if (!bmr_test::HaveColin27())
+  {
+    GTEST_SKIP() << "Colin27 (mricron-data) is not installed";
+  }
+  using ImageType = bmr::RegistrationImage;
+  using MaskImageType = bmr::RegistrationLabelImage;
+  const std::filesystem::path image = bmr_test::Colin27Folder / "ch2.nii.gz";
+  const std::filesystem::path brain = bmr_test::Colin27Folder / "ch2bet.nii.gz";
+  const std::filesystem::path csv = std::filesystem::path(BMR_SOURCE_DIR) / "examples" / "data" /
+                                    "colin27-superior-craniotomy.csv";
+  const Vector3               craniotomyCentre(-11.0, 43.0, 84.0);
+  const double                craniotomyRadius = 30.0, elementSize = 8.0;
+
+  const std::filesystem::path output = m_Folder / "register";
+  std::ostringstream          arguments;
+  arguments << "register '" << image.string() << "' --mask '" << brain.string() << "' --craniotomy-centre "
+            << craniotomyCentre.x() << " " << craniotomyCentre.y() << " " << craniotomyCentre.z()
+            << " --craniotomy-radius " << craniotomyRadius << " --sparse-displacements '" << csv.string()
+            << "' --element-size " << elementSize << " -o '" << output.string() << "'";
+  const auto run = RunBiomech(m_Folder, arguments.str());
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+
+  // The same registration from the filters.
+  const ImageType::Pointer preoperative = itk::ReadBiomechanicalImage<ImageType>(image.string(), "Colin27");
+  auto threshold = itk::BinaryThresholdImageFilter<ImageType, MaskImageType>::New();
+  threshold->SetInput(itk::ReadBiomechanicalImage<ImageType>(brain.string(), "mask"));
+  threshold->SetLowerThreshold(std::numeric_limits<float>::min()); // voxels > 0 are brain
+  threshold->SetInsideValue(1);
+  threshold->SetOutsideValue(0);
+  threshold->Update();
+  const MaskImageType::Pointer mask = threshold->GetOutput();
+
+  auto classifier = itk::FuzzyCMeansClassifierImageFilter<ImageType, MaskImageType>::New();
+  classifier->SetInput(preoperative);
+  classifier->SetMaskImage(mask);
+  classifier->SetNumberOfClasses(3);
+  auto grid = itk::BiomechanicalGridImageFilter<MaskImageType>::New();
+  grid->SetInput(mask);
+  grid->SetElementSize(elementSize);
+  grid->Update();
+  auto mapping = itk::BiomechanicalMaterialMappingFilter<>::New();
+  mapping->SetModelInput(grid->GetModelOutput());
+  mapping->SetMemberships(classifier->GetOutput());
+  auto surfaces = itk::BrainSurfaceMeshSource<MaskImageType>::New();
+  surfaces->SetInput(itk::MakeImageFromBiomechanicalVolume<MaskImageType>(
+    RasterizeCells(grid->GetModel(), itk::MakeBiomechanicalGeometry(mask.GetPointer()))));
+  auto regions = itk::BiomechanicalRegionsFilter<MaskImageType>::New();
+  regions->SetModelInput(mapping->GetOutput());
+  regions->SetCraniotomyCentre(craniotomyCentre);
+  regions->SetCraniotomyRadius(craniotomyRadius);
+  const SparseDisplacements measured = ReadSparseDisplacements(csv.string());
+  auto                      loads = itk::BiomechanicalLoadsFilter<PointSetType>::New();
+  loads->SetModelInput(regions->GetOutput());
+  loads->SetSparseDisplacements(itk::MakeDisplacementPointSet<PointSetType>(measured.points, measured.displacements));
+  auto deformation = FilterType::New();
+  deformation->SetModelInput(regions->GetOutput());
+  deformation->SetPrescribedDisplacements(loads->GetOutput());
+  deformation->SetContactSurface(surfaces->GetSkullOutput());
+  deformation->SetTolerance(0.01);
+  auto fitter = itk::DisplacementPointSetToBSplineTransformFilter<PointSetType>::New();
+  fitter->SetInput(deformation->GetOutput());
+  fitter->SetReferenceImage(preoperative);
+  auto warp = itk::TransformWarpImageFilter<ImageType>::New();
+  warp->SetInput(preoperative);
+  fitter->Update();
+  warp->SetTransform(fitter->GetTransform());
+  warp->Update();
+  ASSERT_TRUE(deformation->GetConverged());
+
+  // Nodal displacements: the command's model-result.vtu against the deformation filter's output.
+  const MeshData result = ReadMesh((output / "model-result.vtu").string());
+  const auto *   points = deformation->GetOutput()->GetPoints();
+  const auto *   data = deformation->GetOutput()->GetPointData();
+  ASSERT_EQ(result.model.nodes.size(), points->Size());
+  const DataArray & written = result.pointData.at("displacement");
+  double            positionDifference = 0.0, displacementDifference = 0.0, largest = 0.0;
+  for (std::size_t n = 0; n < points->Size(); ++n)
+  {
+    for (unsigned int d = 0; d < 3; ++d)
+    {
+      positionDifference = std::max(positionDifference, std::abs(result.model.nodes[n][d] - points->ElementAt(n)[d]));
+      displacementDifference = std::max(displacementDifference, std::abs(written.values[3 * n + d] - data->ElementAt(n)[d]));
+      largest = std::max(largest, std::abs(data->ElementAt(n)[d]));
+    }
+  }
+  EXPECT_LE(positionDifference, 1e-9);
+  EXPECT_LE(displacementDifference, 1e-9);
+  EXPECT_GT(largest, 3.0); // the measured sag peaks at 5 mm
+
+  // The transform: the same B-spline grid and coefficients.
+  const auto written_transform = itk::ReadBiomechanicalTransform((output / "transform.h5").string());
+  const auto * bspline = dynamic_cast<const itk::BSplineTransform<double, 3, 3> *>(written_transform.GetPointer());
+  ASSERT_NE(bspline, nullptr);
+  const auto & fixed = fitter->GetTransform()->GetFixedParameters();
+  const auto & parameters = fitter->GetTransform()->GetParameters();
+  ASSERT_EQ(bspline->GetFixedParameters().size(), fixed.size());
+  ASSERT_EQ(bspline->GetParameters().size(), parameters.size());
+  for (unsigned int k = 0; k < fixed.size(); ++k)
+  {
+    EXPECT_NEAR(bspline->GetFixedParameters()[k], fixed[k], 1e-9) << k;
+  }
+  double coefficientDifference = 0.0;
+  for (unsigned int k = 0; k < parameters.size(); ++k)
+  {
+    coefficientDifference = std::max(coefficientDifference, std::abs(bspline->GetParameters()[k] - parameters[k]));
+  }
+  EXPECT_LE(coefficientDifference, 1e-9);
+
+  // The warped image, voxel by voxel.
+  const ImageType::Pointer warped = itk::ReadBiomechanicalImage<ImageType>((output / "warped.nii.gz").string(), "warped");
+  ASSERT_EQ(warped->GetBufferedRegion(), warp->GetOutput()->GetBufferedRegion());
+  const std::size_t voxels = warped->GetBufferedRegion().GetNumberOfPixels();
+  double            intensityDifference = 0.0;
+  for (std::size_t v = 0; v < voxels; ++v)
+  {
+    intensityDifference = std::max(
+      intensityDifference, std::abs(double(warped->GetBufferPointer()[v]) - double(warp->GetOutput()->GetBufferPointer()[v])));
+  }
+  EXPECT_LE(intensityDifference, 1e-3);
 }
 
 } // namespace

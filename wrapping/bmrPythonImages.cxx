@@ -531,11 +531,7 @@ RegistrationSettingsFrom(const py::dict & values)
   model.skullBase.height = number("skull_base_height", double{});
   const py::object centre = get("craniotomy_centre");
   const py::object mask = get("craniotomy_mask");
-  if (!centre.is_none() && !mask.is_none())
-  {
-    throw py::value_error("give the craniotomy either as a sphere (craniotomy_centre, craniotomy_radius) or as "
-                          "craniotomy_mask, not both");
-  }
+  // A sphere and a mask together: bmr::CheckCraniotomyRegion's error, in BuildBrainModel.
   if (!centre.is_none())
   {
     model.craniotomyCentre = VectorFromObject(centre, "craniotomy_centre");

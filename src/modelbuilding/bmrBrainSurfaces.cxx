@@ -613,6 +613,27 @@ SurfaceNodesInMask(const Model &              model,
   return SortedUnique(std::move(selected));
 }
 
+void
+CheckCraniotomyRegion(const CraniotomyRegion & region)
+{
+  if (region.radius > 0.0 && region.mask != nullptr)
+  {
+    throw Error("give the craniotomy either as a sphere (centre, radius) or as a mask, not both");
+  }
+  if (!region.Given())
+  {
+    throw Error("no craniotomy region: give its centre and radius (> 0 mm) or a craniotomy mask");
+  }
+}
+
+std::vector<Index>
+ExposedSurfaceNodes(const Model & model, const std::vector<Index> & surfaceNodes, const CraniotomyRegion & region)
+{
+  CheckCraniotomyRegion(region);
+  return region.mask != nullptr ? SurfaceNodesInMask(model, surfaceNodes, *region.mask)
+                                : SurfaceNodesInSphere(model, surfaceNodes, region.centre, region.radius);
+}
+
 std::vector<Index>
 SkullBaseNodes(const Model & model, const std::vector<Index> & surfaceNodes, const SkullBaseSettings & settings)
 {

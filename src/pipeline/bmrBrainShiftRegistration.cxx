@@ -6,11 +6,16 @@
 // ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.
 #include "itkAtlasBrainMaskImageFilter.h"
 #include "itkBiomechanicalDeformationFilter.h"
+#include "itkBiomechanicalGridImageFilter.h"
 #include "itkBiomechanicalImageConversion.h"
 #include "itkBiomechanicalImageIO.h"
+#include "itkBiomechanicalLoadsFilter.h"
+#include "itkBiomechanicalMaterialMappingFilter.h"
+#include "itkBiomechanicalRegionsFilter.h"
 #include "itkBrainSurfaceMeshSource.h"
 #include "itkDisplacementPointSetToBSplineTransformFilter.h"
 #include "itkEdgeHausdorffDistanceImageFilter.h"
+#include "itkFuzzyCMeansClassifierImageFilter.h"
 #include "itkIdentityTransform.h"
 #include "itkTransformWarpImageFilter.h"
 
@@ -108,53 +113,43 @@ CheckIntraoperativeData(const IntraoperativeData & data)
   }
 }
 
-/** Displacements of the exposed nodes from whichever intraoperative data was given. */
-PrescribedDisplacement
-LoadFromIntraoperativeData(const Model &              model,
-                           const std::vector<Index> & exposed,
-                           const BrainSurfaces &      surfaces,
-                           const IntraoperativeData & data,
-                           const AtlasSettings &      atlas,
-                           double                     elementSize,
-                           LoadReport &               report,
-                           std::vector<std::string> & warnings)
+/** The exposed surface of an intraoperative image: the boundary of its brain
+ *  mask (given, or from atlas skull stripping). */
+ContactSurface
+IntraoperativeSurfaceOfImage(const IntraoperativeData & data, const AtlasSettings & atlas, double elementSize,
+                             std::vector<std::string> & warnings)
 {
-  SurfaceLoadSettings settings;
-  settings.maxDistance = data.maxDistance;
-  settings.matchDirection = data.surfaceMatchDirection;
-  // A point cloud has no cells; the sparse interpolation then measures distances to the body's surface.
-  const ContactSurface * modelSurface = model.cells.empty() ? &surfaces.brain : nullptr;
-  if (!data.sparse.points.empty())
+  const RegistrationLabelImage::Pointer mask =
+    data.imageBrainMask.IsNotNull() ? RegistrationLabelImage::Pointer() : AtlasBrainMask(data.image, atlas);
+  const LabelVolume maskVolume =
+    MaskVolume(data.imageBrainMask.IsNotNull() ? data.imageBrainMask.GetPointer() : mask.GetPointer(),
+               "intraoperative brain mask", nullptr);
+  // Made as the preoperative one is (the boundary of a hexahedral grid of
+  // the mask, smoothed), so that both surfaces show the same detail: a
+  // mask's own surface shows sulci the model's does not, and closest
+  // points between the two land in them (a 5 mm Colin27 model folded).
+  ImageGridSettings coarse;
+  coarse.elementSize = elementSize;
+  const ImageGrid grid = MakeGridFromLabels(maskVolume, coarse, &warnings);
+  ContactSurface  surface =
+    BrainSurfacesOfMask(RasterizeCells(grid.model, maskVolume.geometry), BrainSurfaceSettings{}.skullGap, warnings).brain;
+  surface.name = "brain surface of the intraoperative image";
+  return surface;
+}
+
+/** Runs one filter of the chain; its itk::ExceptionObject becomes the bmr::Error every caller translates. */
+template <typename TFilter>
+void
+UpdateStage(TFilter * filter, const char * what)
+{
+  try
   {
-    return DisplacementsFromSparsePoints(model, exposed, data.sparse.points, data.sparse.displacements, settings,
-                                         &report, modelSurface);
+    filter->Update();
   }
-  ContactSurface intraoperativeSurface = data.surface;
-  if (intraoperativeSurface.triangles.empty())
+  catch (const itk::ExceptionObject & exception)
   {
-    // The exposed surface is taken from the intraoperative image: the boundary of its brain mask.
-    const RegistrationLabelImage::Pointer mask =
-      data.imageBrainMask.IsNotNull() ? RegistrationLabelImage::Pointer() : AtlasBrainMask(data.image, atlas);
-    const LabelVolume maskVolume =
-      MaskVolume(data.imageBrainMask.IsNotNull() ? data.imageBrainMask.GetPointer() : mask.GetPointer(),
-                 "intraoperative brain mask", nullptr);
-    // Made as the preoperative one is (the boundary of a hexahedral grid of
-    // the mask, smoothed), so that both surfaces show the same detail: a
-    // mask's own surface shows sulci the model's does not, and closest
-    // points between the two land in them (a 5 mm Colin27 model folded).
-    ImageGridSettings coarse;
-    coarse.elementSize = elementSize;
-    const ImageGrid grid = MakeGridFromLabels(maskVolume, coarse, &warnings);
-    intraoperativeSurface =
-      BrainSurfacesOfMask(RasterizeCells(grid.model, maskVolume.geometry), BrainSurfaceSettings{}.skullGap, warnings)
-        .brain;
-    intraoperativeSurface.name = "brain surface of the intraoperative image";
+    throw Error(std::string(what) + ": " + itk::PlainDescription(exception.GetDescription()));
   }
-  // Surface to surface: neither the staircase of a hexahedral grid nor the
-  // walls of sulci inside the opening are brain motion. Staircase nodes lie
-  // up to about a cell from the model's smoothed surface.
-  return DisplacementsBetweenSurfaces(model, exposed, surfaces.brain, intraoperativeSurface, elementSize,
-                                      kScanPointSpacing, settings, &report, modelSurface);
 }
 
 /** The image axis (a direction-cosine column) nearest LPS +z, pointing up. */
@@ -218,14 +213,7 @@ AtlasBrainMask(const RegistrationImage * image, const AtlasSettings & settings)
   filter->SetAtlasImage(itk::ReadBiomechanicalImage<RegistrationImage>(settings.image, "atlas"));
   filter->SetAtlasMaskImage(itk::ReadBiomechanicalImage<RegistrationImage>(settings.mask, "atlas mask"));
   filter->SetUseBSplineStage(settings.bsplineStage);
-  try
-  {
-    filter->Update();
-  }
-  catch (const itk::ExceptionObject & exception)
-  {
-    throw Error(std::string("skull stripping failed: ") + exception.GetDescription());
-  }
+  UpdateStage(filter.GetPointer(), "skull stripping failed");
   return filter->GetOutput();
 }
 
@@ -235,14 +223,7 @@ BrainSurfacesOfMask(const LabelVolume & mask, double skullGap, std::vector<std::
   auto source = itk::BrainSurfaceMeshSource<RegistrationLabelImage>::New();
   source->SetInput(itk::MakeImageFromBiomechanicalVolume<RegistrationLabelImage>(mask));
   source->SetSkullGap(skullGap);
-  try
-  {
-    source->Update();
-  }
-  catch (const itk::ExceptionObject & exception)
-  {
-    throw Error(exception.GetDescription());
-  }
+  UpdateStage(source.GetPointer(), "brain surfaces");
   warnings.insert(warnings.end(), source->GetWarnings().begin(), source->GetWarnings().end());
   return BrainSurfaces{ source->GetBrainSurface(), source->GetSkullSurface() };
 }
@@ -268,85 +249,114 @@ BuildBrainModel(const RegistrationImage *      image,
   {
     CheckIntraoperativeData(*intraoperative);
   }
-  const bool hasCraniotomy = settings.craniotomyRadius > 0.0 || settings.craniotomyMask.IsNotNull();
-  if (intraoperative != nullptr && !hasCraniotomy)
+  // Checked before the long stages; the regions filter selects the nodes.
   {
-    throw Error("intraoperative measurements need the craniotomy region they belong to: give its centre and "
-                "radius (> 0 mm) or a craniotomy mask");
+    const LabelVolume noMask;
+    CraniotomyRegion  craniotomy{ settings.craniotomyCentre, settings.craniotomyRadius,
+                                 settings.craniotomyMask.IsNotNull() ? &noMask : nullptr };
+    if (intraoperative != nullptr || craniotomy.Given())
+    {
+      CheckCraniotomyRegion(craniotomy);
+    }
   }
-  if (settings.craniotomyRadius > 0.0 && settings.craniotomyMask.IsNotNull())
-  {
-    throw Error("give the craniotomy either as a sphere (centre, radius) or as a mask, not both");
-  }
+  const int threads = settings.threads > 0 ? settings.threads : omp_get_max_threads();
 
   BrainModel result;
   auto &     warnings = result.warnings;
-  const ScalarVolume intensities = itk::MakeBiomechanicalVolume<float>(image);
+  const ImageGeometry geometry = itk::MakeBiomechanicalGeometry(image);
 
+  // The brain mask (1 inside) on the image grid.
+  RegistrationLabelImage::ConstPointer mask = brainMask;
   if (brainMask != nullptr)
   {
-    result.brainMask = MaskVolume(brainMask, "brain mask", &intensities.geometry);
+    result.brainMask = MaskVolume(brainMask, "brain mask", &geometry);
   }
   else
   {
-    result.brainMask = timer.Run("skull-strip", [&] {
-      return MaskVolume(AtlasBrainMask(image, settings.atlas).GetPointer(), "brain mask", &intensities.geometry);
-    });
+    mask = timer.Run("skull-strip", [&] { return AtlasBrainMask(image, settings.atlas); });
+    result.brainMask = MaskVolume(mask, "brain mask", &geometry);
   }
   LabelVolume tumour;
   if (tumourMask != nullptr)
   {
-    tumour = MaskVolume(tumourMask, "tumour mask", &intensities.geometry);
+    tumour = MaskVolume(tumourMask, "tumour mask", &geometry);
   }
 
-  result.classification = timer.Run("classify", [&] {
-    return ClassifyTissue(intensities, &result.brainMask, settings.classifier, {}, &warnings);
-  });
+  using ClassifierType = itk::FuzzyCMeansClassifierImageFilter<RegistrationImage, RegistrationLabelImage>;
+  auto classifier = ClassifierType::New();
+  classifier->SetInput(image);
+  classifier->SetMaskImage(mask);
+  classifier->SetNumberOfClasses(static_cast<unsigned int>(std::max(settings.classifier.classes, 0)));
+  classifier->SetFuzziness(settings.classifier.fuzziness);
+  classifier->SetTolerance(settings.classifier.tolerance);
+  classifier->SetMaximumNumberOfIterations(static_cast<unsigned int>(std::max(settings.classifier.maxIterations, 0)));
+  timer.Run("classify", [&] { UpdateStage(classifier.GetPointer(), "tissue classification"); });
+  warnings.insert(warnings.end(), classifier->GetWarnings().begin(), classifier->GetWarnings().end());
+  result.classification.fit.centroids = classifier->GetCentroids();
+  result.classification.fit.iterations = static_cast<int>(classifier->GetNumberOfIterations());
+  result.classification.fit.converged = classifier->GetConverged();
+  result.classification.memberships = itk::MakeBiomechanicalVolume<float>(classifier->GetOutput());
+  result.classification.labels = itk::MakeBiomechanicalVolume<std::uint8_t>(classifier->GetLabelOutput());
 
   // The tumour is a second label, so that tetrahedral meshes conform to its boundary.
   LabelVolume labels = result.brainMask;
-  if (!tumour.values.empty())
+  for (std::size_t voxel = 0; voxel < tumour.values.size(); ++voxel)
   {
-    for (std::size_t voxel = 0; voxel < labels.values.size(); ++voxel)
+    if (tumour.values[voxel] != 0 && labels.values[voxel] != 0)
     {
-      if (tumour.values[voxel] != 0 && labels.values[voxel] != 0)
-      {
-        labels.values[voxel] = 2;
-      }
+      labels.values[voxel] = 2;
     }
   }
+  auto grid = itk::BiomechanicalGridImageFilter<RegistrationLabelImage>::New();
+  grid->SetInput(itk::MakeImageFromBiomechanicalVolume<RegistrationLabelImage>(labels));
   ImageGridSettings gridSettings = settings.grid;
   gridSettings.threads = settings.threads;
-  ImageGrid grid = timer.Run("grid", [&] { return MakeGridFromLabels(labels, gridSettings, &warnings); });
-  result.gridQuality = grid.quality;
-  Model & model = result.model;
-  model = std::move(grid.model);
+  grid->SetSettings(gridSettings);
+  timer.Run("grid", [&] { UpdateStage(grid.GetPointer(), "grid"); });
+  warnings.insert(warnings.end(), grid->GetWarnings().begin(), grid->GetWarnings().end());
+  result.gridQuality = grid->GetQuality();
 
-  timer.Run("materials", [&] {
-    MaterialMappingSettings materials = settings.materials;
-    materials.sampling.threads = settings.threads;
-    MapMaterialsFromMemberships(model, result.classification.memberships, materials,
-                                tumour.values.empty() ? nullptr : &tumour, &warnings);
-  });
+  auto materials = itk::BiomechanicalMaterialMappingFilter<itk::VectorImage<float, 3>, RegistrationLabelImage>::New();
+  materials->SetModelInput(grid->GetModelOutput());
+  materials->SetMemberships(classifier->GetOutput());
+  if (tumourMask != nullptr)
+  {
+    materials->SetTumourMask(tumourMask);
+  }
+  materials->SetClassMaterials(settings.materials.classMaterials);
+  materials->SetTumourMaterial(settings.materials.tumour);
+  materials->SetSampling(settings.materials.sampling);
+  materials->SetNumberOfWorkUnits(static_cast<itk::ThreadIdType>(threads));
+  timer.Run("materials", [&] { UpdateStage(materials.GetPointer(), "material mapping"); });
+  warnings.insert(warnings.end(), materials->GetWarnings().begin(), materials->GetWarnings().end());
 
   // The skull is the boundary of the body dilated by the gap, and the body is
   // the model's cells (for a point cloud, the tetrahedra its integration
   // points cover), not the mask: the corners of a staircase hexahedral grid
   // stick out of the mask by up to half a cell.
-  result.surfaces = timer.Run("surfaces", [&] {
-    const Model & body = model.cells.empty() ? grid.meshlessBody : model;
-    return BrainSurfacesOfMask(RasterizeCells(body, result.brainMask.geometry), settings.skullGap, warnings);
+  auto surfaces = itk::BrainSurfaceMeshSource<RegistrationLabelImage>::New();
+  timer.Run("surfaces", [&] {
+    const Model & body = grid->GetModel().cells.empty() ? grid->GetMeshlessBody() : grid->GetModel();
+    surfaces->SetInput(
+      itk::MakeImageFromBiomechanicalVolume<RegistrationLabelImage>(RasterizeCells(body, result.brainMask.geometry)));
+    surfaces->SetSkullGap(settings.skullGap);
+    UpdateStage(surfaces.GetPointer(), "brain surfaces");
   });
+  warnings.insert(warnings.end(), surfaces->GetWarnings().begin(), surfaces->GetWarnings().end());
+  result.surfaces = BrainSurfaces{ surfaces->GetBrainSurface(), surfaces->GetSkullSurface() };
+  itk::BiomechanicalSurfaceMeshType::Pointer skull = surfaces->GetSkullOutput();
   if (!skullSurface.triangles.empty())
   {
     // The user's skull (e.g. segmented from CT) replaces the dilated body as the contact master.
     result.surfaces.skull = skullSurface;
-    result.surfaces.skull.name = "skull";
     result.surfaces.skull.bodySide = ContactSurface::Side::Inside;
+    skull = itk::MakeMeshFromContactSurface<itk::BiomechanicalSurfaceMeshType>(skullSurface);
   }
+  result.surfaces.skull.name = "skull";
 
-  const std::vector<Index> & surfaceNodes = model.NodeSet("surface");
-  SkullBaseSettings          skullBase = settings.skullBase;
+  auto regions = itk::BiomechanicalRegionsFilter<RegistrationLabelImage>::New();
+  regions->SetModelInput(materials->GetOutput());
+  SkullBaseSettings skullBase = settings.skullBase;
   if (skullBase.superior == Vector3::UnitZ())
   {
     // The patient's superior axis: the image axis nearest LPS +z. On an
@@ -354,78 +364,97 @@ BuildBrainModel(const RegistrationImage *      image,
     // would tilt the fixed band across the brain stem.
     skullBase.superior = SuperiorImageAxis(image);
   }
-  model.nodeSets["skull_base"] = SkullBaseNodes(model, surfaceNodes, skullBase);
-  model.fixedConstraints = { FixedConstraint{ "skull_base", { true, true, true } } };
+  regions->SetSkullBase(skullBase);
+  regions->SetCraniotomyCentre(settings.craniotomyCentre);
+  regions->SetCraniotomyRadius(settings.craniotomyRadius);
   if (settings.craniotomyMask.IsNotNull())
   {
-    const LabelVolume region = MaskVolume(settings.craniotomyMask, "craniotomy mask", nullptr);
-    result.exposedNodes = SurfaceNodesInMask(model, surfaceNodes, region);
+    regions->SetCraniotomyMask(settings.craniotomyMask);
   }
-  else if (settings.craniotomyRadius > 0.0)
+  regions->SetContact(settings.contact);
+  UpdateStage(regions.GetPointer(), "model regions");
+  result.pipelineModel = regions->GetOutput();
+
+  // Gravity and the CSF's level are the model's, not a filter's.
+  if (!settings.gravity.isZero() || settings.csfDrainedDepth)
   {
-    result.exposedNodes = SurfaceNodesInSphere(model, surfaceNodes, settings.craniotomyCentre, settings.craniotomyRadius);
+    Model model = regions->GetOutput()->GetModel();
+    model.bodyAcceleration = settings.gravity;
+    if (settings.csfDrainedDepth)
+    {
+      if (settings.gravity.isZero() || !(*settings.csfDrainedDepth >= 0.0))
+      {
+        throw Error(settings.gravity.isZero()
+                      ? "a CSF drained depth is given without gravity; give the gravity the CSF drains under."
+                      : "the CSF drained depth is " + std::to_string(*settings.csfDrainedDepth) +
+                          " mm; give a depth of 0 mm or more below the brain's top.");
+      }
+      const Vector3 up = -settings.gravity.normalized();
+      Index         top = 0;
+      for (std::size_t n = 1; n < model.nodes.size(); ++n)
+      {
+        top = model.nodes[n].dot(up) > model.nodes[top].dot(up) ? static_cast<Index>(n) : top;
+      }
+      model.fluidSurface = model.nodes[top] - *settings.csfDrainedDepth * up;
+    }
+    result.pipelineModel = itk::BiomechanicalModelObject::New();
+    result.pipelineModel->SetModel(std::move(model));
   }
-  if (!result.exposedNodes.empty())
+  Model & model = result.model;
+  model = result.pipelineModel->GetModel();
+  if (const auto exposed = model.nodeSets.find("exposed"); exposed != model.nodeSets.end())
   {
-    model.nodeSets["exposed"] = result.exposedNodes;
+    result.exposedNodes = exposed->second;
   }
 
   if (intraoperative != nullptr)
   {
-    result.load = timer.Run("loads", [&] {
-      return LoadFromIntraoperativeData(model, result.exposedNodes, result.surfaces, *intraoperative, settings.atlas,
-                                        std::max(result.gridQuality.meanEdgeLength, settings.grid.elementSize),
-                                        result.loadReport, warnings);
+    auto loads = itk::BiomechanicalLoadsFilter<itk::DisplacementPointSetType<3>>::New();
+    loads->SetModelInput(result.pipelineModel);
+    loads->SetMaxDistance(intraoperative->maxDistance);
+    loads->SetMatchDirection(intraoperative->surfaceMatchDirection);
+    if (model.cells.empty())
+    {
+      // A point cloud has no cells: distances are measured to the body's surface.
+      loads->SetModelSurface(surfaces->GetBrainOutput());
+    }
+    timer.Run("loads", [&] {
+      if (!intraoperative->sparse.points.empty())
+      {
+        loads->SetSparseDisplacements(itk::MakeDisplacementPointSet<itk::DisplacementPointSetType<3>>(
+          intraoperative->sparse.points, intraoperative->sparse.displacements));
+      }
+      else
+      {
+        // Surface to surface: neither the staircase of a hexahedral grid nor
+        // the walls of sulci inside the opening are brain motion. Staircase
+        // nodes lie up to about a cell from the model's smoothed surface.
+        const double elementSize = std::max(result.gridQuality.meanEdgeLength, settings.grid.elementSize);
+        const ContactSurface displaced =
+          intraoperative->surface.triangles.empty()
+            ? IntraoperativeSurfaceOfImage(*intraoperative, settings.atlas, elementSize, warnings)
+            : intraoperative->surface;
+        loads->SetIntraoperativeSurface(itk::MakeMeshFromContactSurface<itk::BiomechanicalSurfaceMeshType>(displaced));
+        loads->SetPreoperativeSurface(surfaces->GetBrainOutput());
+        loads->SetScanReach(elementSize);
+        loads->SetScanSpacing(kScanPointSpacing);
+      }
+      UpdateStage(loads.GetPointer(), "loads");
     });
+    result.load = loads->GetPrescribedDisplacement();
+    result.loadReport = loads->GetLoadReport();
     warnings.insert(warnings.end(), result.loadReport.warnings.begin(), result.loadReport.warnings.end());
+    result.prescribedDisplacements = loads->GetOutput();
     model.prescribedDisplacements = { result.load };
   }
-  model.bodyAcceleration = settings.gravity;
-  if (settings.csfDrainedDepth)
-  {
-    if (settings.gravity.isZero() || !(*settings.csfDrainedDepth >= 0.0))
-    {
-      throw Error(settings.gravity.isZero() ? "a CSF drained depth is given without gravity; give the gravity the CSF "
-                                              "drains under."
-                                            : "the CSF drained depth is " + std::to_string(*settings.csfDrainedDepth) +
-                                                " mm; give a depth of 0 mm or more below the brain's top.");
-    }
-    const Vector3 up = -settings.gravity.normalized();
-    Index         top = 0;
-    for (std::size_t n = 1; n < model.nodes.size(); ++n)
-    {
-      top = model.nodes[n].dot(up) > model.nodes[top].dot(up) ? static_cast<Index>(n) : top;
-    }
-    model.fluidSurface = model.nodes[top] - *settings.csfDrainedDepth * up;
-  }
 
-  // Contact: every surface node that is neither fixed nor loaded may touch the skull.
-  if (settings.contact)
+  // Contact: the regions filter's "contact" nodes may touch the skull.
+  if (settings.contact && !model.NodeSet("contact").empty())
   {
-    std::vector<char> constrained(model.nodes.size(), 0);
-    for (const Index node : model.nodeSets["skull_base"])
-    {
-      constrained[node] = 1;
-    }
-    for (const Index node : result.load.nodes)
-    {
-      constrained[node] = 1;
-    }
-    std::vector<Index> contactNodes;
-    for (const Index node : surfaceNodes)
-    {
-      if (!constrained[node])
-      {
-        contactNodes.push_back(node);
-      }
-    }
-    model.nodeSets["contact"] = contactNodes;
-    if (!contactNodes.empty())
-    {
-      ContactSurface skull = result.surfaces.skull;
-      skull.slaveNodeSet = "contact";
-      model.contactSurfaces = { skull };
-    }
+    result.contactSurface = skull;
+    ContactSurface master = result.surfaces.skull;
+    master.slaveNodeSet = "contact";
+    model.contactSurfaces = { master };
   }
   if (result.load.nodes.empty() && settings.gravity.isZero())
   {
@@ -471,14 +500,7 @@ EvaluateEdges(const RegistrationImage *      fixed,
     filter->SetUpperThreshold(*edges.upperThreshold);
     filter->SetLowerThreshold(*edges.lowerThreshold);
   }
-  try
-  {
-    filter->Update();
-  }
-  catch (const itk::ExceptionObject & exception)
-  {
-    throw Error(std::string("edge-based evaluation failed: ") + exception.GetDescription());
-  }
+  UpdateStage(filter.GetPointer(), "edge-based evaluation failed");
   const itk::EdgeHausdorffResult & result = filter->GetResult();
   EdgeEvaluation                   evaluation;
   evaluation.valid = result.valid;
@@ -510,14 +532,7 @@ Warp(const TImage *                                      image,
     warp->SetReferenceImage(reference);
   }
   warp->SetInterpolation(interpolation);
-  try
-  {
-    warp->Update();
-  }
-  catch (const itk::ExceptionObject & exception)
-  {
-    throw Error(std::string("warping failed: ") + exception.GetDescription());
-  }
+  UpdateStage(warp.GetPointer(), "warping failed");
   typename TImage::Pointer output = warp->GetOutput();
   output->DisconnectPipeline();
   return output;
@@ -567,14 +582,22 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
   result.model = BuildBrainModel(inputs.preoperativeImage, inputs.brainMask, inputs.tumourMask, inputs.skullSurface,
                                  &inputs.intraoperative, settings.model, timer);
   result.warnings = result.model.warnings;
-  const Model & model = result.model.model;
 
-  // The solve and the fit are one ITK pipeline: the deformation filter's
+  // The solve and the fit continue the model's pipeline: the deformation
+  // filter takes the regions' model, the loads' point set and the skull; its
   // output (the nodes carrying their displacements) is the fitter's input.
   using PointSetType = itk::DisplacementPointSetType<3>;
   using DeformationType = itk::BiomechanicalDeformationFilter<PointSetType>;
   auto deformation = DeformationType::New();
-  deformation->SetModel(model);
+  deformation->SetModelInput(result.model.pipelineModel);
+  if (result.model.prescribedDisplacements.IsNotNull())
+  {
+    deformation->SetPrescribedDisplacements(result.model.prescribedDisplacements);
+  }
+  if (result.model.contactSurface.IsNotNull())
+  {
+    deformation->SetContactSurface(result.model.contactSurface);
+  }
   deformation->SetSolverSettings(settings.solver);
   // 0: OpenMP's default (OMP_NUM_THREADS), as the solver's own default.
   const int threads = settings.solver.threads != 0 ? settings.solver.threads : settings.model.threads;
@@ -589,14 +612,7 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
     });
   }
   result.solve = timer.Run("solve", [&] {
-    try
-    {
-      deformation->Update();
-    }
-    catch (const itk::ExceptionObject & exception)
-    {
-      throw Error(std::string("the solve failed: ") + exception.GetDescription());
-    }
+    UpdateStage(deformation.GetPointer(), "the solve failed");
     return deformation->GetSolveResult();
   });
   if (!result.solve.converged)
@@ -612,14 +628,7 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
     fitter->SetReferenceImage(inputs.preoperativeImage);
     fitter->SetTolerance(settings.fitTolerance);
     fitter->SetMinimumControlPointSpacing(settings.minimumControlPointSpacing);
-    try
-    {
-      fitter->Update();
-    }
-    catch (const itk::ExceptionObject & exception)
-    {
-      throw Error(std::string("fitting the transform failed: ") + exception.GetDescription());
-    }
+    UpdateStage(fitter.GetPointer(), "fitting the transform failed");
     result.transform = const_cast<RegistrationTransform *>(fitter->GetTransform());
     const itk::BSplineFitReport & report = fitter->GetReport();
     result.fitMaxResidual = report.maximumResidual;
