@@ -1,7 +1,9 @@
 // itk::BiomechanicalDeformationFilter: the solver as an ITK pipeline filter,
 // and the filters before it: itk::BiomechanicalMaterialMappingFilter (the
-// model's materials) and itk::BiomechanicalLoadsFilter (its prescribed
-// displacements from intraoperative measurements).
+// model's materials), itk::BiomechanicalRegionsFilter (fixed, exposed and
+// contact nodes) and itk::BiomechanicalLoadsFilter (its prescribed
+// displacements from intraoperative measurements); and the whole
+// registration composed from the filters against `biomech register`.
 // It must give bitwise the solver's results (hexahedra, ANP tetrahedra,
 // meshless), follow ITK's pipeline conventions (progress, abort, no second
 // solve without a change, a solve again after one), report failures and
@@ -611,6 +613,121 @@ TEST(LoadsFilter, SparsePointsAndASurfaceLoadTheExposedNodes)
   catch (const itk::ExceptionObject & error)
   {
     EXPECT_NE(std::string(error.GetDescription()).find("'opening'"), std::string::npos) << error.GetDescription();
+  }
+}
+
+/** The regions filter on a 10 x 8 x 6 mm block: the bottom layer fixed, a
+ *  sphere on the top exposed, every other surface node a contact slave; bad
+ *  regions are named. */
+TEST(RegionsFilter, FixedExposedAndContactNodesPartitionTheSurface)
+{
+  Model block = PressedBlock("hexahedra");
+  block.fixedConstraints.clear();
+  block.nodeSets["surface"] = block.BoundaryNodes();
+  auto input = itk::BiomechanicalModelObject::New();
+  input->SetModel(block);
+
+  using RegionsType = itk::BiomechanicalRegionsFilter<>;
+  auto              regions = RegionsType::New();
+  regions->SetModelInput(input);
+  SkullBaseSettings base;
+  base.height = 1.0; // the bottom layer (z = 0; the next is at 2 mm)
+  regions->SetSkullBase(base);
+  const Vector3 top(5.0, 4.0, 6.0);
+  regions->SetCraniotomyCentre(top);
+  regions->SetCraniotomyRadius(3.0);
+  regions->Update();
+  const Model & model = regions->GetOutput()->GetModel();
+
+  const std::vector<Index> & fixed = model.NodeSet("skull_base");
+  const std::vector<Index> & exposed = model.NodeSet("exposed");
+  const std::vector<Index> & contact = model.NodeSet("contact");
+  EXPECT_EQ(fixed, block.NodeSet("zmin"));
+  ASSERT_EQ(model.fixedConstraints.size(), 1u);
+  EXPECT_EQ(model.fixedConstraints[0].nodeSet, "skull_base");
+  std::vector<Index> expectedExposed;
+  for (const Index node : block.NodeSet("surface"))
+  {
+    if ((block.nodes[node] - top).norm() <= 3.0)
+    {
+      expectedExposed.push_back(node);
+    }
+  }
+  std::sort(expectedExposed.begin(), expectedExposed.end());
+  EXPECT_EQ(exposed, expectedExposed);
+  EXPECT_GE(exposed.size(), 5u);
+  // Every surface node is in exactly one of the three sets.
+  std::vector<int> count(model.nodes.size(), 0);
+  for (const auto * set : { &fixed, &exposed, &contact })
+  {
+    for (const Index node : *set)
+    {
+      ++count[node];
+    }
+  }
+  for (const Index node : block.NodeSet("surface"))
+  {
+    EXPECT_EQ(count[node], 1) << "surface node " << node;
+  }
+  EXPECT_EQ(fixed.size() + exposed.size() + contact.size(), block.NodeSet("surface").size());
+
+  // Without contact there is no contact set; without a craniotomy no exposed set.
+  regions->SetContact(false);
+  regions->SetCraniotomyRadius(0.0);
+  regions->Update();
+  EXPECT_EQ(regions->GetOutput()->GetModel().nodeSets.count("contact"), 0u);
+  EXPECT_EQ(regions->GetOutput()->GetModel().nodeSets.count("exposed"), 0u);
+
+  const auto expectError = [&](const std::string & expected) {
+    try
+    {
+      regions->Update();
+      ADD_FAILURE() << "no error; expected one naming '" << expected << "'";
+    }
+    catch (const itk::ExceptionObject & error)
+    {
+      EXPECT_NE(std::string(error.GetDescription()).find(expected), std::string::npos) << error.GetDescription();
+    }
+  };
+  // A sphere and a mask: the one craniotomy check.
+  auto mask = itk::Image<unsigned char, 3>::New();
+  itk::Image<unsigned char, 3>::RegionType region;
+  region.SetSize({ { 12, 10, 8 } });
+  mask->SetRegions(region);
+  mask->Allocate(true);
+  regions->SetCraniotomyMask(mask);
+  regions->SetCraniotomyRadius(3.0);
+  expectError("not both");
+  // A sphere far from the body.
+  auto far = RegionsType::New();
+  far->SetModelInput(input);
+  far->SetCraniotomyCentre(Vector3(50.0, 50.0, 50.0));
+  far->SetCraniotomyRadius(3.0);
+  try
+  {
+    far->Update();
+    ADD_FAILURE() << "a sphere off the body was accepted";
+  }
+  catch (const itk::ExceptionObject & error)
+  {
+    EXPECT_NE(std::string(error.GetDescription()).find("selects no surface node"), std::string::npos)
+      << error.GetDescription();
+  }
+  // A model without its surface node set.
+  Model bare = block;
+  bare.nodeSets.erase("surface");
+  auto bareInput = itk::BiomechanicalModelObject::New();
+  bareInput->SetModel(bare);
+  auto noSurface = RegionsType::New();
+  noSurface->SetModelInput(bareInput);
+  try
+  {
+    noSurface->Update();
+    ADD_FAILURE() << "a model without surface nodes was accepted";
+  }
+  catch (const itk::ExceptionObject & error)
+  {
+    EXPECT_NE(std::string(error.GetDescription()).find("'surface'"), std::string::npos) << error.GetDescription();
   }
 }
 
