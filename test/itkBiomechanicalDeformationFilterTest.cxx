@@ -9,6 +9,8 @@
 // solve without a change, a solve again after one), report failures and
 // non-convergence as stated, and compose with the grid, surface and fitter
 // filters.
+// Over 800 lines on purpose: one translation unit instantiates the filters'
+// slow templates once for all their tests.
 //
 // ITK headers first: ITK's bundled Eigen must come before the system Eigen.
 #include "itkBiomechanicalDeformationFilter.h"
