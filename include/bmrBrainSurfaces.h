@@ -173,6 +173,25 @@ struct SkullBaseSettings
 std::vector<Index>
 SkullBaseNodes(const Model & model, const std::vector<Index> & surfaceNodes, const SkullBaseSettings & settings = {});
 
+/** The boundary regions of a brain model's surface, set by SetBrainRegions. */
+struct BrainRegionSettings
+{
+  SkullBaseSettings skullBase;
+  /** Not given (radius 0, no mask): no exposed set. */
+  CraniotomyRegion craniotomy;
+  bool             contact = true;
+};
+
+/** Sets the node sets of the surface regions (replacing earlier ones):
+ *  "skull_base" (SkullBaseNodes; model.fixedConstraints becomes its one
+ *  fixed constraint, all three directions), "exposed" (ExposedSurfaceNodes,
+ *  when the craniotomy is given) and, with `contact`, "contact": every other
+ *  surface node, the slaves of the skull. Exposed nodes are never contact
+ *  slaves, even where a measurement is rejected: the craniotomy has no bone.
+ *  Errors are those of the region functions. */
+void
+SetBrainRegions(Model & model, const std::vector<Index> & surfaceNodes, const BrainRegionSettings & settings);
+
 } // namespace bmr
 
 #endif

@@ -32,7 +32,7 @@ namespace itk
  * CraniotomyCentre (mm) and CraniotomyRadius (mm; 0, the default: no
  * sphere), Contact (default true).
  *
- * Output: the model with the node sets
+ * Output: the model with the node sets (bmr::SetBrainRegions)
  *  - "skull_base": fixed in all three directions (a fixed constraint);
  *  - "exposed": the craniotomy's surface nodes (bmr::ExposedSurfaceNodes),
  *    when a craniotomy is given: the nodes BiomechanicalLoadsFilter loads;
@@ -148,48 +148,18 @@ protected:
     const std::vector<bmr::Index> surfaceNodes = model.nodeSets.at(m_SurfaceNodeSet);
     try
     {
-      model.nodeSets["skull_base"] = bmr::SkullBaseNodes(model, surfaceNodes, m_SkullBase);
-      model.fixedConstraints = { bmr::FixedConstraint{ "skull_base", { true, true, true } } };
-
-      bmr::LabelVolume      mask;
-      bmr::CraniotomyRegion craniotomy;
+      bmr::LabelVolume         mask;
+      bmr::BrainRegionSettings settings;
+      settings.skullBase = m_SkullBase;
+      settings.craniotomy.centre = m_CraniotomyCentre;
+      settings.craniotomy.radius = m_CraniotomyRadius;
       if (const MaskImageType * image = this->GetCraniotomyMask())
       {
         mask = MakeBiomechanicalVolume<std::uint8_t>(image);
-        craniotomy.mask = &mask;
+        settings.craniotomy.mask = &mask;
       }
-      craniotomy.centre = m_CraniotomyCentre;
-      craniotomy.radius = m_CraniotomyRadius;
-      model.nodeSets.erase("exposed");
-      if (craniotomy.Given())
-      {
-        model.nodeSets["exposed"] = bmr::ExposedSurfaceNodes(model, surfaceNodes, craniotomy);
-      }
-
-      model.nodeSets.erase("contact");
-      if (m_Contact)
-      {
-        std::vector<char> constrained(model.nodes.size(), 0);
-        for (const char * set : { "skull_base", "exposed" })
-        {
-          if (const auto found = model.nodeSets.find(set); found != model.nodeSets.end())
-          {
-            for (const bmr::Index node : found->second)
-            {
-              constrained[node] = 1;
-            }
-          }
-        }
-        std::vector<bmr::Index> contact;
-        for (const bmr::Index node : surfaceNodes)
-        {
-          if (!constrained[node])
-          {
-            contact.push_back(node);
-          }
-        }
-        model.nodeSets["contact"] = std::move(contact);
-      }
+      settings.contact = m_Contact;
+      bmr::SetBrainRegions(model, surfaceNodes, settings);
     }
     catch (const bmr::Error & error)
     {

@@ -5,6 +5,7 @@
 #include "bmrBrainSurfaces.h"
 #include "bmrFuzzyCMeans.h"
 #include "bmrImageGrids.h"
+#include "bmrMaterialMapping.h"
 #include "bmrMeshGenerators.h"
 #include "bmrMeshIO.h"
 #include "bmrScene.h"
@@ -277,6 +278,72 @@ BindModelBuilding(py::module_ & module)
     },
     py::arg("model"), py::arg("height") = SkullBaseSettings{}.height, py::arg("superior") = py::make_tuple(0.0, 0.0, 1.0),
     py::arg("surface_nodes") = py::none(), "Boundary nodes within height mm of the lowest one along superior.");
+  module.def(
+    "model_regions",
+    [](Model model, const py::object & centre, double radius, const py::object & mask, double skullBaseHeight,
+       const py::object & superior, bool contact, const py::object & surfaceNodes) {
+      BrainRegionSettings settings;
+      settings.skullBase.height = skullBaseHeight;
+      settings.skullBase.superior = VectorFromObject(superior, "superior");
+      LabelVolume region;
+      if (!centre.is_none())
+      {
+        settings.craniotomy.centre = VectorFromObject(centre, "craniotomy_centre");
+        settings.craniotomy.radius = radius;
+        if (!(radius > 0.0))
+        {
+          throw py::value_error("craniotomy_centre needs craniotomy_radius > 0 (mm)");
+        }
+      }
+      if (!mask.is_none())
+      {
+        region = LabelVolumeFromImage(mask, "craniotomy_mask");
+        settings.craniotomy.mask = &region;
+      }
+      settings.contact = contact;
+      const std::vector<Index> surface =
+        surfaceNodes.is_none() && model.nodeSets.count("surface") ? model.nodeSets.at("surface")
+                                                                   : SurfaceNodesOrBoundary(model, surfaceNodes);
+      SetBrainRegions(model, surface, settings);
+      return model;
+    },
+    py::arg("model"), py::kw_only(), py::arg("craniotomy_centre") = py::none(), py::arg("craniotomy_radius") = 0.0,
+    py::arg("craniotomy_mask") = py::none(), py::arg("skull_base_height") = SkullBaseSettings{}.height,
+    py::arg("superior") = py::make_tuple(0.0, 0.0, 1.0), py::arg("contact") = true,
+    py::arg("surface_nodes") = py::none(),
+    "A copy of the model with its surface regions (itk::BiomechanicalRegionsFilter's method): node sets "
+    "'skull_base' (fixed), 'exposed' (the craniotomy: a sphere or a mask) and 'contact' (every other surface node). "
+    "Surface nodes: surface_nodes, else the model's 'surface' set, else its boundary nodes.");
+  module.def(
+    "map_materials",
+    [](Model model, const py::object & memberships, const std::vector<Material> & classMaterials,
+       const py::object & tumourMask, const Material & tumour, int threads) {
+      const ScalarVolume volume = ScalarVolumeFromImage(memberships, "memberships");
+      LabelVolume        tumourVolume;
+      if (!tumourMask.is_none())
+      {
+        tumourVolume = LabelVolumeFromImage(tumourMask, "tumour_mask");
+      }
+      MaterialMappingSettings settings;
+      settings.classMaterials = classMaterials;
+      settings.tumour = tumour;
+      settings.sampling.threads = threads;
+      std::vector<std::string> warnings;
+      {
+        py::gil_scoped_release release;
+        MapMaterialsFromMemberships(model, volume, settings, tumourMask.is_none() ? nullptr : &tumourVolume, &warnings);
+      }
+      for (const std::string & warning : warnings)
+      {
+        PyErr_WarnEx(PyExc_RuntimeWarning, warning.c_str(), 1);
+      }
+      return model;
+    },
+    py::arg("model"), py::arg("memberships"), py::kw_only(), py::arg("class_materials") = std::vector<Material>{},
+    py::arg("tumour_mask") = py::none(), py::arg("tumour_material") = TumourMaterial(), py::arg("threads") = 0,
+    "A copy of the model with materials mixed from tissue-class memberships (itk::BiomechanicalMaterialMappingFilter's "
+    "method): memberships as classify_tissue gives them; class_materials one per class (empty: CSF for the darkest "
+    "class, parenchyma for the others).");
 }
 
 void

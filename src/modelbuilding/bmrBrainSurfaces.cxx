@@ -634,6 +634,48 @@ ExposedSurfaceNodes(const Model & model, const std::vector<Index> & surfaceNodes
                                 : SurfaceNodesInSphere(model, surfaceNodes, region.centre, region.radius);
 }
 
+void
+SetBrainRegions(Model & model, const std::vector<Index> & surfaceNodes, const BrainRegionSettings & settings)
+{
+  std::vector<Index> fixed = SkullBaseNodes(model, surfaceNodes, settings.skullBase);
+  std::vector<Index> exposed;
+  if (settings.craniotomy.Given())
+  {
+    exposed = ExposedSurfaceNodes(model, surfaceNodes, settings.craniotomy);
+  }
+  std::vector<Index> contact;
+  if (settings.contact)
+  {
+    std::vector<char> constrained(model.nodes.size(), 0);
+    for (const auto * set : { &fixed, &exposed })
+    {
+      for (const Index node : *set)
+      {
+        constrained[static_cast<std::size_t>(node)] = 1;
+      }
+    }
+    for (const Index node : surfaceNodes)
+    {
+      if (!constrained[static_cast<std::size_t>(node)])
+      {
+        contact.push_back(node);
+      }
+    }
+  }
+  model.nodeSets["skull_base"] = std::move(fixed);
+  model.fixedConstraints = { FixedConstraint{ "skull_base", { true, true, true } } };
+  model.nodeSets.erase("exposed");
+  if (settings.craniotomy.Given())
+  {
+    model.nodeSets["exposed"] = std::move(exposed);
+  }
+  model.nodeSets.erase("contact");
+  if (settings.contact)
+  {
+    model.nodeSets["contact"] = std::move(contact);
+  }
+}
+
 std::vector<Index>
 SkullBaseNodes(const Model & model, const std::vector<Index> & surfaceNodes, const SkullBaseSettings & settings)
 {

@@ -285,6 +285,30 @@ def test_build_brain_model_then_solve_reproduces_register(colin27):
     np.testing.assert_array_equal(transform.transform_points(samples), result.transform.transform_points(samples))
 
 
+def test_step_functions_compose_into_build_brain_model(colin27):
+    """The filters' Python faces, one step at a time, give build_brain_model's model."""
+    image, mask = colin27
+    points, displacements = bmr.read_sparse_displacements(sparse_csv())
+    brain = bmr.build_brain_model(image, mask, sparse_points=points, sparse_displacements=displacements, **CRANIOTOMY)
+    classes = bmr.classify_tissue(image, mask, classes=3)
+    grid = bmr.make_grid(mask, element_size=CRANIOTOMY["element_size"])
+    model = bmr.map_materials(grid.model, classes.memberships)
+    model = bmr.model_regions(model, craniotomy_centre=CRANIOTOMY["craniotomy_centre"],
+                              craniotomy_radius=CRANIOTOMY["craniotomy_radius"])
+    load, report = bmr.displacements_from_points(model, model.node_sets["exposed"], points, displacements)
+    np.testing.assert_array_equal(model.nodes, brain.model.nodes)
+    np.testing.assert_array_equal(model.cell_materials, brain.model.cell_materials)
+    assert [m.youngs_modulus for m in model.materials] == [m.youngs_modulus for m in brain.model.materials]
+    for name in ("skull_base", "exposed", "contact"):
+        np.testing.assert_array_equal(model.node_sets[name], brain.model.node_sets[name], err_msg=name)
+    np.testing.assert_array_equal(load.nodes, brain.load.nodes)
+    np.testing.assert_array_equal(load.displacements, brain.load.displacements)
+    assert report["used"] == brain.load_report["used"] == 61
+    # One craniotomy check for every face: a sphere and a mask together are refused.
+    with pytest.raises(bmr.Error, match="not both"):
+        bmr.model_regions(model, craniotomy_centre=(0, 0, 0), craniotomy_radius=5, craniotomy_mask=mask)
+
+
 def test_csf_material_settings_reach_the_model(colin27):
     image, mask = colin27
     points, displacements = bmr.read_sparse_displacements(sparse_csv())
