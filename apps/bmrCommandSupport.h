@@ -117,9 +117,6 @@ ReadMaskImage(const std::string & path, const std::string & what)
   return ThresholdMask(ReadImage<RegistrationImage>(path, what));
 }
 
-using itk::MoveIntoPlace;
-using itk::TemporaryPathFor;
-
 /** Writes an ITK image through a temporary file in the same folder and a rename. */
 template <typename TImage>
 void

@@ -326,7 +326,7 @@ RegisterWithElastix(const fs::path & fixed, const fs::path & moving, const fs::p
   text = std::regex_replace(text, std::regex(R"(\(Spacing [^)]*\))"), "(Spacing " + vector3(preoperativeGrid->GetSpacing()) + ")");
   text = std::regex_replace(text, std::regex(R"(\(Origin [^)]*\))"), "(Origin " + vector3(preoperativeGrid->GetOrigin()) + ")");
   const fs::path onPreoperativeGrid = out / "TransformParameters.preoperative-grid.txt";
-  std::ofstream(onPreoperativeGrid) << text;
+  WriteTextFileAtomically(onPreoperativeGrid.string(), text);
 
   start = std::chrono::steady_clock::now();
   const auto transformix = [&](std::vector<std::string> command, const fs::path & output) {

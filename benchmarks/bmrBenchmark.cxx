@@ -154,7 +154,7 @@ Driver(const Options & options, const std::string & self)
   std::cout << report.str();
   // The image benchmark's section (bmrImageBenchmark) is kept as it is.
   const std::string imageSection = bmr::benchmark::ImageSection(ReadTextFile(options.output));
-  WriteAtomically(options.output, imageSection.empty() ? report.str()
+  WriteCreatingFolder(options.output, imageSection.empty() ? report.str()
                                                        : bmr::benchmark::WithImageSection(report.str(), imageSection));
   Log("wrote " + options.output);
   return 0;

@@ -1,6 +1,7 @@
 // Helpers shared by the parts of bmrBenchmark: timing, medians and number
 // formats, other processes' CPU use (contention), cell keys, atomic writes, the log.
 #include "bmrBenchmarkDriver.h"
+#include "bmrMeshIO.h"
 #include "bmrModel.h"
 
 #include <algorithm>
@@ -147,23 +148,14 @@ CellsFromKey(const std::string & key)
 }
 
 void
-WriteAtomically(const std::string & path, const std::string & text)
+WriteCreatingFolder(const std::string & path, const std::string & text)
 {
   const std::filesystem::path target(path);
   if (target.has_parent_path())
   {
     std::filesystem::create_directories(target.parent_path());
   }
-  const std::string temporary = path + ".tmp";
-  {
-    std::ofstream stream(temporary);
-    stream << text;
-    if (!stream)
-    {
-      throw bmr::Error("bmrBenchmark: could not write " + temporary);
-    }
-  }
-  std::filesystem::rename(temporary, target);
+  WriteTextFileAtomically(path, text);
 }
 
 } // namespace benchmark

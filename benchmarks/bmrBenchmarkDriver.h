@@ -97,8 +97,9 @@ WaitForQuiet(double maxSeconds, double threshold = 0.15);
 bmr::GridCells
 CellsFromKey(const std::string & key);
 
+/** Writes `text` to `path` (bmr::WriteTextFileAtomically), creating its folder first. */
 void
-WriteAtomically(const std::string & path, const std::string & text);
+WriteCreatingFolder(const std::string & path, const std::string & text);
 
 // ---------------------------------------------------------------------------
 // Brain-sized model (bmrBenchmarkBrain.cxx).

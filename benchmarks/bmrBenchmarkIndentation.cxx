@@ -128,10 +128,7 @@ SaveReference(const std::string & path, const std::string & key, const Reference
     const Vector3 & u = reference.displacements[i];
     text << p.x() << " " << p.y() << " " << p.z() << " " << u.x() << " " << u.y() << " " << u.z() << "\n";
   }
-  std::filesystem::create_directories(std::filesystem::path(path).parent_path());
-  const std::string temporary = path + ".tmp";
-  std::ofstream(temporary) << text.str();
-  std::filesystem::rename(temporary, path);
+  WriteCreatingFolder(path, text.str());
 }
 
 Reference
@@ -471,7 +468,7 @@ IndentationSection(const Options & options, std::ostream & md)
     md << "\n![Error against run time](benchmark-error-vs-time.png)\n\n"
        << "The plot (scripts/plot-benchmarks.py) is drawn from " << std::filesystem::path(options.csv).filename().string()
        << ".\n\n";
-    WriteAtomically(options.csv, csv.str());
+    WriteCreatingFolder(options.csv, csv.str());
   }
 }
 

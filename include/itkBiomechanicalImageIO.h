@@ -8,6 +8,7 @@
 #include "itkImageFileReader.h"
 #include "itkImageFileWriter.h"
 
+#include "bmrAtomicWrite.h"
 #include "bmrModel.h"
 
 #include <filesystem>
@@ -85,48 +86,26 @@ ReadBiomechanicalImage(const std::string & path, const std::string & what)
   return reader->GetOutput();
 }
 
-/** A temporary name in the folder of `path`, for writing and then renaming. */
-inline std::filesystem::path
-TemporaryPathFor(const std::filesystem::path & path)
-{
-  return path.parent_path() / (".tmp-" + std::to_string(::getpid()) + "-" + path.filename().string());
-}
-
-/** Renames a finished temporary file onto `path`; removes it and throws when that fails. */
-inline void
-MoveIntoPlace(const std::filesystem::path & temporary, const std::filesystem::path & path)
-{
-  std::error_code error;
-  std::filesystem::rename(temporary, path, error);
-  if (error)
-  {
-    std::error_code ignored;
-    std::filesystem::remove(temporary, ignored);
-    throw bmr::Error("cannot write '" + path.string() + "': renaming the temporary file failed: " + error.message());
-  }
-}
-
-/** Writes an ITK image through a temporary file in the same folder and a rename. */
+/** Writes an ITK image (compressed) through a temporary file in the same
+ *  folder and a rename (bmr::WriteAtomically). Throws bmr::Error naming it. */
 template <typename TImage>
 void
 WriteBiomechanicalImage(const TImage * image, const std::filesystem::path & path)
 {
-  const std::filesystem::path temporary = TemporaryPathFor(path);
-  auto                        writer = ImageFileWriter<TImage>::New();
-  writer->SetInput(image);
-  writer->SetFileName(temporary.string());
-  writer->UseCompressionOn();
-  try
-  {
-    writer->Update();
-  }
-  catch (const ExceptionObject & exception)
-  {
-    std::error_code ignored;
-    std::filesystem::remove(temporary, ignored);
-    throw bmr::Error("cannot write image '" + path.string() + "': " + PlainDescription(exception.GetDescription()));
-  }
-  MoveIntoPlace(temporary, path);
+  bmr::WriteAtomically(path, "image", [&](const std::string & temporary) {
+    auto writer = ImageFileWriter<TImage>::New();
+    writer->SetInput(image);
+    writer->SetFileName(temporary);
+    writer->UseCompressionOn();
+    try
+    {
+      writer->Update();
+    }
+    catch (const ExceptionObject & exception)
+    {
+      throw bmr::Error("cannot write image '" + path.string() + "': " + PlainDescription(exception.GetDescription()));
+    }
+  });
 }
 
 } // namespace itk

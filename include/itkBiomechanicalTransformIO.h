@@ -32,28 +32,22 @@ WriteBiomechanicalTransform(const TransformBaseTemplate<double> * transform, con
     itkGenericExceptionMacro("cannot write transform '" << path << "': the extension must be .h5 or .hdf5 (HDF5) or "
                                                         << ".tfm or .txt (ITK text)");
   }
-  // Same extension on the temporary file: ITK picks the format from it.
-  const std::filesystem::path temporary =
-    target.parent_path() / (".tmp-" + std::to_string(::getpid()) + "-" + target.filename().string());
-  std::error_code ignored;
   try
   {
-    auto writer = TransformFileWriterTemplate<double>::New();
-    writer->SetInput(transform);
-    writer->SetFileName(temporary.string());
-    writer->Update();
+    bmr::WriteAtomically(target, "transform", [&](const std::string & temporary) {
+      auto writer = TransformFileWriterTemplate<double>::New();
+      writer->SetInput(transform);
+      writer->SetFileName(temporary);
+      writer->Update();
+    });
   }
   catch (const ExceptionObject & exception)
   {
-    std::filesystem::remove(temporary, ignored);
     itkGenericExceptionMacro("cannot write transform '" << path << "': " << exception.GetDescription());
   }
-  std::error_code renameError;
-  std::filesystem::rename(temporary, target, renameError);
-  if (renameError)
+  catch (const bmr::Error & error)
   {
-    std::filesystem::remove(temporary, ignored);
-    itkGenericExceptionMacro("cannot write transform '" << path << "': " << renameError.message());
+    itkGenericExceptionMacro(<< error.what());
   }
 }
 

@@ -3,6 +3,8 @@
 // the readers and writers share the conversions and the error handling.
 #include "bmrMeshIO.h"
 
+#include "bmrAtomicWrite.h"
+
 #include <vtkCellArray.h>
 #include <vtkCellData.h>
 #include <vtkCellType.h>
@@ -371,37 +373,6 @@ MakeGrid(const Model & model)
                           model.cells.size());
   }
   return grid;
-}
-
-/** Writes through a temporary file in the target folder and renames it. */
-template <typename WriteFunction>
-void
-WriteAtomically(const std::string & path, const std::string & what, WriteFunction && write)
-{
-  const fs::path target(path);
-  const fs::path folder = target.has_parent_path() ? target.parent_path() : fs::path(".");
-  std::error_code error;
-  if (!fs::is_directory(folder, error))
-  {
-    throw Error("cannot write " + what + " '" + path + "': folder '" + folder.string() + "' does not exist");
-  }
-  const fs::path temporary =
-    folder / ("." + target.filename().string() + "." + std::to_string(::getpid()) + ".tmp");
-  try
-  {
-    write(temporary.string());
-  }
-  catch (...)
-  {
-    fs::remove(temporary, error);
-    throw;
-  }
-  fs::rename(temporary, target, error);
-  if (error)
-  {
-    fs::remove(temporary, error);
-    throw Error("cannot write " + what + " '" + path + "': renaming the temporary file failed: " + error.message());
-  }
 }
 
 template <typename WriterType>
