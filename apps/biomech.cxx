@@ -22,6 +22,7 @@
 #include "bmrMeshIO.h"
 #include "bmrScene.h"
 #include "bmrSolver.h"
+#include "bmrSolverSettingsTable.h"
 
 #include <CLI/CLI.hpp>
 
@@ -48,6 +49,7 @@ struct SolveOptions
   std::string         scenePath;
   std::string         outputDirectory = ".";
   std::optional<int>  threads;
+  std::vector<std::string> overrides; // --set NAME=VALUE
   bool                quiet = false;
 };
 
@@ -71,12 +73,38 @@ RemoveIfExists(const fs::path & path)
 }
 
 int
+PrintSolverSettings(bool markdown)
+{
+  if (markdown)
+  {
+    std::cout << bmr::SolverSettingsMarkdown();
+    return ExitSuccess;
+  }
+  const bmr::SolverSettings defaults;
+  for (const bmr::SolverSettingField & field : bmr::SolverSettingFields())
+  {
+    std::cout << field.name << " = " << field.Text(defaults) << (field.unit.empty() ? "" : " " + field.unit) << "  ("
+              << field.Range() << ")\n    " << field.meaning << "\n";
+  }
+  return ExitSuccess;
+}
+
+int
 RunSolve(const SolveOptions & options)
 {
   bmr::Scene scene = bmr::ReadScene(options.scenePath);
   if (options.threads)
   {
-    scene.settings.threads = *options.threads;
+    bmr::SetSolverSetting(scene.settings, "threads", std::to_string(*options.threads));
+  }
+  for (const std::string & assignment : options.overrides)
+  {
+    const auto equals = assignment.find('=');
+    if (equals == std::string::npos || equals == 0)
+    {
+      throw bmr::Error("--set needs NAME=VALUE (a key of the scene's \"solver\" object), got '" + assignment + "'");
+    }
+    bmr::SetSolverSetting(scene.settings, assignment.substr(0, equals), assignment.substr(equals + 1));
   }
 
   const fs::path outputDirectory(options.outputDirectory);
@@ -217,7 +245,15 @@ main(int argc, char ** argv)
   solve->add_option("--threads", solveOptions.threads,
                     "Worker threads (overrides the scene; 0 = OpenMP's default, OMP_NUM_THREADS or all cores)")
     ->check(CLI::Range(0, 4096));
+  solve->add_option("--set", solveOptions.overrides,
+                    "Override a solver setting of the scene: NAME=VALUE, e.g. tolerance=0.01 (the keys: "
+                    "biomech settings); may be repeated");
   solve->add_flag("--quiet,-q", solveOptions.quiet, "Print nothing but errors");
+
+  bool       settingsMarkdown = false;
+  CLI::App * settings = app.add_subcommand(
+    "settings", "List the solver settings: the scene's \"solver\" keys, Python's SolverSettings, solve --set");
+  settings->add_flag("--markdown", settingsMarkdown, "Print the Markdown table of docs/scene-format.md");
 
   MakeMeshOptions makeMeshOptions;
   CLI::App *      makeMesh = app.add_subcommand("make-mesh", "Generate a block or ellipsoid mesh and write it (.vtu or .vtk)");
@@ -266,6 +302,10 @@ main(int argc, char ** argv)
     if (makeMesh->parsed())
     {
       return RunMakeMesh(makeMeshOptions);
+    }
+    if (settings->parsed())
+    {
+      return PrintSolverSettings(settingsMarkdown);
     }
     for (const auto & run : runOtherCommands)
     {

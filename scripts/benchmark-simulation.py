@@ -61,7 +61,7 @@ def run(model, start, threads, region):
     probe.add_tool(tool)
     results = []
     for end_time in (DURATION, 2 * DURATION):
-        result, _ = bmr.simulate(probe, integrator="explicit_dynamics", end_time=end_time, damping_coefficient=20.0,
+        result, _ = bmr.simulate(probe, integrator="explicit_dynamics", end_time=end_time, damping=20.0,
                                  threads=threads, output_interval=end_time)
         results.append(result)
     short, long = results

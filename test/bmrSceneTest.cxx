@@ -7,6 +7,7 @@
 #include "bmrMeshless.h"
 #include "bmrScene.h"
 #include "bmrSolver.h"
+#include "bmrSolverSettingsTable.h"
 
 #include "bmrTemporaryFolderTest.h"
 
@@ -14,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -75,6 +77,70 @@ CountNodes(const bmr::Model & model, const std::function<bool(const bmr::Vector3
 }
 
 } // namespace
+
+/** The solver settings' one table: every row reaches SolverSettings through the
+ *  scene file and through `--set` text alike, a value outside its range is
+ *  refused by both with the row's range, and docs/scene-format.md holds the
+ *  table as `biomech settings --markdown` prints it. */
+TEST_F(SceneTest, SolverSettingsTableIsTheSceneKeysAndTheDocs)
+{
+  const bmr::SolverSettings defaults;
+  for (const bmr::SolverSettingField & field : bmr::SolverSettingFields())
+  {
+    SCOPED_TRACE(field.name);
+    // A value that is not the default: the other choice, the other flag, or a changed number within the range.
+    json   value;
+    std::string text;
+    double expected = 0.0;
+    switch (field.kind)
+    {
+      case bmr::SolverSettingField::Kind::Choice:
+        expected = 1.0 - field.get(defaults);
+        value = field.choices.at(static_cast<std::size_t>(expected));
+        text = value.get<std::string>();
+        break;
+      case bmr::SolverSettingField::Kind::Flag:
+        expected = 1.0 - field.get(defaults);
+        value = expected != 0.0;
+        text = expected != 0.0 ? "true" : "false";
+        break;
+      case bmr::SolverSettingField::Kind::Integer:
+        expected = field.get(defaults) + 3.0;
+        value = static_cast<long long>(expected);
+        text = std::to_string(static_cast<long long>(expected));
+        break;
+      case bmr::SolverSettingField::Kind::Number:
+        expected = std::isfinite(field.highest) ? 0.5 * field.highest : field.get(defaults) + 0.25;
+        value = expected;
+        text = value.dump();
+        break;
+    }
+    ASSERT_NE(expected, field.get(defaults));
+    ASSERT_EQ(field.Check(expected), "");
+    json scene = BlockScene();
+    scene["solver"] = { { field.name, value } };
+    EXPECT_EQ(field.get(Parse(scene).settings), expected);
+    bmr::SolverSettings settings;
+    bmr::SetSolverSetting(settings, field.name, text);
+    EXPECT_EQ(field.get(settings), expected);
+
+    // Outside the range (or of the wrong kind): both refuse, naming the key.
+    json bad = field.kind == bmr::SolverSettingField::Kind::Choice  ? json("bogus")
+               : field.kind == bmr::SolverSettingField::Kind::Flag  ? json(2)
+               : std::isfinite(field.lowest)                       ? json(field.lowest - 1.0)
+                                                                   : json("many");
+    scene["solver"] = { { field.name, bad } };
+    EXPECT_CONTAINS(ParseError(scene), "solver." + field.name);
+    const std::string badText = bad.is_string() ? bad.get<std::string>() : bad.dump();
+    EXPECT_CONTAINS(ErrorMessage([&] { bmr::SetSolverSetting(settings, field.name, badText); }), field.name);
+  }
+  EXPECT_CONTAINS(ErrorMessage([] {
+                    bmr::SolverSettings settings;
+                    bmr::SetSolverSetting(settings, "tolerence", "0.01");
+                  }),
+                  "tolerance");
+  EXPECT_CONTAINS(ReadText(fs::path(BMR_SOURCE_DIR) / "docs" / "scene-format.md"), bmr::SolverSettingsMarkdown());
+}
 
 TEST_F(SceneTest, EveryFieldIsMapped)
 {

@@ -4,6 +4,8 @@
 // the conversions they share are in bmrPythonConversions.cxx.
 #include "bmrPythonSupport.h"
 
+#include "bmrSolverSettingsTable.h"
+
 #include "bmrBrainSurfaces.h"
 #include "bmrFuzzyCMeans.h"
 #include "bmrImageGrids.h"
@@ -13,6 +15,8 @@
 #include "bmrSurfaceLoads.h"
 
 #include <Python.h>
+
+#include <algorithm>
 #include <pybind11/eigen.h>
 #include <pybind11/functional.h>
 
@@ -164,27 +168,6 @@ const char *
 IntegratorName(Integrator integrator)
 {
   return integrator == Integrator::ExplicitDynamics ? "explicit_dynamics" : "dynamic_relaxation";
-}
-
-/** The settings object's attribute setter for a string choice. */
-Integrator
-ParseIntegrator(const std::string & name)
-{
-  if (name == "dynamic_relaxation")
-    return Integrator::DynamicRelaxation;
-  if (name == "explicit_dynamics")
-    return Integrator::ExplicitDynamics;
-  throw py::value_error("integrator must be 'dynamic_relaxation' or 'explicit_dynamics', not '" + name + "'");
-}
-
-TetrahedronFormulation
-ParseTetrahedron(const std::string & name)
-{
-  if (name == "anp")
-    return TetrahedronFormulation::AverageNodalPressure;
-  if (name == "linear")
-    return TetrahedronFormulation::Linear;
-  throw py::value_error("tetrahedron must be 'anp' (average nodal pressure) or 'linear', not '" + name + "'");
 }
 
 void
@@ -569,43 +552,79 @@ BindModel(py::module_ & module)
 void
 BindSolver(py::module_ & module)
 {
-  py::class_<SolverSettings>(module, "SolverSettings",
-                             "Settings of the TLED solver (docs/scene-format.md names the same keys).")
-    .def(py::init([](const py::kwargs & values) {
-           SolverSettings settings;
-           py::object     object = py::cast(settings);
-           for (const auto & [key, value] : values)
-           {
-             if (!py::hasattr(object, key))
-             {
-               throw py::type_error("SolverSettings has no setting '" + std::string(py::str(key)) + "'");
-             }
-             object.attr(key) = value;
-           }
-           return object.cast<SolverSettings>();
-         }))
-    .def_property(
-      "integrator", [](const SolverSettings & settings) { return IntegratorName(settings.integrator); },
-      [](SolverSettings & settings, const std::string & name) { settings.integrator = ParseIntegrator(name); })
-    .def_property(
-      "tetrahedron",
-      [](const SolverSettings & settings) {
-        return settings.tetrahedron == TetrahedronFormulation::Linear ? "linear" : "anp";
+  auto solverSettings =
+    py::class_<SolverSettings>(module, "SolverSettings",
+                               "Settings of the TLED solver: the attributes are the scene file's \"solver\" keys "
+                               "(one table: docs/scene-format.md, biomech settings --markdown).")
+      .def(py::init([](const py::kwargs & values) {
+        SolverSettings settings;
+        py::object     object = py::cast(settings);
+        for (const auto & [key, value] : values)
+        {
+          if (FindSolverSetting(py::str(key)) == nullptr)
+          {
+            throw py::type_error("SolverSettings has no setting '" + std::string(py::str(key)) + "'");
+          }
+          object.attr(key) = value;
+        }
+        return object.cast<SolverSettings>();
+      }));
+  // One property per row of the table; a setter checks the value as the scene parser does.
+  for (const SolverSettingField & field : SolverSettingFields())
+  {
+    const SolverSettingField * row = &field;
+    solverSettings.def_property(
+      field.name.c_str(),
+      [row](const SolverSettings & settings) -> py::object {
+        const double value = row->get(settings);
+        switch (row->kind)
+        {
+          case SolverSettingField::Kind::Choice:
+            return py::str(row->choices.at(static_cast<std::size_t>(value)));
+          case SolverSettingField::Kind::Flag:
+            return py::bool_(value != 0.0);
+          case SolverSettingField::Kind::Integer:
+            return py::int_(static_cast<long long>(value));
+          default:
+            return py::float_(value);
+        }
       },
-      [](SolverSettings & settings, const std::string & name) { settings.tetrahedron = ParseTetrahedron(name); })
-    .def_readwrite("hourglass_coefficient", &SolverSettings::hourglassCoefficient)
-    .def_readwrite("collapse_bulk_modulus", &SolverSettings::collapseBulkModulus)
-    .def_readwrite("time_step_safety_factor", &SolverSettings::timeStepSafetyFactor)
-    .def_readwrite("time_step", &SolverSettings::timeStep)
-    .def_readwrite("end_time", &SolverSettings::endTime)
-    .def_readwrite("damping_coefficient", &SolverSettings::dampingCoefficient)
-    .def_readwrite("load_steps", &SolverSettings::loadSteps)
-    .def_readwrite("tolerance", &SolverSettings::tolerance)
-    .def_readwrite("max_steps", &SolverSettings::maxSteps)
-    .def_readwrite("adapt_interval", &SolverSettings::adaptInterval)
-    .def_readwrite("compute_stress", &SolverSettings::computeStress)
-    .def_readwrite("output_interval", &SolverSettings::outputInterval)
-    .def_readwrite("threads", &SolverSettings::threads)
+      [row](SolverSettings & settings, const py::object & value) {
+        double number = 0.0;
+        if (row->kind == SolverSettingField::Kind::Choice)
+        {
+          const auto found = py::isinstance<py::str>(value)
+                               ? std::find(row->choices.begin(), row->choices.end(), value.cast<std::string>())
+                               : row->choices.end();
+          if (found == row->choices.end())
+          {
+            throw py::value_error("solver setting '" + row->name + "' must be one of " + row->Range() + ", got " +
+                                  std::string(py::repr(value)));
+          }
+          row->set(settings, static_cast<double>(found - row->choices.begin()));
+          return;
+        }
+        const bool isBool = py::isinstance<py::bool_>(value);
+        if ((row->kind == SolverSettingField::Kind::Flag) != isBool ||
+            (!isBool && !py::isinstance<py::int_>(value) && !py::isinstance<py::float_>(value)) ||
+            (row->kind == SolverSettingField::Kind::Integer && !py::isinstance<py::int_>(value)))
+        {
+          throw py::type_error("solver setting '" + row->name + "' must be " +
+                               (row->kind == SolverSettingField::Kind::Flag      ? std::string("True or False")
+                                : row->kind == SolverSettingField::Kind::Integer ? std::string("an integer")
+                                                                                  : std::string("a number")) +
+                               ", got " + std::string(py::repr(value)));
+        }
+        number = isBool ? (value.cast<bool>() ? 1.0 : 0.0) : value.cast<double>();
+        if (const std::string problem = row->Check(number); !problem.empty())
+        {
+          throw py::value_error("solver setting '" + row->name + "' " + problem);
+        }
+        row->set(settings, number);
+      },
+      (field.meaning + (field.unit.empty() ? std::string() : " (" + field.unit + ")")).c_str());
+  }
+  solverSettings
     .def("copy", [](const SolverSettings & settings) { return SolverSettings(settings); })
     .def("__repr__", [](const SolverSettings & settings) {
       std::ostringstream text;

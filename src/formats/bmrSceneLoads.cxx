@@ -1,6 +1,7 @@
 // The scene parser's sections after the model: constraints, prescribed
 // displacements, gravity, contact, tools, solver settings and output names.
 #include "bmrSceneParser.h"
+#include "bmrSolverSettingsTable.h"
 
 namespace bmr
 {
@@ -382,80 +383,48 @@ SceneParser::ParseSolver()
   {
     return;
   }
-  solver->AllowOnly({ "integrator", "tetrahedron", "tolerance", "max_steps", "load_steps", "adapt_interval",
-                      "time_step", "safety_factor", "end_time", "damping", "hourglass_coefficient", "threads",
-                      "compute_stress", "output_interval", "collapse_bulk_modulus" });
+  // The keys, their types and ranges are the solver settings' one table.
+  std::vector<std::string> keys;
+  for (const SolverSettingField & field : SolverSettingFields())
+  {
+    keys.push_back(field.name);
+  }
+  solver->AllowOnly(keys);
   SolverSettings & settings = m_Scene.settings;
-  if (const auto value = solver->Optional("integrator"))
+  for (const SolverSettingField & field : SolverSettingFields())
   {
-    settings.integrator = value->Choice({ "dynamic_relaxation", "explicit_dynamics" }) == "explicit_dynamics"
-                            ? Integrator::ExplicitDynamics
-                            : Integrator::DynamicRelaxation;
-  }
-  if (const auto value = solver->Optional("tetrahedron"))
-  {
-    settings.tetrahedron = value->Choice({ "anp", "linear" }) == "linear" ? TetrahedronFormulation::Linear
-                                                                           : TetrahedronFormulation::AverageNodalPressure;
-  }
-  if (const auto value = solver->Optional("tolerance"))
-  {
-    settings.tolerance = value->PositiveNumber();
-  }
-  if (const auto value = solver->Optional("max_steps"))
-  {
-    settings.maxSteps = value->IntegerInRange(1, std::numeric_limits<int>::max());
-  }
-  if (const auto value = solver->Optional("load_steps"))
-  {
-    settings.loadSteps = value->IntegerInRange(1, std::numeric_limits<int>::max());
-  }
-  if (const auto value = solver->Optional("adapt_interval"))
-  {
-    settings.adaptInterval = value->IntegerInRange(2, std::numeric_limits<int>::max());
-  }
-  if (const auto value = solver->Optional("time_step"))
-  {
-    settings.timeStep = value->NonNegativeNumber();
-  }
-  if (const auto value = solver->Optional("safety_factor"))
-  {
-    settings.timeStepSafetyFactor = value->PositiveNumber();
-    if (settings.timeStepSafetyFactor > 1.0)
+    const auto value = solver->Optional(field.name);
+    if (!value)
     {
-      value->Fail("must not exceed 1 (the critical time step is the stability limit)");
+      continue;
     }
-  }
-  if (const auto value = solver->Optional("end_time"))
-  {
-    settings.endTime = value->PositiveNumber();
-  }
-  if (const auto value = solver->Optional("damping"))
-  {
-    settings.dampingCoefficient = value->NonNegativeNumber();
-  }
-  if (const auto value = solver->Optional("output_interval"))
-  {
-    settings.outputInterval = value->PositiveNumber();
-  }
-  if (const auto value = solver->Optional("hourglass_coefficient"))
-  {
-    settings.hourglassCoefficient = value->NonNegativeNumber();
-    if (settings.hourglassCoefficient > 1.0)
+    double number = 0.0;
+    switch (field.kind)
     {
-      value->Fail("must lie in [0, 1] (0.2 is the default)");
+      case SolverSettingField::Kind::Choice:
+      {
+        const std::string choice = value->Choice(field.choices);
+        while (field.choices[static_cast<std::size_t>(number)] != choice)
+        {
+          number += 1.0;
+        }
+        break;
+      }
+      case SolverSettingField::Kind::Flag:
+        number = value->Boolean() ? 1.0 : 0.0;
+        break;
+      case SolverSettingField::Kind::Integer:
+        number = static_cast<double>(value->Integer());
+        break;
+      case SolverSettingField::Kind::Number:
+        number = value->Number();
+        break;
     }
-  }
-  if (const auto value = solver->Optional("collapse_bulk_modulus"))
-  {
-    settings.collapseBulkModulus = value->NonNegativeNumber();
-  }
-  if (const auto value = solver->Optional("threads"))
-  {
-    settings.threads = value->IntegerInRange(0, 4096);
-  }
-  if (const auto value = solver->Optional("compute_stress"))
-  {
-    settings.computeStress = value->Boolean();
+    if (const std::string problem = field.Check(number); !problem.empty())
+    {
+      value->Fail(problem);
+    }
+    field.set(settings, number);
   }
 }
 

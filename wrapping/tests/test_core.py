@@ -179,6 +179,33 @@ def test_solve_gives_what_the_command_line_tool_writes(tmp_path, biomech):
     np.testing.assert_array_equal(bmr.solve(as_dict).displacements, result.displacements)
 
 
+def test_solver_settings_are_the_one_table(tmp_path, biomech):
+    """SolverSettings' attributes, solve() keywords, biomech solve --set and the scene keys are one vocabulary."""
+    listed = [line.split(" = ")[0] for line in biomech("settings").stdout.splitlines() if not line.startswith(" ")]
+    assert "safety_factor" in listed and "damping" in listed and len(listed) >= 15
+    settings = bmr.SolverSettings()
+    for name in listed:
+        assert hasattr(settings, name), name
+    with pytest.raises(TypeError, match="damping_coefficient"):
+        bmr.SolverSettings(damping_coefficient=1.0)
+    settings.safety_factor = 0.5
+    with pytest.raises(ValueError, match=r"safety_factor.*\(0, 1\]"):
+        settings.safety_factor = 1.5
+    with pytest.raises(TypeError, match="max_steps"):
+        settings.max_steps = 2.5
+    with pytest.raises(ValueError, match="tetrahedron"):
+        settings.tetrahedron = "quadratic"
+    # The same override from Python and from the command line gives the same solve.
+    run = biomech("solve", scene_path(), "-d", tmp_path, "--set", "tolerance=0.05", "--set", "load_steps=50")
+    assert run.returncode == 0, run.stderr
+    written = bmr.read_mesh(tmp_path / "block-indentation-result.vtu")
+    result = bmr.solve(scene_path(), tolerance=0.05, load_steps=50)
+    np.testing.assert_array_equal(result.displacements, written["point_data"]["displacement"])
+    assert result.steps != bmr.solve(scene_path()).steps
+    bad = biomech("solve", scene_path(), "-d", tmp_path / "bad", "--set", "tolerance=-1")
+    assert bad.returncode == 1 and "tolerance" in bad.stderr and "> 0" in bad.stderr
+
+
 def test_errors_carry_the_command_line_tool_messages(tmp_path, biomech):
     scene = json.loads(scene_path().read_text())
     scene["fixed"][0]["node_set"] = "floor"

@@ -1,0 +1,294 @@
+#include "bmrSolverSettingsTable.h"
+
+#include <cmath>
+#include <cstdlib>
+#include <sstream>
+
+namespace bmr
+{
+
+namespace
+{
+
+/** The shortest text that reads back as `value`. */
+std::string
+ShortestText(double value)
+{
+  if (value == std::floor(value) && std::abs(value) < 1e15)
+  {
+    return std::to_string(static_cast<long long>(value));
+  }
+  for (int digits = 1; digits <= 17; ++digits)
+  {
+    std::ostringstream text;
+    text.precision(digits);
+    text << value;
+    if (std::strtod(text.str().c_str(), nullptr) == value)
+    {
+      return text.str();
+    }
+  }
+  return std::to_string(value);
+}
+
+using Field = SolverSettingField;
+using Kind = SolverSettingField::Kind;
+
+template <typename Member>
+Field
+NumberField(std::string name, std::string unit, Member member, double lowest, bool lowestOpen, double highest,
+            bool highestOpen, std::string meaning)
+{
+  Field field;
+  field.name = std::move(name);
+  field.kind = Kind::Number;
+  field.unit = std::move(unit);
+  field.meaning = std::move(meaning);
+  field.lowest = lowest;
+  field.lowestOpen = lowestOpen;
+  field.highest = highest;
+  field.highestOpen = highestOpen;
+  field.get = [member](const SolverSettings & settings) { return static_cast<double>(settings.*member); };
+  field.set = [member](SolverSettings & settings, double value) { settings.*member = value; };
+  return field;
+}
+
+Field
+IntegerField(std::string name, int SolverSettings::*member, double lowest, double highest, std::string meaning)
+{
+  Field field = NumberField(std::move(name), "", member, lowest, false, highest, false, std::move(meaning));
+  field.kind = Kind::Integer;
+  field.set = [member](SolverSettings & settings, double value) { settings.*member = static_cast<int>(value); };
+  return field;
+}
+
+constexpr double kInfinity = std::numeric_limits<double>::infinity();
+
+std::vector<Field>
+MakeFields()
+{
+  std::vector<Field> fields;
+  Field integrator;
+  integrator.name = "integrator";
+  integrator.kind = Kind::Choice;
+  integrator.choices = { "dynamic_relaxation", "explicit_dynamics" };
+  integrator.meaning = "dynamic relaxation (steady state) or explicit dynamics (time-accurate central difference)";
+  integrator.get = [](const SolverSettings & s) { return s.integrator == Integrator::ExplicitDynamics ? 1.0 : 0.0; };
+  integrator.set = [](SolverSettings & s, double v) {
+    s.integrator = v == 1.0 ? Integrator::ExplicitDynamics : Integrator::DynamicRelaxation;
+  };
+  fields.push_back(integrator);
+  Field tetrahedron;
+  tetrahedron.name = "tetrahedron";
+  tetrahedron.kind = Kind::Choice;
+  tetrahedron.choices = { "anp", "linear" };
+  tetrahedron.meaning = "average nodal pressure (non-locking) or the plain constant-strain tetrahedron, for comparison";
+  tetrahedron.get = [](const SolverSettings & s) {
+    return s.tetrahedron == TetrahedronFormulation::Linear ? 1.0 : 0.0;
+  };
+  tetrahedron.set = [](SolverSettings & s, double v) {
+    s.tetrahedron = v == 1.0 ? TetrahedronFormulation::Linear : TetrahedronFormulation::AverageNodalPressure;
+  };
+  fields.push_back(tetrahedron);
+  fields.push_back(NumberField("tolerance", "mm", &SolverSettings::tolerance, 0.0, true, kInfinity, false,
+                               "dynamic relaxation stops when the estimated distance to the solution is below it"));
+  fields.push_back(IntegerField("max_steps", &SolverSettings::maxSteps, 1, std::numeric_limits<int>::max(),
+                                "dynamic relaxation step limit; reaching it gives `converged: false`"));
+  fields.push_back(IntegerField("load_steps", &SolverSettings::loadSteps, 1, std::numeric_limits<int>::max(),
+                                "dynamic relaxation steps over which loads are ramped"));
+  fields.push_back(IntegerField("adapt_interval", &SolverSettings::adaptInterval, 2, std::numeric_limits<int>::max(),
+                                "dynamic relaxation steps between updates of the convergence-rate estimate"));
+  fields.push_back(NumberField("time_step", "s", &SolverSettings::timeStep, 0.0, false, kInfinity, false,
+                               "explicit dynamics step; 0 = the critical step × `safety_factor`"));
+  fields.push_back(NumberField("safety_factor", "", &SolverSettings::timeStepSafetyFactor, 0.0, true, 1.0, false,
+                               "fraction of the critical time step used (1 is the stability limit)"));
+  fields.push_back(NumberField("end_time", "s", &SolverSettings::endTime, 0.0, true, kInfinity, false,
+                               "explicit dynamics end time"));
+  fields.push_back(NumberField("damping", "1/s", &SolverSettings::dampingCoefficient, 0.0, false, kInfinity, false,
+                               "explicit dynamics mass-proportional damping"));
+  fields.push_back(NumberField("hourglass_coefficient", "", &SolverSettings::hourglassCoefficient, 0.0, false, 1.0,
+                               false, "hexahedron hourglass stiffness k: k 2 mu V (B:B) / 8 per cell (docs/solver.md)"));
+  fields.push_back(NumberField("collapse_bulk_modulus", "Pa", &SolverSettings::collapseBulkModulus, 0.0, false,
+                               kInfinity, false,
+                               "bulk modulus with which a cell or integration point resists collapse below half its "
+                               "reference volume (docs/solver.md); 0 = the model's volume-weighted median bulk "
+                               "modulus; a stiffer cell keeps its own"));
+  fields.push_back(IntegerField("threads", &SolverSettings::threads, 0, 4096,
+                                "worker threads, 0 = all (OpenMP default); results do not depend on it"));
+  Field stress;
+  stress.name = "compute_stress";
+  stress.kind = Kind::Flag;
+  stress.meaning = "compute the Cauchy stress per cell at the end (written as `cauchy_stress`)";
+  stress.get = [](const SolverSettings & s) { return s.computeStress ? 1.0 : 0.0; };
+  stress.set = [](SolverSettings & s, double v) { s.computeStress = v != 0.0; };
+  fields.push_back(stress);
+  Field output = NumberField("output_interval", "s", &SolverSettings::outputInterval, 0.0, false, kInfinity, false,
+                             "explicit dynamics: seconds between the frames `biomech simulate` writes (the first "
+                             "step at or after each multiple, plus t = 0 and the end); 0 = none; required by "
+                             "`simulate`");
+  fields.push_back(output);
+  return fields;
+}
+
+} // namespace
+
+std::string
+SolverSettingField::Range() const
+{
+  switch (kind)
+  {
+    case Kind::Flag:
+      return "true or false";
+    case Kind::Choice:
+    {
+      std::string text;
+      for (const std::string & choice : choices)
+      {
+        text += (text.empty() ? "\"" : ", \"") + choice + "\"";
+      }
+      return text;
+    }
+    default:
+      break;
+  }
+  const bool bounded = std::isfinite(highest) && (kind != Kind::Integer || highest < std::numeric_limits<int>::max());
+  if (std::isfinite(lowest) && bounded)
+  {
+    return (kind == Kind::Integer ? "integer in " : "") + std::string(lowestOpen ? "(" : "[") + ShortestText(lowest) +
+           ", " + ShortestText(highest) + (highestOpen ? ")" : "]");
+  }
+  if (std::isfinite(lowest))
+  {
+    return (kind == Kind::Integer ? "integer " : "") + std::string(lowestOpen ? "> " : ">= ") + ShortestText(lowest);
+  }
+  return kind == Kind::Integer ? "integer" : "";
+}
+
+std::string
+SolverSettingField::Check(double value) const
+{
+  const std::string got = ", got " + ShortestText(value);
+  switch (kind)
+  {
+    case Kind::Flag:
+      return value == 0.0 || value == 1.0 ? "" : "must be true or false" + got;
+    case Kind::Choice:
+      return value >= 0.0 && value < static_cast<double>(choices.size()) && value == std::floor(value)
+               ? ""
+               : "must be one of " + Range();
+    default:
+      break;
+  }
+  if (!std::isfinite(value))
+  {
+    return "must be a finite number" + got;
+  }
+  if (kind == Kind::Integer && value != std::floor(value))
+  {
+    return "must be an integer" + got;
+  }
+  const bool aboveLowest = lowestOpen ? value > lowest : value >= lowest;
+  const bool belowHighest = highestOpen ? value < highest : value <= highest;
+  return aboveLowest && belowHighest ? "" : "must be " + Range() + got;
+}
+
+std::string
+SolverSettingField::Text(const SolverSettings & settings) const
+{
+  const double value = get(settings);
+  switch (kind)
+  {
+    case Kind::Flag:
+      return value != 0.0 ? "true" : "false";
+    case Kind::Choice:
+      return "\"" + choices.at(static_cast<std::size_t>(value)) + "\"";
+    default:
+      return ShortestText(value);
+  }
+}
+
+const std::vector<SolverSettingField> &
+SolverSettingFields()
+{
+  static const std::vector<SolverSettingField> fields = MakeFields();
+  return fields;
+}
+
+const SolverSettingField *
+FindSolverSetting(const std::string & name)
+{
+  for (const SolverSettingField & field : SolverSettingFields())
+  {
+    if (field.name == name)
+    {
+      return &field;
+    }
+  }
+  return nullptr;
+}
+
+void
+SetSolverSetting(SolverSettings & settings, const std::string & name, const std::string & text)
+{
+  const SolverSettingField * field = FindSolverSetting(name);
+  if (field == nullptr)
+  {
+    std::string names;
+    for (const SolverSettingField & known : SolverSettingFields())
+    {
+      names += (names.empty() ? "" : ", ") + known.name;
+    }
+    throw Error("unknown solver setting '" + name + "'; the settings are: " + names);
+  }
+  double value = 0.0;
+  if (field->kind == SolverSettingField::Kind::Flag)
+  {
+    if (text != "true" && text != "false" && text != "1" && text != "0")
+    {
+      throw Error("solver setting '" + name + "' must be true or false, got '" + text + "'");
+    }
+    value = text == "true" || text == "1" ? 1.0 : 0.0;
+  }
+  else if (field->kind == SolverSettingField::Kind::Choice)
+  {
+    value = -1.0;
+    for (std::size_t k = 0; k < field->choices.size(); ++k)
+    {
+      value = field->choices[k] == text ? static_cast<double>(k) : value;
+    }
+  }
+  else
+  {
+    char * end = nullptr;
+    value = std::strtod(text.c_str(), &end);
+    if (text.empty() || end == text.c_str() || *end != '\0')
+    {
+      throw Error("solver setting '" + name + "' must be a number, got '" + text + "'");
+    }
+  }
+  const std::string problem = field->Check(value);
+  if (!problem.empty())
+  {
+    throw Error("solver setting '" + name + "' " + problem + (field->kind == SolverSettingField::Kind::Choice
+                                                                   ? ", got '" + text + "'"
+                                                                   : std::string()));
+  }
+  field->set(settings, value);
+}
+
+std::string
+SolverSettingsMarkdown()
+{
+  const SolverSettings defaults;
+  std::ostringstream   text;
+  text << "| key | default | unit | allowed | meaning |\n| --- | --- | --- | --- | --- |\n";
+  for (const SolverSettingField & field : SolverSettingFields())
+  {
+    std::string value = field.Text(defaults);
+    text << "| `" << field.name << "` | " << (field.kind == SolverSettingField::Kind::Choice ? "`" + value + "`" : value)
+         << " | " << field.unit << " | " << field.Range() << " | " << field.meaning << " |\n";
+  }
+  return text.str();
+}
+
+} // namespace bmr
