@@ -2,6 +2,8 @@
 // synthetic ground truth (bmrSyntheticBrainShift.h) and the `register`
 // subcommand, on Colin27 (Debian's mricron-data) at coarse settings: the
 // reduced form of the README demo.
+// Over 800 lines: these tests share Colin27 (read once per program) and the
+// slow ITK templates this translation unit instantiates (resampling, transforms).
 #include "bmrColin27.h"
 #include "bmrMeshIO.h"
 #include "bmrSyntheticBrainShift.h"
