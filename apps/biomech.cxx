@@ -15,6 +15,8 @@
 // Exit status: 0 success (solve converged), 2 solve finished but did not
 // converge (results written, report says so), 1 any error (nothing written).
 #include "bmrCommandSupport.h"
+// ITK-based headers before the core ones: ITK's bundled Eigen must come first.
+#include "bmrBrainShiftRegistration.h"
 
 #include "bmrMeshGenerators.h"
 #include "bmrImageCommands.h"
@@ -72,19 +74,21 @@ RemoveIfExists(const fs::path & path)
   fs::remove(path, ignored);
 }
 
+/** A settings table: one setting per entry (name = default unit (allowed), meaning), or the docs' Markdown. */
+template <typename TSettings>
 int
-PrintSolverSettings(bool markdown)
+PrintSettings(const std::vector<bmr::SettingField<TSettings>> & fields, const TSettings & defaults, bool markdown)
 {
   if (markdown)
   {
-    std::cout << bmr::SolverSettingsMarkdown();
+    std::cout << bmr::SettingsMarkdown(fields, defaults);
     return ExitSuccess;
   }
-  const bmr::SolverSettings defaults;
-  for (const bmr::SolverSettingField & field : bmr::SolverSettingFields())
+  for (const auto & field : fields)
   {
-    std::cout << field.name << " = " << field.Text(defaults) << (field.unit.empty() ? "" : " " + field.unit) << "  ("
-              << field.Range() << ")\n    " << field.meaning << "\n";
+    std::cout << field.name << " = " << field.Text(defaults) << (field.unit.empty() ? "" : " " + field.unit);
+    const std::string range = field.Range();
+    std::cout << (range.empty() ? "" : "  (" + range + ")") << "\n    " << field.meaning << "\n";
   }
   return ExitSuccess;
 }
@@ -250,10 +254,12 @@ main(int argc, char ** argv)
                     "biomech settings); may be repeated");
   solve->add_flag("--quiet,-q", solveOptions.quiet, "Print nothing but errors");
 
-  bool       settingsMarkdown = false;
+  bool       settingsMarkdown = false, registrationSettings = false;
   CLI::App * settings = app.add_subcommand(
-    "settings", "List the solver settings: the scene's \"solver\" keys, Python's SolverSettings, solve --set");
-  settings->add_flag("--markdown", settingsMarkdown, "Print the Markdown table of docs/scene-format.md");
+    "settings", "List the solver settings (the scene's \"solver\" keys, Python's SolverSettings, solve --set) or "
+                "the registration's (register/model options, Python's register() keywords)");
+  settings->add_flag("--registration", registrationSettings, "The registration's settings (docs/registration.md)");
+  settings->add_flag("--markdown", settingsMarkdown, "Print the Markdown table of the docs");
 
   MakeMeshOptions makeMeshOptions;
   CLI::App *      makeMesh = app.add_subcommand("make-mesh", "Generate a block or ellipsoid mesh and write it (.vtu or .vtk)");
@@ -305,7 +311,9 @@ main(int argc, char ** argv)
     }
     if (settings->parsed())
     {
-      return PrintSolverSettings(settingsMarkdown);
+      return registrationSettings ? PrintSettings(bmr::RegistrationSettingFields(), bmr::BrainShiftRegistrationSettings{},
+                                                  settingsMarkdown)
+                                  : PrintSettings(bmr::SolverSettingFields(), bmr::SolverSettings{}, settingsMarkdown);
     }
     for (const auto & run : runOtherCommands)
     {

@@ -22,12 +22,15 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
+#include <map>
 #include <optional>
 #include <sstream>
 #include <unistd.h>
@@ -87,87 +90,11 @@ PrintWarnings(const std::vector<std::string> & warnings)
 // Options shared by the subcommands.
 // ---------------------------------------------------------------------------
 
-struct ClassifierOptions
-{
-  // 3, not the classifier's 2: on a T1 image two classes split grey from white
-  // matter, and the darker class (grey matter) would get the CSF material.
-  int    classes = 3;
-  double fuzziness = 2.0;
-  double tolerance = 1e-5;
-  int    maxIterations = 300;
-
-  void Add(CLI::App * command)
-  {
-    command->add_option("--classes", classes, "Tissue classes (2: CSF and parenchyma; 3: CSF, grey, white)")
-      ->check(CLI::Range(2, 16))
-      ->capture_default_str();
-    command->add_option("--fuzziness", fuzziness, "Fuzzy c-means exponent m > 1")->capture_default_str();
-    command->add_option("--tolerance", tolerance, "Largest centroid change, relative to the intensity range")
-      ->capture_default_str();
-    command->add_option("--max-iterations", maxIterations, "Fuzzy c-means iteration limit")->capture_default_str();
-  }
-
-  FuzzyCMeansSettings Settings() const
-  {
-    FuzzyCMeansSettings settings;
-    settings.classes = classes;
-    settings.fuzziness = fuzziness;
-    settings.tolerance = tolerance;
-    settings.maxIterations = maxIterations;
-    return settings;
-  }
-};
-
-struct AtlasOptions
-{
-  AtlasSettings settings;
-  bool          affineOnly = false;
-
-  void Add(CLI::App * command)
-  {
-    command->add_option("--atlas", settings.image, "Atlas T1 image for skull stripping")->capture_default_str();
-    command->add_option("--atlas-mask", settings.mask, "Atlas brain mask (voxels > 0 are brain)")->capture_default_str();
-    command->add_flag("--affine-only", affineOnly, "Skip the B-spline stage of the atlas registration");
-  }
-
-  AtlasSettings Settings() const
-  {
-    AtlasSettings result = settings;
-    result.bsplineStage = !affineOnly;
-    return result;
-  }
-};
-
-struct GridOptions
-{
-  std::string kind = "hexahedra";
-  double      elementSize = 5.0;
-
-  void Add(CLI::App * command)
-  {
-    command->add_option("--grid", kind, "hexahedra, tetrahedra, mixed or meshless")
-      ->check(CLI::IsMember({ "hexahedra", "tetrahedra", "mixed", "meshless", "hex", "tet" }))
-      ->capture_default_str();
-    command->add_option("--element-size", elementSize, "Element edge or meshless nodal spacing (mm)")
-      ->capture_default_str();
-  }
-
-  ImageGridSettings Settings(int threads) const
-  {
-    ImageGridSettings settings;
-    settings.kind = ParseImageGridKind(kind);
-    settings.elementSize = elementSize;
-    settings.threads = threads;
-    return settings;
-  }
-};
-
 struct RegionOptions
 {
   std::vector<double> craniotomyCentre;
   double              craniotomyRadius = 0.0;
   std::string         craniotomyMask;
-  double              skullBaseHeight = SkullBaseSettings{}.height;
 
   void Add(CLI::App * command)
   {
@@ -175,9 +102,6 @@ struct RegionOptions
       ->expected(3);
     command->add_option("--craniotomy-radius", craniotomyRadius, "Radius of the craniotomy (mm)");
     command->add_option("--craniotomy-mask", craniotomyMask, "Mask of the craniotomy region (instead of a sphere)");
-    command->add_option("--skull-base-height", skullBaseHeight,
-                        "Fixed band above the most inferior surface node (mm): skull base and brain stem")
-      ->capture_default_str();
   }
 
   bool HasCraniotomy() const { return !craniotomyCentre.empty() || !craniotomyMask.empty(); }
@@ -195,7 +119,7 @@ struct RegionOptions
     return ExposedSurfaceNodes(model, surface, region);
   }
 
-  /** The craniotomy and the skull base of the one-call model builder (which checks the region). */
+  /** The craniotomy of the one-call model builder (which checks the region). */
   void Apply(BrainModelSettings & settings) const
   {
     const CraniotomyRegion sphere = Sphere();
@@ -205,7 +129,6 @@ struct RegionOptions
     {
       settings.craniotomyMask = ReadMaskImage(craniotomyMask, "craniotomy mask");
     }
-    settings.skullBase.height = skullBaseHeight;
   }
 
 private:
@@ -327,25 +250,91 @@ DisplacementCsv(const PrescribedDisplacement & load)
 // The model pipeline: MRI (+ mask, tumour, craniotomy, measurements) -> scene.
 // ---------------------------------------------------------------------------
 
-/** The CSF class's material: the default (10 Pa, nu 0.1) is compressible; a
- *  nearly incompressible, fluid-like CSF keeps its cells from being crushed by
- *  large shifts and carries the brain's weight (docs/model-building.md). */
-struct CsfOptions
+/** Rows of the registration's settings table (bmr::RegistrationSettingFields)
+ *  as options: --name-with-dashes, and --no-name for a flag whose default is
+ *  true. The same names as Python's keywords and docs/registration.md. */
+struct SettingOptions
 {
-  Material csf = CsfMaterial();
+  std::vector<std::string>            groups; // every row of these groups
+  std::vector<std::string>            names;  // and these rows
+  std::map<std::string, std::string>  values;
+  std::map<std::string, bool>         flags;
+  std::map<std::string, CLI::Option *> options;
 
   void Add(CLI::App * command)
   {
-    command->add_option("--csf-modulus", csf.youngsModulus, "Young's modulus of the CSF class (Pa)")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-    command->add_option("--csf-poisson-ratio", csf.poissonRatio,
-                        "Poisson's ratio of the CSF class; 0.49: fluid-like, keeps CSF cells from being crushed "
-                        "by shifts of 20 mm and more")
-      ->check(CLI::Range(0.0, 0.4999))
-      ->capture_default_str();
+    const BrainShiftRegistrationSettings defaults;
+    for (const RegistrationSettingField & row : RegistrationSettingFields())
+    {
+      if (std::find(groups.begin(), groups.end(), row.group) == groups.end() &&
+          std::find(names.begin(), names.end(), row.name) == names.end())
+      {
+        continue;
+      }
+      std::string help = row.meaning + (row.unit.empty() ? "" : " (" + row.unit + ")");
+      if (row.kind == SettingFieldBase::Kind::Flag)
+      {
+        const bool onByDefault = row.get(defaults) != 0.0;
+        if (!onByDefault)
+        {
+          help[0] = static_cast<char>(std::toupper(static_cast<unsigned char>(help[0])));
+        }
+        options[row.name] = command->add_flag(onByDefault ? "--no-" + row.OptionName().substr(2) : row.OptionName(),
+                                              flags[row.name], onByDefault ? "Turn off " + help : help);
+        continue;
+      }
+      help[0] = static_cast<char>(std::toupper(static_cast<unsigned char>(help[0])));
+      const char * type = row.kind == SettingFieldBase::Kind::Number    ? "FLOAT"
+                          : row.kind == SettingFieldBase::Kind::Integer ? "INT"
+                          : row.kind == SettingFieldBase::Kind::Choice  ? "CHOICE"
+                                                                        : "TEXT";
+      if (row.kind == SettingFieldBase::Kind::Choice)
+      {
+        help += ": " + row.Range();
+      }
+      options[row.name] =
+        command->add_option(row.OptionName(), values[row.name], help)->type_name(type)->default_str(row.Text(defaults));
+    }
+  }
+
+  /** The defaults with the given options set. */
+  BrainShiftRegistrationSettings Resolved() const
+  {
+    BrainShiftRegistrationSettings settings;
+    Apply(settings);
+    return settings;
+  }
+
+  /** The given options set into `settings`; a bad value names its option. */
+  void Apply(BrainShiftRegistrationSettings & settings) const
+  {
+    const BrainShiftRegistrationSettings defaults;
+    for (const RegistrationSettingField & row : RegistrationSettingFields())
+    {
+      const auto option = options.find(row.name);
+      if (option == options.end() || option->second->count() == 0)
+      {
+        continue;
+      }
+      try
+      {
+        if (row.kind == SettingFieldBase::Kind::Flag)
+        {
+          row.set(settings, row.get(defaults) != 0.0 ? 0.0 : 1.0);
+        }
+        else
+        {
+          row.SetText(settings, values.at(row.name));
+        }
+      }
+      catch (const Error & error)
+      {
+        throw Error(option->second->get_name() + ": " + error.what());
+      }
+    }
   }
 };
+
 
 /** The preoperative side of a patient model, shared by `model` and `register`:
  *  the image and its masks, and every setting of bmr::BuildBrainModel. */
@@ -355,17 +344,11 @@ struct PatientModelOptions
   std::string         mask;
   std::string         tumourMask;
   std::string         skullSurface;
-  AtlasOptions        atlas;
-  ClassifierOptions   classifier;
-  GridOptions         grid;
+  SettingOptions      settings{ { "model" } };
   RegionOptions       regions;
-  CsfOptions          csf;
-  double              skullGap = BrainSurfaceSettings{}.skullGap;
-  bool                noContact = false;
   std::vector<double> gravity;
   double              csfDrainedDepth = 0.0;
   CLI::Option *       csfDrainedDepthOption = nullptr;
-  int                 threads = 0;
 
   void Add(CLI::App * command)
   {
@@ -374,14 +357,8 @@ struct PatientModelOptions
     command->add_option("--tumour-mask", tumourMask, "Tumour mask on the image grid (voxels > 0)");
     command->add_option("--skull-surface", skullSurface,
                         "Rigid skull surface (.stl, .obj, .vtp, .vtk) to use instead of the body dilated by --skull-gap");
-    atlas.Add(command);
-    classifier.Add(command);
-    grid.Add(command);
+    settings.Add(command);
     regions.Add(command);
-    csf.Add(command);
-    command->add_option("--skull-gap", skullGap, "Gap between the brain surface and the rigid skull (mm)")
-      ->capture_default_str();
-    command->add_flag("--no-contact", noContact, "No brain-skull contact");
     CLI::Option * gravityOption =
       command->add_option("--gravity", gravity, "Body acceleration X Y Z (mm/s^2), e.g. 0 0 -9810")->expected(3);
     csfDrainedDepthOption =
@@ -391,31 +368,28 @@ struct PatientModelOptions
                      "the CSF's surface carries its weight (default: all of it)")
         ->check(CLI::NonNegativeNumber)
         ->needs(gravityOption);
-    command->add_option("--threads", threads, "Worker threads (0: all)")->check(CLI::Range(0, 4096));
   }
 
-  /** The settings of bmr::BuildBrainModel (reads the craniotomy mask when one is given). */
-  BrainModelSettings Settings() const
+  /** The table's settings (the model's rows) and the craniotomy, gravity and CSF drainage. */
+  BrainShiftRegistrationSettings RegistrationSettings() const
   {
-    BrainModelSettings settings;
-    settings.classifier = classifier.Settings();
-    settings.atlas = atlas.Settings();
-    settings.grid = grid.Settings(threads);
-    settings.materials.classMaterials = DefaultClassMaterials(classifier.classes, csf.csf);
-    settings.skullGap = skullGap;
-    regions.Apply(settings);
-    settings.contact = !noContact;
+    BrainShiftRegistrationSettings registration;
+    settings.Apply(registration);
+    BrainModelSettings & model = registration.model;
+    regions.Apply(model);
     if (!gravity.empty())
     {
-      settings.gravity = ThreeValues(gravity, "--gravity");
+      model.gravity = ThreeValues(gravity, "--gravity");
     }
     if (csfDrainedDepthOption->count() > 0)
     {
-      settings.csfDrainedDepth = csfDrainedDepth;
+      model.csfDrainedDepth = csfDrainedDepth;
     }
-    settings.threads = threads;
-    return settings;
+    return registration;
   }
+
+  /** The settings of bmr::BuildBrainModel (reads the craniotomy mask when one is given). */
+  BrainModelSettings Settings() const { return RegistrationSettings().model; }
 
   /** The image, and the masks and skull surface that were given (null or empty otherwise). */
   struct Inputs
@@ -461,8 +435,9 @@ RunModel(const ModelOptions & options)
   StepTimer      timer(!options.quiet);
   json           report;
   const PatientModelOptions & patient = options.patient;
+  const BrainModelSettings    settings = patient.Settings();
   report["image"] = patient.image;
-  report["mask"] = patient.mask.empty() ? "atlas: " + patient.atlas.settings.image : patient.mask;
+  report["mask"] = patient.mask.empty() ? "atlas: " + settings.atlas.image : patient.mask;
   if (!patient.skullSurface.empty())
   {
     report["skull_surface"] = patient.skullSurface;
@@ -475,7 +450,6 @@ RunModel(const ModelOptions & options)
     throw Error("intraoperative measurements need the craniotomy region they belong to: give --craniotomy-centre "
                 "and --craniotomy-radius, or --craniotomy-mask");
   }
-  const BrainModelSettings                settings = patient.Settings();
   const std::optional<IntraoperativeData> measurements = options.measurements.Data();
   const BrainModel brain = BuildBrainModel(inputs.image, inputs.brainMask, inputs.tumourMask, inputs.skullSurface,
                                            measurements ? &*measurements : nullptr, settings, timer);
@@ -485,7 +459,7 @@ RunModel(const ModelOptions & options)
   const BrainSurfaces &          surfaces = brain.surfaces;
   const std::vector<Index> &     surfaceNodes = model.NodeSet("surface");
   std::vector<std::string>       warnings = brain.warnings;
-  report["classification"] = { { "classes", patient.classifier.classes },
+  report["classification"] = { { "classes", settings.classifier.classes },
                                { "centroids", brain.classification.fit.centroids },
                                { "iterations", brain.classification.fit.iterations },
                                { "converged", brain.classification.fit.converged } };
@@ -499,7 +473,7 @@ RunModel(const ModelOptions & options)
   json       scene;
   std::ostringstream description;
   description << "Brain model of " << fs::path(patient.image).filename().string() << " made by biomech model ("
-              << ImageGridKindName(patient.grid.Settings(0).kind) << ", " << patient.grid.elementSize << " mm)";
+              << ImageGridKindName(settings.grid.kind) << ", " << settings.grid.elementSize << " mm)";
   scene["description"] = description.str();
   scene["mesh"] = "model.vtu";
   if (meshless)
@@ -548,8 +522,8 @@ RunModel(const ModelOptions & options)
   scene["output"] = { { "vtu", "brain-result.vtu" }, { "report", "brain-report.json" } };
 
   const ModelCounts counts = CountModel(model);
-  report["grid"] = { { "kind", ImageGridKindName(patient.grid.Settings(0).kind) },
-                     { "element_size_mm", patient.grid.elementSize },
+  report["grid"] = { { "kind", ImageGridKindName(settings.grid.kind) },
+                     { "element_size_mm", settings.grid.elementSize },
                      { "nodes", counts.nodes },
                      { "cells", counts.cells },
                      { "dofs", counts.dofs },
@@ -560,9 +534,9 @@ RunModel(const ModelOptions & options)
   report["regions"] = { { "surface_nodes", surfaceNodes.size() },
                         { "exposed_nodes", exposed.size() },
                         { "skull_base_nodes", model.NodeSet("skull_base").size() } };
-  report["skull_gap_mm"] = patient.skullGap;
-  report["csf"] = { { "youngs_modulus_pa", patient.csf.csf.youngsModulus },
-                    { "poisson_ratio", patient.csf.csf.poissonRatio } };
+  report["skull_gap_mm"] = settings.skullGap;
+  const Material csf = settings.materials.classMaterials.empty() ? CsfMaterial() : settings.materials.classMaterials.front();
+  report["csf"] = { { "youngs_modulus_pa", csf.youngsModulus }, { "poisson_ratio", csf.poissonRatio } };
   if (settings.csfDrainedDepth)
   {
     report["csf"]["drained_depth_mm"] = *settings.csfDrainedDepth;
@@ -605,7 +579,7 @@ RunModel(const ModelOptions & options)
   if (!options.quiet)
   {
     std::cout << "model of " << patient.image << "\n"
-              << "  grid              " << ImageGridKindName(patient.grid.Settings(0).kind) << ", " << counts.nodes
+              << "  grid              " << ImageGridKindName(settings.grid.kind) << ", " << counts.nodes
               << " nodes, " << counts.cells << " cells, " << counts.dofs << " DOF";
     if (counts.integrationPoints > 0)
     {
@@ -631,10 +605,7 @@ struct RegisterOptions
   std::string                    intraoperativeImage;
   std::string                    intraoperativeMask;
   std::string                    outputDirectory = "registration";
-  BrainShiftRegistrationSettings defaults;
-  double                         tolerance = defaults.solver.tolerance;
-  double                         fitTolerance = defaults.fitTolerance;
-  double                         minimumControlPointSpacing = defaults.minimumControlPointSpacing;
+  SettingOptions                 settings{ { "solve", "fit", "evaluation" } };
   int                            overlays = 5;
   bool                           quiet = false;
 };
@@ -694,11 +665,8 @@ RunRegister(const RegisterOptions & options)
     inputs.intraoperative.imageBrainMask = ReadMaskImage(options.intraoperativeMask, "intraoperative brain mask");
   }
 
-  BrainShiftRegistrationSettings settings;
-  settings.model = options.patient.Settings();
-  settings.solver.tolerance = options.tolerance;
-  settings.fitTolerance = options.fitTolerance;
-  settings.minimumControlPointSpacing = options.minimumControlPointSpacing;
+  BrainShiftRegistrationSettings settings = options.patient.RegistrationSettings();
+  options.settings.Apply(settings);
 
   BrainShiftRegistrationResult result;
   {
@@ -774,18 +742,17 @@ struct StepOptions
   std::string        input;
   std::string        mask;
   std::string        output;
-  ClassifierOptions  classifier;
-  AtlasOptions       atlas;
-  GridOptions        grid;
+  SettingOptions     classifySettings{ {}, { "classes", "fuzziness", "classifier_tolerance", "classifier_max_iterations" } };
+  SettingOptions     maskSettings{ {}, { "atlas", "atlas_mask", "affine_only" } };
+  SettingOptions     gridSettings{ {}, { "grid", "element_size", "threads" } };
+  SettingOptions     surfaceSettings{ {}, { "skull_gap" } };
   std::string        integrationPointsOutput;
   std::string        memberships;
   std::string        tumourMask;
   RegionOptions      regions;
   MeasurementOptions measurements;
-  double             skullGap = BrainSurfaceSettings{}.skullGap;
   std::string        skullOutput;
   std::string        modelSurface;
-  int                threads = 0;
 };
 
 int
@@ -800,7 +767,7 @@ RunClassify(const StepOptions & options)
   }
   std::vector<std::string>   warnings;
   const TissueClassification result = ClassifyTissue(intensities, options.mask.empty() ? nullptr : &mask,
-                                                     options.classifier.Settings(), {}, &warnings);
+                                                     options.classifySettings.Resolved().model.classifier, {}, &warnings);
   const fs::path prefix(options.output);
   CreateFolder(prefix.has_parent_path() ? prefix.parent_path() : fs::path("."));
   WriteImageAtomically(MakeMembershipImage(result.memberships).GetPointer(), prefix.string() + "-memberships.nii.gz");
@@ -820,7 +787,7 @@ RunClassify(const StepOptions & options)
 int
 RunMask(const StepOptions & options)
 {
-  const MaskImageType::Pointer mask = AtlasBrainMask(ReadImage<ImageType>(options.input, "image"), options.atlas.Settings());
+  const MaskImageType::Pointer mask = AtlasBrainMask(ReadImage<ImageType>(options.input, "image"), options.maskSettings.Resolved().model.atlas);
   const fs::path               output(options.output);
   CreateFolder(output.has_parent_path() ? output.parent_path() : fs::path("."));
   WriteImageAtomically(mask.GetPointer(), output);
@@ -834,7 +801,10 @@ RunGrid(const StepOptions & options)
   const ImageType::Pointer image = ReadImage<ImageType>(options.input, "label image");
   LabelVolume              labels = itk::MakeBiomechanicalVolume<std::uint8_t>(image.GetPointer());
   std::vector<std::string> warnings;
-  ImageGrid                grid = MakeGridFromLabels(labels, options.grid.Settings(options.threads), &warnings);
+  const BrainShiftRegistrationSettings settings = options.gridSettings.Resolved();
+  ImageGridSettings                    gridSettings = settings.model.grid;
+  gridSettings.threads = settings.model.threads;
+  ImageGrid grid = MakeGridFromLabels(labels, gridSettings, &warnings);
   if (!options.memberships.empty())
   {
     const auto         membershipImage = ReadImage<MembershipImageType>(options.memberships, "memberships");
@@ -869,7 +839,8 @@ RunSurfaces(const StepOptions & options)
 {
   const LabelVolume   mask = ReadMaskVolume(options.input, "brain mask", nullptr);
   std::vector<std::string> warnings;
-  const BrainSurfaces      surfaces = BrainSurfacesOfMask(mask, options.skullGap, warnings);
+  const double             skullGap = options.surfaceSettings.Resolved().model.skullGap;
+  const BrainSurfaces      surfaces = BrainSurfacesOfMask(mask, skullGap, warnings);
   PrintWarnings(warnings);
   for (const fs::path path : { fs::path(options.output), fs::path(options.skullOutput) })
   {
@@ -879,7 +850,7 @@ RunSurfaces(const StepOptions & options)
   WriteSurface(options.skullOutput, surfaces.skull);
   std::cout << "brain surface " << surfaces.brain.triangles.size() << " triangles, enclosed volume "
             << EnclosedVolume(surfaces.brain) / 1000.0 << " ml -> " << options.output << "\n"
-            << "skull surface " << surfaces.skull.triangles.size() << " triangles (gap " << options.skullGap
+            << "skull surface " << surfaces.skull.triangles.size() << " triangles (gap " << skullGap
             << " mm) -> " << options.skullOutput << "\n";
   return 0;
 }
@@ -948,27 +919,26 @@ AddModelCommands(CLI::App & app)
   classify->add_option("--mask", step->mask, "Brain mask on the image grid (voxels > 0)");
   classify->add_option("-o,--output", step->output, "Output prefix: PREFIX-memberships.nii.gz, PREFIX-labels.nii.gz")
     ->required();
-  step->classifier.Add(classify);
+  step->classifySettings.Add(classify);
 
   CLI::App * mask = app.add_subcommand("mask", "Brain mask by atlas registration (Colin27 by default)");
   mask->add_option("image", step->input, "T1 MRI image")->required();
   mask->add_option("-o,--output", step->output, "Output mask (.nii.gz)")->required();
-  step->atlas.Add(mask);
+  step->maskSettings.Add(mask);
 
   CLI::App * gridCommand = app.add_subcommand("grid", "Hexahedral, tetrahedral, mixed or meshless grid from a mask or label image");
   gridCommand->add_option("labels", step->input, "Mask or label image (0 = outside)")->required();
   gridCommand->add_option("-o,--output", step->output, "Output mesh (.vtu or .vtk)")->required();
-  step->grid.Add(gridCommand);
+  step->gridSettings.Add(gridCommand);
   gridCommand->add_option("--integration-points", step->integrationPointsOutput, "Meshless: output integration points (.vtu)");
   gridCommand->add_option("--memberships", step->memberships, "Memberships from 'classify': map materials to the cells");
   gridCommand->add_option("--tumour-mask", step->tumourMask, "Tumour mask on the memberships' grid");
-  gridCommand->add_option("--threads", step->threads, "Worker threads (0: all)")->check(CLI::Range(0, 4096));
 
   CLI::App * surfaces = app.add_subcommand("surfaces", "Brain surface and rigid skull surface from a brain mask");
   surfaces->add_option("mask", step->input, "Brain mask (voxels > 0)")->required();
   surfaces->add_option("-o,--output", step->output, "Brain surface (.vtp, .stl, .vtk)")->required();
   surfaces->add_option("--skull-output", step->skullOutput, "Skull surface (.vtp, .stl, .vtk)")->required();
-  surfaces->add_option("--skull-gap", step->skullGap, "Gap between brain and skull (mm)")->capture_default_str();
+  step->surfaceSettings.Add(surfaces);
 
   CLI::App * loads = app.add_subcommand("loads", "Displacements of the exposed surface nodes from intraoperative measurements");
   loads->add_option("mesh", step->input, "Model mesh (.vtu, .vtk)")->required();
@@ -1002,15 +972,7 @@ AddModelCommands(CLI::App & app)
   registerCommand->add_option("--intraoperative-mask", registration->intraoperativeMask,
                               "Brain mask of the intraoperative image (default: atlas skull stripping when its "
                               "surface is needed; the registered preoperative mask for the evaluation)");
-  registerCommand->add_option("--solver-tolerance", registration->tolerance,
-                              "Dynamic relaxation: estimated distance to the solution at which it stops (mm)")
-    ->capture_default_str();
-  registerCommand->add_option("--fit-tolerance", registration->fitTolerance,
-                              "Transform fit: largest residual at the nodes (mm)")
-    ->capture_default_str();
-  registerCommand->add_option("--min-control-point-spacing", registration->minimumControlPointSpacing,
-                              "Transform fit: finest control-point spacing (mm)")
-    ->capture_default_str();
+  registration->settings.Add(registerCommand);
   registerCommand->add_option("--overlays", registration->overlays, "Edge-overlay PNGs per evaluation (0: none)")
     ->capture_default_str();
   registerCommand->add_option("-o,--output-dir", registration->outputDirectory, "Output folder")->capture_default_str();

@@ -24,6 +24,7 @@
 #include "bmrFuzzyCMeans.h"
 #include "bmrImageGrids.h"
 #include "bmrMaterialMapping.h"
+#include "bmrSettingsTable.h"
 #include "bmrSolver.h"
 #include "bmrSurfaceLoads.h"
 
@@ -237,6 +238,24 @@ struct BrainShiftRegistrationSettings
   int    evaluationSliceAxis = 2;
   double evaluationDistanceThreshold = 1.7;
 };
+
+/** The registration's settings as one table (bmrSettingsTable.h), read by
+ *  `biomech model` and `biomech register` (--name-with-dashes; a flag whose
+ *  default is true is --no-name), Python's register() and
+ *  build_brain_model() keywords, and docs/registration.md (`biomech settings
+ *  --registration --markdown` prints it; a test checks the docs). Groups:
+ *  "model" (BrainModelSettings: what `biomech model` takes), "solve", "fit",
+ *  "evaluation". What is not one value is not a row, and each face names it
+ *  itself: the craniotomy (a sphere or a mask), gravity, the CSF drained
+ *  depth, and the intraoperative data's max_distance. */
+using RegistrationSettingField = SettingField<BrainShiftRegistrationSettings>;
+
+const std::vector<RegistrationSettingField> &
+RegistrationSettingFields();
+
+/** The docs' table (Markdown) of RegistrationSettingFields. */
+std::string
+RegistrationSettingsMarkdown();
 
 struct BrainShiftRegistrationInputs
 {

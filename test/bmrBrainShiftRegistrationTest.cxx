@@ -28,6 +28,7 @@
 #include <type_traits>
 #include <unistd.h>
 #include <fstream>
+#include <iterator>
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
@@ -209,6 +210,68 @@ TEST(BrainShiftRegistration, SameGridAsTheGroundTruthReproducesIt)
     bmr::MeasureDisplacementError(result.transform, truth.truthTransform, truth.intraoperativeBrainOnPreoperativeGrid);
   EXPECT_LT(error.p95, 0.2);
   EXPECT_LT(error.max, 1.5);
+}
+
+/** The registration's settings table: every row reads back what is set
+ *  through it, refuses a value outside its range naming itself, and
+ *  docs/registration.md holds the table `biomech settings --registration
+ *  --markdown` prints. */
+TEST(RegistrationSettingsTable, RowsRoundTripAndTheDocsHoldTheTable)
+{
+  const bmr::BrainShiftRegistrationSettings defaults;
+  for (const bmr::RegistrationSettingField & row : bmr::RegistrationSettingFields())
+  {
+    SCOPED_TRACE(row.name);
+    bmr::BrainShiftRegistrationSettings settings;
+    std::string                         text;
+    switch (row.kind)
+    {
+      case bmr::SettingFieldBase::Kind::Text:
+        text = "/elsewhere/" + row.name + ".nii.gz";
+        break;
+      case bmr::SettingFieldBase::Kind::Choice:
+        text = row.choices.back();
+        break;
+      case bmr::SettingFieldBase::Kind::Flag:
+        text = row.get(defaults) != 0.0 ? "false" : "true";
+        break;
+      default:
+      {
+        // The top of the range (inside an open end), or the bottom where the top is the default.
+        double value = std::isfinite(row.highest) ? (row.highestOpen ? 0.9 * row.highest : row.highest)
+                                                  : row.get(defaults) + 2.0;
+        value = value == row.get(defaults) ? row.lowest : value;
+        text = bmr::SettingNumberText(value);
+        break;
+      }
+    }
+    ASSERT_NE(text, row.Text(defaults));
+    row.SetText(settings, text);
+    EXPECT_EQ(row.Text(settings), text);
+    if (std::isfinite(row.lowest))
+    {
+      const std::string below = bmr::SettingNumberText(row.lowest - 1.0);
+      try
+      {
+        row.SetText(settings, below);
+        ADD_FAILURE() << "accepted " << below;
+      }
+      catch (const bmr::Error & error)
+      {
+        EXPECT_NE(std::string(error.what()).find(row.name), std::string::npos) << error.what();
+      }
+    }
+  }
+  // The CSF rows and the class count keep one set of class materials.
+  bmr::BrainShiftRegistrationSettings settings;
+  bmr::FindSettingField(bmr::RegistrationSettingFields(), "csf_modulus")->SetText(settings, "250");
+  bmr::FindSettingField(bmr::RegistrationSettingFields(), "classes")->SetText(settings, "2");
+  ASSERT_EQ(settings.model.materials.classMaterials.size(), 2u);
+  EXPECT_EQ(settings.model.materials.classMaterials[0].youngsModulus, 250.0);
+  std::ifstream docs(std::string(BMR_SOURCE_DIR) + "/docs/registration.md");
+  const std::string text((std::istreambuf_iterator<char>(docs)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find(bmr::RegistrationSettingsMarkdown()), std::string::npos)
+    << "docs/registration.md does not hold `biomech settings --registration --markdown`";
 }
 
 TEST(BrainShiftRegistration, BadInputIsNamed)

@@ -683,7 +683,7 @@ class Fuzzer:
               "tetrahedra", "-o", "out/mesh.vtk"], ["out/mesh.vtk"], None),
             # Image commands get broken or missing images: they must fail fast and clearly.
             (["classify", "data/truncated.mha", "--mask", "data/mask.mha", "-o", "out/c", "--classes", "3",
-              "--fuzziness", "2", "--tolerance", "1e-5", "--max-iterations", "300"], None, None),
+              "--fuzziness", "2", "--classifier-tolerance", "1e-5", "--classifier-max-iterations", "300"], None, None),
             (["grid", "data/broken.nii.gz", "-o", "out/grid.vtu", "--grid", "hexahedra", "--element-size", "5",
               "--threads", "1"], None, None),
             (["surfaces", "data/empty.nii.gz", "-o", "out/brain.vtp", "--skull-output", "out/skull.vtp",

@@ -575,53 +575,8 @@ BindSolver(py::module_ & module)
     const SolverSettingField * row = &field;
     solverSettings.def_property(
       field.name.c_str(),
-      [row](const SolverSettings & settings) -> py::object {
-        const double value = row->get(settings);
-        switch (row->kind)
-        {
-          case SolverSettingField::Kind::Choice:
-            return py::str(row->choices.at(static_cast<std::size_t>(value)));
-          case SolverSettingField::Kind::Flag:
-            return py::bool_(value != 0.0);
-          case SolverSettingField::Kind::Integer:
-            return py::int_(static_cast<long long>(value));
-          default:
-            return py::float_(value);
-        }
-      },
-      [row](SolverSettings & settings, const py::object & value) {
-        double number = 0.0;
-        if (row->kind == SolverSettingField::Kind::Choice)
-        {
-          const auto found = py::isinstance<py::str>(value)
-                               ? std::find(row->choices.begin(), row->choices.end(), value.cast<std::string>())
-                               : row->choices.end();
-          if (found == row->choices.end())
-          {
-            throw py::value_error("solver setting '" + row->name + "' must be one of " + row->Range() + ", got " +
-                                  std::string(py::repr(value)));
-          }
-          row->set(settings, static_cast<double>(found - row->choices.begin()));
-          return;
-        }
-        const bool isBool = py::isinstance<py::bool_>(value);
-        if ((row->kind == SolverSettingField::Kind::Flag) != isBool ||
-            (!isBool && !py::isinstance<py::int_>(value) && !py::isinstance<py::float_>(value)) ||
-            (row->kind == SolverSettingField::Kind::Integer && !py::isinstance<py::int_>(value)))
-        {
-          throw py::type_error("solver setting '" + row->name + "' must be " +
-                               (row->kind == SolverSettingField::Kind::Flag      ? std::string("True or False")
-                                : row->kind == SolverSettingField::Kind::Integer ? std::string("an integer")
-                                                                                  : std::string("a number")) +
-                               ", got " + std::string(py::repr(value)));
-        }
-        number = isBool ? (value.cast<bool>() ? 1.0 : 0.0) : value.cast<double>();
-        if (const std::string problem = row->Check(number); !problem.empty())
-        {
-          throw py::value_error("solver setting '" + row->name + "' " + problem);
-        }
-        row->set(settings, number);
-      },
+      [row](const SolverSettings & settings) { return SettingValueToPython(*row, settings); },
+      [row](SolverSettings & settings, const py::object & value) { row->set(settings, SettingValueFromPython(*row, value)); },
       (field.meaning + (field.unit.empty() ? std::string() : " (" + field.unit + ")")).c_str());
   }
   solverSettings

@@ -430,41 +430,25 @@ BindFilters(py::module_ & module)
 // The patient model and the one-call registration: settings from keywords.
 // ---------------------------------------------------------------------------
 
-/** The keywords of build_brain_model and register, with their defaults (the
- *  names of `biomech register`'s options). The Python layer checks names. */
+/** The keywords of build_brain_model and register, with their defaults: the
+ *  rows of the registration's settings table (bmr::RegistrationSettingFields,
+ *  the names of `biomech register`'s options with underscores) and the
+ *  settings that are not one value. The Python layer checks names. */
 py::dict
 DefaultRegistrationSettings()
 {
   const BrainShiftRegistrationSettings defaults;
-  const BrainModelSettings &           model = defaults.model;
   py::dict                             settings;
-  settings["classes"] = model.classifier.classes;
-  settings["fuzziness"] = model.classifier.fuzziness;
-  settings["classifier_tolerance"] = model.classifier.tolerance;
-  settings["classifier_max_iterations"] = model.classifier.maxIterations;
-  settings["atlas"] = model.atlas.image;
-  settings["atlas_mask"] = model.atlas.mask;
-  settings["affine_only"] = !model.atlas.bsplineStage;
-  settings["grid"] = std::string(ImageGridKindName(model.grid.kind));
-  settings["element_size"] = model.grid.elementSize;
-  settings["csf_modulus"] = CsfMaterial().youngsModulus;
-  settings["csf_poisson_ratio"] = CsfMaterial().poissonRatio;
-  settings["skull_gap"] = model.skullGap;
-  settings["skull_base_height"] = model.skullBase.height;
+  for (const RegistrationSettingField & row : RegistrationSettingFields())
+  {
+    settings[py::str(row.name)] = SettingValueToPython(row, defaults);
+  }
   settings["craniotomy_centre"] = py::none();
   settings["craniotomy_radius"] = 0.0;
   settings["craniotomy_mask"] = py::none();
-  settings["contact"] = model.contact;
   settings["gravity"] = py::make_tuple(0.0, 0.0, 0.0);
   settings["csf_drained_depth"] = py::none();
   settings["max_distance"] = IntraoperativeData{}.maxDistance;
-  settings["solver_tolerance"] = defaults.solver.tolerance;
-  settings["max_steps"] = defaults.solver.maxSteps;
-  settings["fit_tolerance"] = defaults.fitTolerance;
-  settings["min_control_point_spacing"] = defaults.minimumControlPointSpacing;
-  settings["evaluation_slice_axis"] = defaults.evaluationSliceAxis;
-  settings["evaluation_distance_threshold"] = defaults.evaluationDistanceThreshold;
-  settings["threads"] = model.threads;
   return settings;
 }
 
@@ -482,60 +466,42 @@ RegistrationSettingsFrom(const py::dict & values)
   const auto get = [&](const char * name) -> py::object {
     return values.contains(name) ? py::reinterpret_borrow<py::object>(values[name]) : py::object(known[name]);
   };
-  // A value of the wrong type is a TypeError that names the setting (pybind's own message does not).
-  const auto number = [&](const char * name, auto typed) {
-    const py::object value = get(name);
-    try
-    {
-      return value.cast<decltype(typed)>();
-    }
-    catch (const py::cast_error &)
-    {
-      throw py::type_error("setting '" + std::string(name) + "' must be " +
-                           (std::is_same_v<decltype(typed), bool> ? "True or False"
-                                                                  : std::is_integral_v<decltype(typed)> ? "an integer"
-                                                                                                        : "a number") +
-                           ", got " + std::string(py::repr(value)));
-    }
-  };
-  const auto text = [&](const char * name) {
-    const py::object value = get(name);
-    if (!py::isinstance<py::str>(value) && !py::hasattr(value, "__fspath__"))
-    {
-      throw py::type_error("setting '" + std::string(name) + "' must be a string or a path, got " +
-                           std::string(py::repr(value)));
-    }
-    return py::module_::import("os").attr("fspath")(value).cast<std::string>();
-  };
   BrainShiftRegistrationSettings settings;
-  BrainModelSettings &           model = settings.model;
-  model.classifier.classes = number("classes", int{});
-  model.classifier.fuzziness = number("fuzziness", double{});
-  model.classifier.tolerance = number("classifier_tolerance", double{});
-  model.classifier.maxIterations = number("classifier_max_iterations", int{});
-  model.atlas.image = text("atlas");
-  model.atlas.mask = text("atlas_mask");
-  model.atlas.bsplineStage = !number("affine_only", bool{});
-  model.grid.kind = ParseImageGridKind(text("grid"));
-  model.grid.elementSize = number("element_size", double{});
-  Material csf = CsfMaterial();
-  csf.youngsModulus = number("csf_modulus", double{});
-  csf.poissonRatio = number("csf_poisson_ratio", double{});
-  if (!(csf.youngsModulus > 0.0) || !(csf.poissonRatio >= 0.0 && csf.poissonRatio < 0.5))
+  for (const RegistrationSettingField & row : RegistrationSettingFields())
   {
-    throw py::value_error("csf_modulus must be > 0 (Pa) and csf_poisson_ratio in [0, 0.5); got " +
-                          std::to_string(csf.youngsModulus) + " and " + std::to_string(csf.poissonRatio));
+    if (!values.contains(row.name.c_str()))
+    {
+      continue;
+    }
+    const py::object value = values[row.name.c_str()];
+    if (row.kind == SettingFieldBase::Kind::Text)
+    {
+      if (!py::isinstance<py::str>(value) && !py::hasattr(value, "__fspath__"))
+      {
+        throw py::type_error("setting '" + row.name + "' must be a string or a path, got " +
+                             std::string(py::repr(value)));
+      }
+      row.setText(settings, py::module_::import("os").attr("fspath")(value).cast<std::string>());
+    }
+    else
+    {
+      row.set(settings, SettingValueFromPython(row, value));
+    }
   }
-  model.materials.classMaterials = DefaultClassMaterials(model.classifier.classes, csf);
-  model.skullGap = number("skull_gap", double{});
-  model.skullBase.height = number("skull_base_height", double{});
-  const py::object centre = get("craniotomy_centre");
-  const py::object mask = get("craniotomy_mask");
+  // The settings that are not one value.
+  BrainModelSettings & model = settings.model;
+  const py::object     centre = get("craniotomy_centre");
+  const py::object     mask = get("craniotomy_mask");
   // A sphere and a mask together: bmr::CheckCraniotomyRegion's error, in BuildBrainModel.
   if (!centre.is_none())
   {
     model.craniotomyCentre = VectorFromObject(centre, "craniotomy_centre");
-    model.craniotomyRadius = number("craniotomy_radius", double{});
+    const py::object radius = get("craniotomy_radius");
+    if (!py::isinstance<py::int_>(radius) && !py::isinstance<py::float_>(radius))
+    {
+      throw py::type_error("setting 'craniotomy_radius' must be a number, got " + std::string(py::repr(radius)));
+    }
+    model.craniotomyRadius = radius.cast<double>();
     if (!(model.craniotomyRadius > 0.0))
     {
       throw py::value_error("craniotomy_centre needs craniotomy_radius > 0 (mm)");
@@ -545,20 +511,20 @@ RegistrationSettingsFrom(const py::dict & values)
   {
     model.craniotomyMask = ItkLabelImage(mask, "craniotomy_mask");
   }
-  model.contact = number("contact", bool{});
   model.gravity = VectorFromObject(get("gravity"), "gravity");
-  if (!get("csf_drained_depth").is_none())
+  if (const py::object depth = get("csf_drained_depth"); !depth.is_none())
   {
-    model.csfDrainedDepth = number("csf_drained_depth", double{});
+    if (!py::isinstance<py::int_>(depth) && !py::isinstance<py::float_>(depth))
+    {
+      throw py::type_error("setting 'csf_drained_depth' must be a number or None, got " + std::string(py::repr(depth)));
+    }
+    model.csfDrainedDepth = depth.cast<double>();
   }
-  model.threads = number("threads", int{});
-  settings.solver.tolerance = number("solver_tolerance", double{});
-  settings.solver.maxSteps = number("max_steps", int{});
-  settings.fitTolerance = number("fit_tolerance", double{});
-  settings.minimumControlPointSpacing = number("min_control_point_spacing", double{});
-  settings.evaluationSliceAxis = number("evaluation_slice_axis", int{});
-  settings.evaluationDistanceThreshold = number("evaluation_distance_threshold", double{});
-  number("max_distance", double{}); // checked here, used by MaxDistanceFrom with the intraoperative data
+  if (const py::object distance = get("max_distance");
+      py::isinstance<py::bool_>(distance) || (!py::isinstance<py::int_>(distance) && !py::isinstance<py::float_>(distance)))
+  {
+    throw py::type_error("setting 'max_distance' must be a number, got " + std::string(py::repr(distance)));
+  }
   return settings;
 }
 

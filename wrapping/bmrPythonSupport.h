@@ -12,6 +12,7 @@
 
 #include "bmrImageVolume.h"
 #include "bmrModel.h"
+#include "bmrSettingsTable.h"
 #include "bmrSolver.h"
 #include "bmrSurfaceLoads.h"
 
@@ -20,6 +21,7 @@
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
 
+#include <algorithm>
 #include <filesystem>
 
 #include <memory>
@@ -171,6 +173,67 @@ BindLoads(py::module_ & module);
 /** Binds the ITK layer (bmrPythonImages.cxx). */
 void
 BindImages(py::module_ & module);
+
+/** A table row's value as Python gives it: float, int, bool, str (a choice).
+ *  A value of the wrong type is a TypeError and one outside the row's range a
+ *  ValueError, both naming the setting (pybind's own messages do not). */
+inline double
+SettingValueFromPython(const SettingFieldBase & row, const py::handle & value)
+{
+  using Kind = SettingFieldBase::Kind;
+  const std::string name = "setting '" + row.name + "'";
+  if (row.kind == Kind::Choice)
+  {
+    const auto found = py::isinstance<py::str>(value)
+                         ? std::find(row.choices.begin(), row.choices.end(), value.cast<std::string>())
+                         : row.choices.end();
+    if (found == row.choices.end())
+    {
+      throw py::value_error(name + " must be one of " + row.Range() + ", got " + std::string(py::repr(value)));
+    }
+    return static_cast<double>(found - row.choices.begin());
+  }
+  const bool isBool = py::isinstance<py::bool_>(value);
+  const bool isNumber = !isBool && (py::isinstance<py::int_>(value) || py::isinstance<py::float_>(value));
+  const bool typeOk = row.kind == Kind::Flag      ? isBool
+                      : row.kind == Kind::Integer ? isNumber && py::isinstance<py::int_>(value)
+                                                  : isNumber;
+  if (!typeOk)
+  {
+    throw py::type_error(name + " must be " +
+                         (row.kind == Kind::Flag      ? std::string("True or False")
+                          : row.kind == Kind::Integer ? std::string("an integer")
+                                                      : std::string("a number")) +
+                         ", got " + std::string(py::repr(value)));
+  }
+  const double number = isBool ? (value.cast<bool>() ? 1.0 : 0.0) : value.cast<double>();
+  if (const std::string problem = row.Check(number); !problem.empty())
+  {
+    throw py::value_error(name + " " + problem);
+  }
+  return number;
+}
+
+/** A table row's value as a Python object (float, int, bool, str). */
+template <typename TSettings>
+py::object
+SettingValueToPython(const SettingField<TSettings> & row, const TSettings & settings)
+{
+  using Kind = SettingFieldBase::Kind;
+  switch (row.kind)
+  {
+    case Kind::Text:
+      return py::str(row.getText(settings));
+    case Kind::Choice:
+      return py::str(row.Text(settings));
+    case Kind::Flag:
+      return py::bool_(row.get(settings) != 0.0);
+    case Kind::Integer:
+      return py::int_(static_cast<long long>(row.get(settings)));
+    default:
+      return py::float_(row.get(settings));
+  }
+}
 
 } // namespace bmr::python
 

@@ -1,35 +1,11 @@
 #include "bmrSolverSettingsTable.h"
 
-#include <cmath>
-#include <cstdlib>
-#include <sstream>
 
 namespace bmr
 {
 
 namespace
 {
-
-/** The shortest text that reads back as `value`. */
-std::string
-ShortestText(double value)
-{
-  if (value == std::floor(value) && std::abs(value) < 1e15)
-  {
-    return std::to_string(static_cast<long long>(value));
-  }
-  for (int digits = 1; digits <= 17; ++digits)
-  {
-    std::ostringstream text;
-    text.precision(digits);
-    text << value;
-    if (std::strtod(text.str().c_str(), nullptr) == value)
-    {
-      return text.str();
-    }
-  }
-  return std::to_string(value);
-}
 
 using Field = SolverSettingField;
 using Kind = SolverSettingField::Kind;
@@ -132,81 +108,6 @@ MakeFields()
 
 } // namespace
 
-std::string
-SolverSettingField::Range() const
-{
-  switch (kind)
-  {
-    case Kind::Flag:
-      return "true or false";
-    case Kind::Choice:
-    {
-      std::string text;
-      for (const std::string & choice : choices)
-      {
-        text += (text.empty() ? "\"" : ", \"") + choice + "\"";
-      }
-      return text;
-    }
-    default:
-      break;
-  }
-  const bool bounded = std::isfinite(highest) && (kind != Kind::Integer || highest < std::numeric_limits<int>::max());
-  if (std::isfinite(lowest) && bounded)
-  {
-    return (kind == Kind::Integer ? "integer in " : "") + std::string(lowestOpen ? "(" : "[") + ShortestText(lowest) +
-           ", " + ShortestText(highest) + (highestOpen ? ")" : "]");
-  }
-  if (std::isfinite(lowest))
-  {
-    return (kind == Kind::Integer ? "integer " : "") + std::string(lowestOpen ? "> " : ">= ") + ShortestText(lowest);
-  }
-  return kind == Kind::Integer ? "integer" : "";
-}
-
-std::string
-SolverSettingField::Check(double value) const
-{
-  const std::string got = ", got " + ShortestText(value);
-  switch (kind)
-  {
-    case Kind::Flag:
-      return value == 0.0 || value == 1.0 ? "" : "must be true or false" + got;
-    case Kind::Choice:
-      return value >= 0.0 && value < static_cast<double>(choices.size()) && value == std::floor(value)
-               ? ""
-               : "must be one of " + Range();
-    default:
-      break;
-  }
-  if (!std::isfinite(value))
-  {
-    return "must be a finite number" + got;
-  }
-  if (kind == Kind::Integer && value != std::floor(value))
-  {
-    return "must be an integer" + got;
-  }
-  const bool aboveLowest = lowestOpen ? value > lowest : value >= lowest;
-  const bool belowHighest = highestOpen ? value < highest : value <= highest;
-  return aboveLowest && belowHighest ? "" : "must be " + Range() + got;
-}
-
-std::string
-SolverSettingField::Text(const SolverSettings & settings) const
-{
-  const double value = get(settings);
-  switch (kind)
-  {
-    case Kind::Flag:
-      return value != 0.0 ? "true" : "false";
-    case Kind::Choice:
-      return "\"" + choices.at(static_cast<std::size_t>(value)) + "\"";
-    default:
-      return ShortestText(value);
-  }
-}
-
 const std::vector<SolverSettingField> &
 SolverSettingFields()
 {
@@ -217,14 +118,7 @@ SolverSettingFields()
 const SolverSettingField *
 FindSolverSetting(const std::string & name)
 {
-  for (const SolverSettingField & field : SolverSettingFields())
-  {
-    if (field.name == name)
-    {
-      return &field;
-    }
-  }
-  return nullptr;
+  return FindSettingField(SolverSettingFields(), name);
 }
 
 void
@@ -233,62 +127,15 @@ SetSolverSetting(SolverSettings & settings, const std::string & name, const std:
   const SolverSettingField * field = FindSolverSetting(name);
   if (field == nullptr)
   {
-    std::string names;
-    for (const SolverSettingField & known : SolverSettingFields())
-    {
-      names += (names.empty() ? "" : ", ") + known.name;
-    }
-    throw Error("unknown solver setting '" + name + "'; the settings are: " + names);
+    throw Error("unknown solver setting '" + name + "'; the settings are: " + SettingNames(SolverSettingFields()));
   }
-  double value = 0.0;
-  if (field->kind == SolverSettingField::Kind::Flag)
-  {
-    if (text != "true" && text != "false" && text != "1" && text != "0")
-    {
-      throw Error("solver setting '" + name + "' must be true or false, got '" + text + "'");
-    }
-    value = text == "true" || text == "1" ? 1.0 : 0.0;
-  }
-  else if (field->kind == SolverSettingField::Kind::Choice)
-  {
-    value = -1.0;
-    for (std::size_t k = 0; k < field->choices.size(); ++k)
-    {
-      value = field->choices[k] == text ? static_cast<double>(k) : value;
-    }
-  }
-  else
-  {
-    char * end = nullptr;
-    value = std::strtod(text.c_str(), &end);
-    if (text.empty() || end == text.c_str() || *end != '\0')
-    {
-      throw Error("solver setting '" + name + "' must be a number, got '" + text + "'");
-    }
-  }
-  const std::string problem = field->Check(value);
-  if (!problem.empty())
-  {
-    throw Error("solver setting '" + name + "' " + problem + (field->kind == SolverSettingField::Kind::Choice
-                                                                   ? ", got '" + text + "'"
-                                                                   : std::string()));
-  }
-  field->set(settings, value);
+  field->SetText(settings, text);
 }
 
 std::string
 SolverSettingsMarkdown()
 {
-  const SolverSettings defaults;
-  std::ostringstream   text;
-  text << "| key | default | unit | allowed | meaning |\n| --- | --- | --- | --- | --- |\n";
-  for (const SolverSettingField & field : SolverSettingFields())
-  {
-    std::string value = field.Text(defaults);
-    text << "| `" << field.name << "` | " << (field.kind == SolverSettingField::Kind::Choice ? "`" + value + "`" : value)
-         << " | " << field.unit << " | " << field.Range() << " | " << field.meaning << " |\n";
-  }
-  return text.str();
+  return SettingsMarkdown(SolverSettingFields(), SolverSettings{});
 }
 
 } // namespace bmr

@@ -169,11 +169,10 @@ def _as_scene(scene):
 def default_registration_settings():
     """The keyword settings of :func:`register` and :func:`build_brain_model` with their defaults.
 
-    They are the options of ``biomech register`` (underscores for dashes;
-    the classifier's ``--tolerance`` and ``--max-iterations`` are
-    ``classifier_tolerance`` and ``classifier_max_iterations``, ``--no-contact``
-    is ``contact=False``, ``--min-control-point-spacing`` is
-    ``min_control_point_spacing``).
+    They are the rows of the registration's settings table (the options of
+    ``biomech register`` with underscores for dashes; ``--no-contact`` is
+    ``contact=False``; docs/registration.md lists them), and the craniotomy,
+    gravity, CSF drainage and ``max_distance``.
     """
     return _bmr._default_registration_settings()
 
