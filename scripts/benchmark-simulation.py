@@ -125,7 +125,7 @@ def main():
     parser.add_argument("--output", default=os.path.join(ROOT, "docs", "benchmarks.md"))
     parser.add_argument("--json", default=os.path.join(ROOT, "docs", "simulation-benchmark.json"))
     arguments = parser.parse_args()
-    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+    os.environ.setdefault("GOMP_SPINCOUNT", "1000")  # a bounded spin on a quiet machine: docs/wait-policy.md
     image = bmr.imread(os.path.join(TEMPLATES, "ch2.nii.gz"), pixel_type="float32")
     bet = bmr.imread(os.path.join(TEMPLATES, "ch2bet.nii.gz"))
     mask = bmr.image_from_array((bmr.array_from_image(bet) > 0).astype(np.uint8), bet.spacing, bet.origin, bet.direction)

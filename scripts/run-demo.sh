@@ -19,10 +19,11 @@ cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
 bash scripts/install-dependencies.sh
 
-# Idle OpenMP threads sleep instead of spinning: on a machine that is busy with
-# other work, spinning threads turn every barrier into a lost time slice
-# (measured: 2 s -> 99 s for a brain-sized scene). Override by setting it yourself.
-export OMP_WAIT_POLICY="${OMP_WAIT_POLICY:-PASSIVE}"
+# Idle OpenMP threads spin briefly, then sleep (libgomp's GOMP_SPINCOUNT): on a
+# quiet machine as fast as spinning, beside other work within a few per cent of
+# sleeping at once, where libgomp's default long spin turned a 2 s brain-sized
+# solve into 32-99 s (docs/wait-policy.md). Override by setting it yourself.
+export GOMP_SPINCOUNT="${GOMP_SPINCOUNT:-1000}"
 
 build_dir=build
 jobs="$(nproc 2>/dev/null || echo 2)"
