@@ -100,6 +100,28 @@ struct SettingField : SettingFieldBase
   }
 };
 
+/** A row with a numeric value (Number, Integer, Flag, Choice: see SettingField::get). */
+template <typename TSettings>
+SettingField<TSettings>
+MakeSettingField(SettingFieldBase::Kind kind, std::string group, std::string name, std::string unit, double lowest,
+                 bool lowestOpen, double highest, bool highestOpen, std::string meaning,
+                 std::function<double(const TSettings &)> get, std::function<void(TSettings &, double)> set)
+{
+  SettingField<TSettings> field;
+  field.kind = kind;
+  field.group = std::move(group);
+  field.name = std::move(name);
+  field.unit = std::move(unit);
+  field.meaning = std::move(meaning);
+  field.lowest = lowest;
+  field.lowestOpen = lowestOpen;
+  field.highest = highest;
+  field.highestOpen = highestOpen;
+  field.get = std::move(get);
+  field.set = std::move(set);
+  return field;
+}
+
 /** The row of `name` in `fields`, or nullptr. */
 template <typename TSettings>
 const SettingField<TSettings> *

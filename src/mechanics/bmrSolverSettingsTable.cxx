@@ -15,27 +15,19 @@ Field
 NumberField(std::string name, std::string unit, Member member, double lowest, bool lowestOpen, double highest,
             bool highestOpen, std::string meaning)
 {
-  Field field;
-  field.name = std::move(name);
-  field.kind = Kind::Number;
-  field.unit = std::move(unit);
-  field.meaning = std::move(meaning);
-  field.lowest = lowest;
-  field.lowestOpen = lowestOpen;
-  field.highest = highest;
-  field.highestOpen = highestOpen;
-  field.get = [member](const SolverSettings & settings) { return static_cast<double>(settings.*member); };
-  field.set = [member](SolverSettings & settings, double value) { settings.*member = value; };
-  return field;
+  return MakeSettingField<SolverSettings>(
+    Kind::Number, "", std::move(name), std::move(unit), lowest, lowestOpen, highest, highestOpen, std::move(meaning),
+    [member](const SolverSettings & settings) { return static_cast<double>(settings.*member); },
+    [member](SolverSettings & settings, double value) { settings.*member = value; });
 }
 
 Field
 IntegerField(std::string name, int SolverSettings::*member, double lowest, double highest, std::string meaning)
 {
-  Field field = NumberField(std::move(name), "", member, lowest, false, highest, false, std::move(meaning));
-  field.kind = Kind::Integer;
-  field.set = [member](SolverSettings & settings, double value) { settings.*member = static_cast<int>(value); };
-  return field;
+  return MakeSettingField<SolverSettings>(
+    Kind::Integer, "", std::move(name), "", lowest, false, highest, false, std::move(meaning),
+    [member](const SolverSettings & settings) { return static_cast<double>(settings.*member); },
+    [member](SolverSettings & settings, double value) { settings.*member = static_cast<int>(value); });
 }
 
 constexpr double kInfinity = std::numeric_limits<double>::infinity();
@@ -44,27 +36,23 @@ std::vector<Field>
 MakeFields()
 {
   std::vector<Field> fields;
-  Field integrator;
-  integrator.name = "integrator";
-  integrator.kind = Kind::Choice;
+  Field integrator = MakeSettingField<SolverSettings>(
+    Kind::Choice, "", "integrator", "", 0, false, 0, false,
+    "dynamic relaxation (steady state) or explicit dynamics (time-accurate central difference)",
+    [](const SolverSettings & s) { return s.integrator == Integrator::ExplicitDynamics ? 1.0 : 0.0; },
+    [](SolverSettings & s, double v) {
+      s.integrator = v == 1.0 ? Integrator::ExplicitDynamics : Integrator::DynamicRelaxation;
+    });
   integrator.choices = { "dynamic_relaxation", "explicit_dynamics" };
-  integrator.meaning = "dynamic relaxation (steady state) or explicit dynamics (time-accurate central difference)";
-  integrator.get = [](const SolverSettings & s) { return s.integrator == Integrator::ExplicitDynamics ? 1.0 : 0.0; };
-  integrator.set = [](SolverSettings & s, double v) {
-    s.integrator = v == 1.0 ? Integrator::ExplicitDynamics : Integrator::DynamicRelaxation;
-  };
   fields.push_back(integrator);
-  Field tetrahedron;
-  tetrahedron.name = "tetrahedron";
-  tetrahedron.kind = Kind::Choice;
+  Field tetrahedron = MakeSettingField<SolverSettings>(
+    Kind::Choice, "", "tetrahedron", "", 0, false, 0, false,
+    "average nodal pressure (non-locking) or the plain constant-strain tetrahedron, for comparison",
+    [](const SolverSettings & s) { return s.tetrahedron == TetrahedronFormulation::Linear ? 1.0 : 0.0; },
+    [](SolverSettings & s, double v) {
+      s.tetrahedron = v == 1.0 ? TetrahedronFormulation::Linear : TetrahedronFormulation::AverageNodalPressure;
+    });
   tetrahedron.choices = { "anp", "linear" };
-  tetrahedron.meaning = "average nodal pressure (non-locking) or the plain constant-strain tetrahedron, for comparison";
-  tetrahedron.get = [](const SolverSettings & s) {
-    return s.tetrahedron == TetrahedronFormulation::Linear ? 1.0 : 0.0;
-  };
-  tetrahedron.set = [](SolverSettings & s, double v) {
-    s.tetrahedron = v == 1.0 ? TetrahedronFormulation::Linear : TetrahedronFormulation::AverageNodalPressure;
-  };
   fields.push_back(tetrahedron);
   fields.push_back(NumberField("tolerance", "mm", &SolverSettings::tolerance, 0.0, true, kInfinity, false,
                                "dynamic relaxation stops when the estimated distance to the solution is below it"));
@@ -91,13 +79,11 @@ MakeFields()
                                "modulus; a stiffer cell keeps its own"));
   fields.push_back(IntegerField("threads", &SolverSettings::threads, 0, 4096,
                                 "worker threads, 0 = all (OpenMP default); results do not depend on it"));
-  Field stress;
-  stress.name = "compute_stress";
-  stress.kind = Kind::Flag;
-  stress.meaning = "compute the Cauchy stress per cell at the end (written as `cauchy_stress`)";
-  stress.get = [](const SolverSettings & s) { return s.computeStress ? 1.0 : 0.0; };
-  stress.set = [](SolverSettings & s, double v) { s.computeStress = v != 0.0; };
-  fields.push_back(stress);
+  fields.push_back(MakeSettingField<SolverSettings>(
+    Kind::Flag, "", "compute_stress", "", 0, false, 1, false,
+    "compute the Cauchy stress per cell at the end (written as `cauchy_stress`)",
+    [](const SolverSettings & s) { return s.computeStress ? 1.0 : 0.0; },
+    [](SolverSettings & s, double v) { s.computeStress = v != 0.0; }));
   Field output = NumberField("output_interval", "s", &SolverSettings::outputInterval, 0.0, false, kInfinity, false,
                              "explicit dynamics: seconds between the frames `biomech simulate` writes (the first "
                              "step at or after each multiple, plus t = 0 and the end); 0 = none; required by "

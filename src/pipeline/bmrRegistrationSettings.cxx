@@ -20,19 +20,8 @@ Row(const char * group, const char * name, Kind kind, const char * unit, double 
     double highest, bool highestOpen, const char * meaning, std::function<double(const Settings &)> get,
     std::function<void(Settings &, double)> set)
 {
-  Field field;
-  field.group = group;
-  field.name = name;
-  field.kind = kind;
-  field.unit = unit;
-  field.meaning = meaning;
-  field.lowest = lowest;
-  field.lowestOpen = lowestOpen;
-  field.highest = highest;
-  field.highestOpen = highestOpen;
-  field.get = std::move(get);
-  field.set = std::move(set);
-  return field;
+  return MakeSettingField<Settings>(kind, group, name, unit, lowest, lowestOpen, highest, highestOpen, meaning,
+                                    std::move(get), std::move(set));
 }
 
 Field
