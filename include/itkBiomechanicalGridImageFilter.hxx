@@ -90,18 +90,7 @@ BiomechanicalGridImageFilter<TLabelImage>::GenerateData()
   OutputMeshType * output = this->GetOutput();
   output->Initialize();
   const bmr::Model & model = m_Grid.model;
-  auto               points = OutputMeshType::PointsContainer::New();
-  points->Reserve(static_cast<typename OutputMeshType::PointsContainer::ElementIdentifier>(model.nodes.size()));
-  for (std::size_t p = 0; p < model.nodes.size(); ++p)
-  {
-    typename OutputMeshType::PointType point;
-    for (unsigned int d = 0; d < 3; ++d)
-    {
-      point[d] = model.nodes[p][d];
-    }
-    points->SetElement(p, point);
-  }
-  output->SetPoints(points);
+  output->SetPoints(MakePointsContainer<typename OutputMeshType::PointsContainer>(model.nodes));
 
   using CellType = typename OutputMeshType::CellType;
   using CellAutoPointer = typename CellType::CellAutoPointer;

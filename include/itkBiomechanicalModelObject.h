@@ -15,6 +15,7 @@
 #include <array>
 #include <map>
 #include <string>
+#include <vector>
 
 namespace itk
 {
@@ -148,6 +149,25 @@ MakeContactSurfaceFromMesh(const TMesh * mesh, const std::string & what)
   return surface;
 }
 
+/** Positions (mm) as an ITK points container (of a mesh or point set), in order. */
+template <typename TPointsContainer>
+typename TPointsContainer::Pointer
+MakePointsContainer(const std::vector<bmr::Vector3> & positions)
+{
+  auto container = TPointsContainer::New();
+  container->Reserve(static_cast<typename TPointsContainer::ElementIdentifier>(positions.size()));
+  for (std::size_t p = 0; p < positions.size(); ++p)
+  {
+    typename TPointsContainer::Element point;
+    for (unsigned int d = 0; d < 3; ++d)
+    {
+      point[d] = positions[p][d];
+    }
+    container->SetElement(p, point);
+  }
+  return container;
+}
+
 /** The core's surface as a triangle itk::Mesh (mm): the inverse of
  *  MakeContactSurfaceFromMesh, points and triangles in the surface's order. */
 template <typename TMesh>
@@ -158,18 +178,7 @@ FillMeshFromContactSurface(const bmr::ContactSurface & surface, TMesh * mesh)
   using CellAutoPointer = typename CellType::CellAutoPointer;
 
   mesh->Initialize();
-  auto points = TMesh::PointsContainer::New();
-  points->Reserve(surface.vertices.size());
-  for (std::size_t v = 0; v < surface.vertices.size(); ++v)
-  {
-    typename TMesh::PointType p;
-    for (unsigned int d = 0; d < 3; ++d)
-    {
-      p[d] = surface.vertices[v][d];
-    }
-    points->SetElement(v, p);
-  }
-  mesh->SetPoints(points);
+  mesh->SetPoints(MakePointsContainer<typename TMesh::PointsContainer>(surface.vertices));
   for (std::size_t t = 0; t < surface.triangles.size(); ++t)
   {
     CellAutoPointer cell;

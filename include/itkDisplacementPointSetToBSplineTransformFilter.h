@@ -249,23 +249,18 @@ FillDisplacementPointSet(TPointSet *                         pointSet,
                                                          << " displacements; give the result of a solve of "
                                                             "this model (one displacement per node).");
   }
-  auto points = TPointSet::PointsContainer::New();
   auto data = TPointSet::PointDataContainer::New();
-  points->Reserve(nodes.size());
   data->Reserve(nodes.size());
   for (std::size_t n = 0; n < nodes.size(); ++n)
   {
-    typename TPointSet::PointType point;
     typename TPointSet::PixelType displacement;
     for (unsigned int d = 0; d < 3; ++d)
     {
-      point[d] = nodes[n][d];
       displacement[d] = displacements[n][d];
     }
-    points->SetElement(n, point);
     data->SetElement(n, displacement);
   }
-  pointSet->SetPoints(points);
+  pointSet->SetPoints(MakePointsContainer<typename TPointSet::PointsContainer>(nodes));
   pointSet->SetPointData(data);
   pointSet->SetBufferedRegion(pointSet->GetRequestedRegion());
 }
