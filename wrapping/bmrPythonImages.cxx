@@ -495,17 +495,14 @@ RegistrationSettingsFrom(const py::dict & values)
   // A sphere and a mask together: bmr::CheckCraniotomyRegion's error, in BuildBrainModel.
   if (!centre.is_none())
   {
-    model.craniotomyCentre = VectorFromObject(centre, "craniotomy_centre");
     const py::object radius = get("craniotomy_radius");
     if (!py::isinstance<py::int_>(radius) && !py::isinstance<py::float_>(radius))
     {
       throw py::type_error("setting 'craniotomy_radius' must be a number, got " + std::string(py::repr(radius)));
     }
-    model.craniotomyRadius = radius.cast<double>();
-    if (!(model.craniotomyRadius > 0.0))
-    {
-      throw py::value_error("craniotomy_centre needs craniotomy_radius > 0 (mm)");
-    }
+    const CraniotomyRegion sphere = CraniotomySphereFrom(centre, radius.cast<double>());
+    model.craniotomyCentre = sphere.centre;
+    model.craniotomyRadius = sphere.radius;
   }
   if (!mask.is_none())
   {

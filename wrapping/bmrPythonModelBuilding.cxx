@@ -286,15 +286,7 @@ BindModelBuilding(py::module_ & module)
       settings.skullBase.height = skullBaseHeight;
       settings.skullBase.superior = VectorFromObject(superior, "superior");
       LabelVolume region;
-      if (!centre.is_none())
-      {
-        settings.craniotomy.centre = VectorFromObject(centre, "craniotomy_centre");
-        settings.craniotomy.radius = radius;
-        if (!(radius > 0.0))
-        {
-          throw py::value_error("craniotomy_centre needs craniotomy_radius > 0 (mm)");
-        }
-      }
+      settings.craniotomy = CraniotomySphereFrom(centre, radius);
       if (!mask.is_none())
       {
         region = LabelVolumeFromImage(mask, "craniotomy_mask");

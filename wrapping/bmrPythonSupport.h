@@ -10,6 +10,7 @@
 #ifndef bmrPythonSupport_h
 #define bmrPythonSupport_h
 
+#include "bmrBrainSurfaces.h"
 #include "bmrImageVolume.h"
 #include "bmrModel.h"
 #include "bmrSettingsTable.h"
@@ -49,6 +50,27 @@ PointsFromArray(const py::handle & object, const std::string & what);
 /** Three finite numbers (a point, a vector). */
 Vector3
 VectorFromObject(const py::handle & object, const std::string & what);
+
+/** The craniotomy sphere of the keywords craniotomy_centre and
+ *  craniotomy_radius (mm): none (radius 0) without a centre; a centre needs a
+ *  radius > 0 (ValueError). A mask, and a sphere beside a mask, are
+ *  bmr::CheckCraniotomyRegion's to judge. */
+inline CraniotomyRegion
+CraniotomySphereFrom(const py::handle & centre, double radius)
+{
+  CraniotomyRegion sphere;
+  if (centre.is_none())
+  {
+    return sphere;
+  }
+  sphere.centre = VectorFromObject(centre, "craniotomy_centre");
+  if (!(radius > 0.0))
+  {
+    throw py::value_error("craniotomy_centre needs craniotomy_radius > 0 (mm)");
+  }
+  sphere.radius = radius;
+  return sphere;
+}
 
 py::array_t<Index>
 ArrayFromIndices(const std::vector<Index> & indices);
