@@ -241,10 +241,7 @@ BindFilters(py::module_ & module)
         py::gil_scoped_release release;
         surfaces = BrainSurfacesOfMask(volume, skullGap, warnings);
       }
-      for (const std::string & warning : warnings)
-      {
-        PyErr_WarnEx(PyExc_RuntimeWarning, warning.c_str(), 1);
-      }
+      WarnInPython(warnings);
       return py::make_tuple(surfaces.brain, surfaces.skull);
     },
     py::arg("mask"), py::kw_only(), py::arg("skull_gap") = BrainSurfaceSettings{}.skullGap,

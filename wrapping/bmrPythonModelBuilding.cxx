@@ -200,10 +200,7 @@ BindModelBuilding(py::module_ & module)
         return ClassifyTissue(intensities, mask.is_none() ? nullptr : &maskVolume, settings,
                               [&](double fraction) { reporter.Report("classify", fraction); }, &warnings);
       });
-      for (const std::string & warning : warnings)
-      {
-        PyErr_WarnEx(PyExc_RuntimeWarning, warning.c_str(), 1);
-      }
+      WarnInPython(warnings);
       return result;
     },
     py::arg("image"), py::arg("mask") = py::none(), py::kw_only(), py::arg("classes") = FuzzyCMeansSettings{}.classes,
@@ -240,10 +237,7 @@ BindModelBuilding(py::module_ & module)
         py::gil_scoped_release release;
         grid = MakeGridFromLabels(volume, settings, &warnings);
       }
-      for (const std::string & warning : warnings)
-      {
-        PyErr_WarnEx(PyExc_RuntimeWarning, warning.c_str(), 1);
-      }
+      WarnInPython(warnings);
       return grid;
     },
     py::arg("labels"), py::kw_only(), py::arg("kind") = "hexahedra", py::arg("element_size") = ImageGridSettings{}.elementSize,
@@ -325,10 +319,7 @@ BindModelBuilding(py::module_ & module)
         py::gil_scoped_release release;
         MapMaterialsFromMemberships(model, volume, settings, tumourMask.is_none() ? nullptr : &tumourVolume, &warnings);
       }
-      for (const std::string & warning : warnings)
-      {
-        PyErr_WarnEx(PyExc_RuntimeWarning, warning.c_str(), 1);
-      }
+      WarnInPython(warnings);
       return model;
     },
     py::arg("model"), py::arg("memberships"), py::kw_only(), py::arg("class_materials") = std::vector<Material>{},

@@ -51,6 +51,16 @@ PointsFromArray(const py::handle & object, const std::string & what);
 Vector3
 VectorFromObject(const py::handle & object, const std::string & what);
 
+/** The C++ code's warnings as Python RuntimeWarnings. */
+inline void
+WarnInPython(const std::vector<std::string> & warnings)
+{
+  for (const std::string & warning : warnings)
+  {
+    PyErr_WarnEx(PyExc_RuntimeWarning, warning.c_str(), 1);
+  }
+}
+
 /** The craniotomy sphere of the keywords craniotomy_centre and
  *  craniotomy_radius (mm): none (radius 0) without a centre; a centre needs a
  *  radius > 0 (ValueError). A mask, and a sphere beside a mask, are
