@@ -460,9 +460,9 @@ RunModel(const ModelOptions & options)
   const std::vector<Index> &     surfaceNodes = model.NodeSet("surface");
   std::vector<std::string>       warnings = brain.warnings;
   report["classification"] = { { "classes", settings.classifier.classes },
-                               { "centroids", brain.classification.fit.centroids },
-                               { "iterations", brain.classification.fit.iterations },
-                               { "converged", brain.classification.fit.converged } };
+                               { "centroids", brain.classificationFit.centroids },
+                               { "iterations", brain.classificationFit.iterations },
+                               { "converged", brain.classificationFit.converged } };
   if (measurements)
   {
     report["loads"] = LoadReportJson(brain.loadReport);
@@ -560,10 +560,8 @@ RunModel(const ModelOptions & options)
     {
       WriteTextFileAtomically((outputDirectory / "exposed-displacements.csv").string(), DisplacementCsv(load));
     }
-    WriteImageAtomically(MakeMembershipImage(brain.classification.memberships).GetPointer(),
-                         outputDirectory / "memberships.nii.gz");
-    WriteImageAtomically(itk::MakeImageFromBiomechanicalVolume<MaskImageType>(brain.classification.labels).GetPointer(),
-                         outputDirectory / "tissue-labels.nii.gz");
+    WriteImageAtomically(brain.membershipImage.GetPointer(), outputDirectory / "memberships.nii.gz");
+    WriteImageAtomically(brain.tissueLabelImage.GetPointer(), outputDirectory / "tissue-labels.nii.gz");
     if (patient.mask.empty())
     {
       WriteImageAtomically(itk::MakeImageFromBiomechanicalVolume<MaskImageType>(brain.brainMask).GetPointer(),

@@ -18,6 +18,7 @@
 // ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.
 #include "itkBSplineTransform.h"
 #include "itkImage.h"
+#include "itkVectorImage.h"
 #include "itkBiomechanicalModelObject.h"
 
 #include "bmrBrainSurfaces.h"
@@ -186,7 +187,8 @@ struct BrainModel
    *  displacements, contact (what `biomech model` writes). */
   Model                    model;
   BrainSurfaces            surfaces; // preoperative brain surface and the skull (contact master)
-  TissueClassification     classification;
+  /** The classifier's fit (centroids, iterations, convergence). */
+  FuzzyCMeansResult        classificationFit;
   LabelVolume              brainMask;
   GridQuality              gridQuality;
   std::vector<Index>       exposedNodes;
@@ -201,6 +203,11 @@ struct BrainModel
   itk::BiomechanicalModelObject::Pointer           pipelineModel;
   itk::DisplacementPointSetType<3>::Pointer        prescribedDisplacements;
   itk::BiomechanicalSurfaceMeshType::Pointer       contactSurface;
+  /** The classifier's outputs, shared with the material mapping rather than
+   *  copied (about 85 MB on Colin27): memberships per class (component k:
+   *  class k, ascending centroid) and the class of largest membership (1..K). */
+  itk::VectorImage<float, 3>::ConstPointer membershipImage;
+  RegistrationLabelImage::ConstPointer     tissueLabelImage;
 };
 
 /** Builds the model of `image` inside `brainMask` (null: atlas skull stripping

@@ -142,6 +142,11 @@ struct CraniotomyRegion
 void
 CheckCraniotomyRegion(const CraniotomyRegion & region);
 
+/** The same check before the mask is read: a sphere of `radius` (> 0: given)
+ *  and whether a mask is given. */
+void
+CheckCraniotomyChoice(double radius, bool maskGiven);
+
 /** The exposed surface nodes: those of the craniotomy region
  *  (SurfaceNodesInSphere or SurfaceNodesInMask), after CheckCraniotomyRegion. */
 std::vector<Index>

@@ -118,6 +118,10 @@ DisplacementsFromSparsePoints(const Model &                model,
  *
  *  Errors (bmr::Error): those of (b), an empty surface, and no vertex of the
  *  preoperative surface near the exposed nodes. */
+/** Default spacing (mm) of the scanned surface's points that load the model:
+ *  the tracked-point density of a surface scan. */
+constexpr double kDefaultScanSpacing = 5.0;
+
 PrescribedDisplacement
 DisplacementsBetweenSurfaces(const Model &               model,
                              const std::vector<Index> &  exposedNodes,

@@ -257,7 +257,7 @@ private:
   double          m_MaxDistance{ bmr::SurfaceLoadSettings{}.maxDistance };
   double          m_Smoothing{ 0.0 };
   double          m_ScanReach{ 10.0 };
-  double          m_ScanSpacing{ 5.0 };
+  double          m_ScanSpacing{ bmr::kDefaultScanSpacing };
   std::optional<bmr::Vector3>  m_MatchDirection;
   bmr::LoadReport             m_Report;
   bmr::PrescribedDisplacement m_Load;

@@ -233,20 +233,27 @@ BindFilters(py::module_ & module)
 
   module.def(
     "brain_surfaces",
-    [](const py::object & mask, double skullGap) {
-      const LabelVolume        volume = LabelVolumeFromImage(mask, "mask");
+    [](const py::object & mask, double skullGap, const std::optional<Model> & body) {
+      LabelVolume              volume = LabelVolumeFromImage(mask, "mask");
       std::vector<std::string> warnings;
       BrainSurfaces            surfaces;
       {
         py::gil_scoped_release release;
+        if (body)
+        {
+          volume = RasterizeCells(*body, volume.geometry);
+        }
         surfaces = BrainSurfacesOfMask(volume, skullGap, warnings);
       }
       WarnInPython(warnings);
       return py::make_tuple(surfaces.brain, surfaces.skull);
     },
     py::arg("mask"), py::kw_only(), py::arg("skull_gap") = BrainSurfaceSettings{}.skullGap,
+    py::arg("body") = py::none(),
     "(brain, skull): the smoothed brain surface of a mask and a rigid skull skull_gap mm outside it "
-    "(itk::BrainSurfaceMeshSource).");
+    "(itk::BrainSurfaceMeshSource). With body= (a grid's model, or a point cloud's meshless_body), the "
+    "surfaces of the body's cells on the mask's grid instead, as build_brain_model makes them: the "
+    "corners of a staircase hexahedral grid stick out of the mask, and the skull must enclose them.");
 
   module.def(
     "fit_transform",
@@ -564,8 +571,12 @@ BindRegistration(py::module_ & module)
     .def_readonly("model", &BrainModel::model)
     .def_property_readonly("brain_surface", [](const BrainModel & model) { return model.surfaces.brain; })
     .def_property_readonly("skull_surface", [](const BrainModel & model) { return model.surfaces.skull; })
-    .def_property_readonly("tissue_classes", [](const BrainModel & model) { return ImageFromVolume(model.classification.labels); })
-    .def_property_readonly("centroids", [](const BrainModel & model) { return model.classification.fit.centroids; })
+    .def_property_readonly("tissue_classes",
+                           [](const BrainModel & model) {
+                             return ImageFromVolume(
+                               itk::MakeBiomechanicalVolume<std::uint8_t>(model.tissueLabelImage.GetPointer()));
+                           })
+    .def_property_readonly("centroids", [](const BrainModel & model) { return model.classificationFit.centroids; })
     .def_property_readonly("brain_mask", [](const BrainModel & model) { return ImageFromVolume(model.brainMask); })
     .def_property_readonly("exposed_nodes", [](const BrainModel & model) { return ArrayFromIndices(model.exposedNodes); })
     .def_readonly("load", &BrainModel::load)

@@ -375,7 +375,8 @@ BindLoads(py::module_ & module)
       return py::make_tuple(load, LoadReportDict(report));
     },
     py::arg("model"), py::arg("exposed_nodes"), py::arg("preoperative_surface"), py::arg("intraoperative_surface"),
-    py::kw_only(), py::arg("reach"), py::arg("spacing"), py::arg("max_distance") = SurfaceLoadSettings{}.maxDistance,
+    py::kw_only(), py::arg("reach"), py::arg("spacing") = kDefaultScanSpacing,
+    py::arg("max_distance") = SurfaceLoadSettings{}.maxDistance,
     "Surface to surface: scanner-visible points of the smooth preoperative surface matched to the intraoperative one.");
 }
 

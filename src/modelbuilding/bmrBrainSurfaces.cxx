@@ -614,16 +614,22 @@ SurfaceNodesInMask(const Model &              model,
 }
 
 void
-CheckCraniotomyRegion(const CraniotomyRegion & region)
+CheckCraniotomyChoice(double radius, bool maskGiven)
 {
-  if (region.radius > 0.0 && region.mask != nullptr)
+  if (radius > 0.0 && maskGiven)
   {
     throw Error("give the craniotomy either as a sphere (centre, radius) or as a mask, not both");
   }
-  if (!region.Given())
+  if (!(radius > 0.0) && !maskGiven)
   {
     throw Error("no craniotomy region: give its centre and radius (> 0 mm) or a craniotomy mask");
   }
+}
+
+void
+CheckCraniotomyRegion(const CraniotomyRegion & region)
+{
+  CheckCraniotomyChoice(region.radius, region.mask != nullptr);
 }
 
 std::vector<Index>

@@ -88,9 +88,6 @@ StageTimer::Seconds(const std::string & name) const
 namespace
 {
 
-/** Spacing (mm) of the points of a scanned surface that load the model: the tracked-point density of a surface scan. */
-constexpr double kScanPointSpacing = 5.0;
-
 /** Checks that the intraoperative data name one source of the exposed surface's motion. */
 void
 CheckIntraoperativeData(const IntraoperativeData & data)
@@ -250,14 +247,9 @@ BuildBrainModel(const RegistrationImage *      image,
     CheckIntraoperativeData(*intraoperative);
   }
   // Checked before the long stages; the regions filter selects the nodes.
+  if (intraoperative != nullptr || settings.craniotomyRadius > 0.0 || settings.craniotomyMask.IsNotNull())
   {
-    const LabelVolume noMask;
-    CraniotomyRegion  craniotomy{ settings.craniotomyCentre, settings.craniotomyRadius,
-                                 settings.craniotomyMask.IsNotNull() ? &noMask : nullptr };
-    if (intraoperative != nullptr || craniotomy.Given())
-    {
-      CheckCraniotomyRegion(craniotomy);
-    }
+    CheckCraniotomyChoice(settings.craniotomyRadius, settings.craniotomyMask.IsNotNull());
   }
   const int threads = settings.threads > 0 ? settings.threads : omp_get_max_threads();
 
@@ -292,11 +284,11 @@ BuildBrainModel(const RegistrationImage *      image,
   classifier->SetMaximumNumberOfIterations(static_cast<unsigned int>(std::max(settings.classifier.maxIterations, 0)));
   timer.Run("classify", [&] { UpdateStage(classifier.GetPointer(), "tissue classification"); });
   warnings.insert(warnings.end(), classifier->GetWarnings().begin(), classifier->GetWarnings().end());
-  result.classification.fit.centroids = classifier->GetCentroids();
-  result.classification.fit.iterations = static_cast<int>(classifier->GetNumberOfIterations());
-  result.classification.fit.converged = classifier->GetConverged();
-  result.classification.memberships = itk::MakeBiomechanicalVolume<float>(classifier->GetOutput());
-  result.classification.labels = itk::MakeBiomechanicalVolume<std::uint8_t>(classifier->GetLabelOutput());
+  result.classificationFit.centroids = classifier->GetCentroids();
+  result.classificationFit.iterations = static_cast<int>(classifier->GetNumberOfIterations());
+  result.classificationFit.converged = classifier->GetConverged();
+  result.membershipImage = classifier->GetOutput();
+  result.tissueLabelImage = classifier->GetLabelOutput();
 
   // The tumour is a second label, so that tetrahedral meshes conform to its boundary.
   LabelVolume labels = result.brainMask;
@@ -437,7 +429,7 @@ BuildBrainModel(const RegistrationImage *      image,
         loads->SetIntraoperativeSurface(itk::MakeMeshFromContactSurface<itk::BiomechanicalSurfaceMeshType>(displaced));
         loads->SetPreoperativeSurface(surfaces->GetBrainOutput());
         loads->SetScanReach(elementSize);
-        loads->SetScanSpacing(kScanPointSpacing);
+        loads->SetScanSpacing(kDefaultScanSpacing);
       }
       UpdateStage(loads.GetPointer(), "loads");
     });

@@ -234,7 +234,7 @@ def test_surface_correspondence_and_mask_regions():
     np.testing.assert_array_equal(np.sort(load.nodes), np.sort(exposed))
     np.testing.assert_allclose(load.displacements, np.tile([0, 0, -1.0], (len(exposed), 1)), atol=1e-9)
     with pytest.raises(TypeError):
-        bmr.displacements_between_surfaces(model, exposed, top(10.0), top(9.0))  # reach and spacing are required
+        bmr.displacements_between_surfaces(model, exposed, top(10.0), top(9.0))  # reach is required (it depends on the grid)
     # A mask over the block's top layer selects the top nodes.
     region = np.zeros((12, 22, 22), np.uint8)  # 1 mm voxels from (-1, -1, -1): z 8..11 mm
     region[9:, :, :] = 1
@@ -304,6 +304,21 @@ def test_step_functions_compose_into_build_brain_model(colin27):
     np.testing.assert_array_equal(load.nodes, brain.load.nodes)
     np.testing.assert_array_equal(load.displacements, brain.load.displacements)
     assert report["used"] == brain.load_report["used"] == 61
+    # From a displaced surface: the surfaces of the grid's cells (not of the mask), then surface to surface.
+    brain_surface, skull = bmr.brain_surfaces(mask, body=grid.model)
+    np.testing.assert_array_equal(brain_surface.vertices, brain.brain_surface.vertices)
+    np.testing.assert_array_equal(skull.vertices, brain.skull_surface.vertices)
+    assert not np.array_equal(bmr.brain_surfaces(mask)[0].vertices.shape, brain_surface.vertices.shape) or \
+        not np.array_equal(bmr.brain_surfaces(mask)[0].vertices, brain_surface.vertices)
+    displaced = bmr.Surface(brain_surface.vertices - [0.0, 0.0, 4.0], brain_surface.triangles)
+    from_surface = bmr.build_brain_model(image, mask, intraoperative_surface=displaced, **CRANIOTOMY)
+    reach = max(grid.quality["mean_edge_length_mm"], CRANIOTOMY["element_size"])
+    load, report = bmr.displacements_between_surfaces(model, model.node_sets["exposed"], brain_surface, displaced,
+                                                      reach=reach)
+    np.testing.assert_array_equal(load.nodes, from_surface.load.nodes)
+    np.testing.assert_array_equal(load.displacements, from_surface.load.displacements)
+    assert report["used"] == from_surface.load_report["used"] > 20
+    np.testing.assert_allclose(load.displacements[:, 2], -4.0, atol=0.5)  # the surface sank 4 mm
     # One craniotomy check for every face: a sphere and a mask together are refused.
     with pytest.raises(bmr.Error, match="not both"):
         bmr.model_regions(model, craniotomy_centre=(0, 0, 0), craniotomy_radius=5, craniotomy_mask=mask)
