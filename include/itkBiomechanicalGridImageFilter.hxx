@@ -115,6 +115,7 @@ BiomechanicalGridImageFilter<TLabelImage>::GenerateData()
     output->SetCell(c, element);
     output->SetCellData(c, c < m_Grid.cellLabels.size() ? m_Grid.cellLabels[c] : 0);
   }
+  MarkPointSetProduced(output);
   this->GetModelOutput()->SetModel(m_Grid.model);
 }
 

@@ -234,8 +234,8 @@ private:
 
 /** Sets `pointSet`'s points to `nodes` (reference positions, mm) carrying
  * `displacements` (mm), one per node, and marks the whole set as produced
- * (buffered region = requested region), as a filter's output must be or the
- * pipeline runs the filter again. Throws ExceptionObject when the counts differ. */
+ * (MarkPointSetProduced), as a filter's output must be or the pipeline runs
+ * the filter again. Throws ExceptionObject when the counts differ. */
 template <typename TPointSet>
 void
 FillDisplacementPointSet(TPointSet *                         pointSet,
@@ -262,7 +262,7 @@ FillDisplacementPointSet(TPointSet *                         pointSet,
   }
   pointSet->SetPoints(MakePointsContainer<typename TPointSet::PointsContainer>(nodes));
   pointSet->SetPointData(data);
-  pointSet->SetBufferedRegion(pointSet->GetRequestedRegion());
+  MarkPointSetProduced(pointSet);
 }
 
 /** The fitter's input from the mechanics core: the points are `nodes`
