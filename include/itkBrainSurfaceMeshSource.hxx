@@ -9,6 +9,7 @@
 #include "itkSignedMaurerDistanceMapImageFilter.h"
 #include "itkTriangleCell.h"
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 #include <vector>
@@ -44,9 +45,38 @@ BrainSurfaceMeshSource<TMaskImage, TOutputMesh>::GenerateData()
     itkExceptionMacro("SkullGap " << m_SkullGap << " mm must be a finite number >= 0 (default 1.5 mm)");
   }
 
-  // Binary mask padded with background: ceil(gap / spacing) + 2 voxels along
-  // each axis, so the dilated (skull) level set closes inside the volume.
-  const auto & region = mask->GetBufferedRegion();
+  // The mask's bounding box padded with background: ceil(gap / spacing) + 2
+  // voxels along each axis, so the dilated (skull) level set closes inside the
+  // volume. Cropped to the box, the distance maps and isosurfaces cover about
+  // half of Colin27's 181 x 217 x 181 voxels.
+  typename MaskImageType::RegionType region;
+  {
+    const auto & buffered = mask->GetBufferedRegion();
+    Index<3>     low, high;
+    low.Fill(NumericTraits<IndexValueType>::max());
+    high.Fill(NumericTraits<IndexValueType>::NonpositiveMin());
+    for (ImageRegionConstIteratorWithIndex<MaskImageType> it(mask, buffered); !it.IsAtEnd(); ++it)
+    {
+      if (it.Get() > NumericTraits<typename MaskImageType::PixelType>::ZeroValue())
+      {
+        for (unsigned int d = 0; d < 3; ++d)
+        {
+          low[d] = std::min(low[d], it.GetIndex()[d]);
+          high[d] = std::max(high[d], it.GetIndex()[d]);
+        }
+      }
+    }
+    if (low[0] > high[0])
+    {
+      itkExceptionMacro("the brain mask (" << buffered.GetSize() << " voxels) has no voxel > 0: nothing to triangulate. "
+                                           << "Give a brain mask (for example from AtlasBrainMaskImageFilter)");
+    }
+    region.SetIndex(low);
+    for (unsigned int d = 0; d < 3; ++d)
+    {
+      region.SetSize(d, static_cast<SizeValueType>(high[d] - low[d] + 1));
+    }
+  }
   typename BinaryImageType::RegionType   paddedRegion;
   typename BinaryImageType::IndexType    firstIndex = region.GetIndex();
   Index<3>                               pad;
@@ -71,7 +101,6 @@ BrainSurfaceMeshSource<TMaskImage, TOutputMesh>::GenerateData()
   background->Allocate();
   background->FillBuffer(1);
 
-  SizeValueType brainVoxels = 0;
   for (ImageRegionConstIteratorWithIndex<MaskImageType> it(mask, region); !it.IsAtEnd(); ++it)
   {
     if (it.Get() > NumericTraits<typename MaskImageType::PixelType>::ZeroValue())
@@ -83,13 +112,7 @@ BrainSurfaceMeshSource<TMaskImage, TOutputMesh>::GenerateData()
       }
       brain->SetPixel(index, 1);
       background->SetPixel(index, 0);
-      ++brainVoxels;
     }
-  }
-  if (brainVoxels == 0)
-  {
-    itkExceptionMacro("the brain mask (" << region.GetSize() << " voxels) has no voxel > 0: nothing to triangulate. "
-                                         << "Give a brain mask (for example from AtlasBrainMaskImageFilter)");
   }
 
   // Maurer distances are to the centres of the boundary voxels of the object:
