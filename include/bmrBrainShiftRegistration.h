@@ -109,6 +109,12 @@ AtlasBrainMask(const RegistrationImage * image, const AtlasSettings & settings =
 BrainSurfaces
 BrainSurfacesOfMask(const LabelVolume & mask, double skullGap, std::vector<std::string> & warnings);
 
+/** The smooth surface (level 0) of a brain mask alone, without a skull: the
+ *  cortex that a surface scan images (itk::BrainSurfaceMeshSource with
+ *  ComputeSkull off). Throws bmr::Error. */
+ContactSurface
+CortexSurfaceOfMask(const RegistrationLabelImage * brainMask);
+
 /** 1 where `image` > 0, 0 elsewhere, same grid: a brain-extracted image
  *  such as Colin27's ch2bet.nii.gz as a mask. */
 RegistrationLabelImage::Pointer

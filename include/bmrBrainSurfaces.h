@@ -63,6 +63,9 @@ struct BrainSurfaceSettings
    *  thick, so 1.5 mm is the default. */
   double skullGap = 1.5;
   IsosurfaceSettings isosurface;
+  /** False: only the brain surface (the skull is left empty), e.g. for the
+   *  anatomical surface that a surface scan is matched to. */
+  bool skull = true;
 };
 
 struct BrainSurfaces

@@ -49,7 +49,9 @@ namespace itk
  *
  * Parameters: SkullGap (mm, default 1.5: the CSF layer between brain and
  * skull is about 1-3 mm), SmoothingIterations (default 20), SmoothingPassBand
- * (default 0.1), TargetEdgeLength (mm, default 0 = no decimation).
+ * (default 0.1), TargetEdgeLength (mm, default 0 = no decimation),
+ * ComputeSkull (default on; off leaves output 1 empty and saves the skull's
+ * exact-distance band and isosurface).
  *
  * Errors (itk::ExceptionObject): no input, an empty mask (no voxel > 0), a
  * negative SkullGap, and the core's errors (bmr::Error messages).
@@ -93,6 +95,11 @@ public:
   /** Target mean triangle edge length, mm (default 0: no decimation). */
   itkSetMacro(TargetEdgeLength, double);
   itkGetConstMacro(TargetEdgeLength, double);
+  /** Off: only the brain surface; the skull output stays an empty mesh
+   *  (default on). The anatomical surface a scan is matched to needs no skull. */
+  itkSetMacro(ComputeSkull, bool);
+  itkGetConstMacro(ComputeSkull, bool);
+  itkBooleanMacro(ComputeSkull);
 
   /** The brain surface mesh (output 0). */
   OutputMeshType *
@@ -139,6 +146,7 @@ private:
   int                m_SmoothingIterations{ 20 };
   double             m_SmoothingPassBand{ 0.1 };
   double             m_TargetEdgeLength{ 0.0 };
+  bool               m_ComputeSkull{ true };
   bmr::BrainSurfaces m_Surfaces;
   std::vector<std::string> m_Warnings;
 };

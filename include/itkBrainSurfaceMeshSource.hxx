@@ -148,6 +148,7 @@ BrainSurfaceMeshSource<TMaskImage, TOutputMesh>::GenerateData()
   settings.isosurface.smoothingIterations = m_SmoothingIterations;
   settings.isosurface.smoothingPassBand = m_SmoothingPassBand;
   settings.isosurface.targetEdgeLength = m_TargetEdgeLength;
+  settings.skull = m_ComputeSkull;
   m_Warnings.clear();
   try
   {
@@ -177,6 +178,7 @@ BrainSurfaceMeshSource<TMaskImage, TOutputMesh>::PrintSelf(std::ostream & os, In
   os << indent << "SmoothingIterations: " << m_SmoothingIterations << std::endl;
   os << indent << "SmoothingPassBand: " << m_SmoothingPassBand << std::endl;
   os << indent << "TargetEdgeLength: " << m_TargetEdgeLength << " mm" << std::endl;
+  os << indent << "ComputeSkull: " << (m_ComputeSkull ? "On" : "Off") << std::endl;
   os << indent << "Brain surface: " << m_Surfaces.brain.vertices.size() << " vertices, "
      << m_Surfaces.brain.triangles.size() << " triangles" << std::endl;
   os << indent << "Skull surface: " << m_Surfaces.skull.vertices.size() << " vertices, "

@@ -451,6 +451,12 @@ ExtractBrainSurfaces(const ScalarVolume &         signedDistance,
   brainSettings.name = "brain";
   brainSettings.targetEdgeLength = 0.0;
   surfaces.brain = ExtractIsosurface(signedDistance, 0.0, brainSettings, warnings);
+  brainSettings.targetEdgeLength = settings.isosurface.targetEdgeLength;
+  if (!settings.skull)
+  {
+    DecimateIfAsked(surfaces.brain, brainSettings, "isosurface 'brain' at level 0", warnings);
+    return surfaces;
+  }
   IsosurfaceSettings skullSettings = settings.isosurface;
   skullSettings.name = "skull";
 
@@ -481,7 +487,6 @@ ExtractBrainSurfaces(const ScalarVolume &         signedDistance,
     }
   }
   surfaces.skull = ExtractIsosurface(skullField, settings.skullGap, skullSettings, warnings);
-  brainSettings.targetEdgeLength = settings.isosurface.targetEdgeLength;
   DecimateIfAsked(surfaces.brain, brainSettings, "isosurface 'brain' at level 0", warnings);
   surfaces.skull.bodySide = ContactSurface::Side::Inside;
   return surfaces;

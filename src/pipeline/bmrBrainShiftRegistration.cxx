@@ -225,6 +225,16 @@ BrainSurfacesOfMask(const LabelVolume & mask, double skullGap, std::vector<std::
   return BrainSurfaces{ source->GetBrainSurface(), source->GetSkullSurface() };
 }
 
+ContactSurface
+CortexSurfaceOfMask(const RegistrationLabelImage * brainMask)
+{
+  auto source = itk::BrainSurfaceMeshSource<RegistrationLabelImage>::New();
+  source->SetInput(brainMask);
+  source->ComputeSkullOff();
+  UpdateStage(source.GetPointer(), "brain surface of the mask");
+  return source->GetBrainSurface();
+}
+
 // ---------------------------------------------------------------------------
 // The model.
 // ---------------------------------------------------------------------------
@@ -427,7 +437,12 @@ BuildBrainModel(const RegistrationImage *      image,
             ? IntraoperativeSurfaceOfImage(*intraoperative, settings.atlas, elementSize, warnings)
             : intraoperative->surface;
         loads->SetIntraoperativeSurface(itk::MakeMeshFromContactSurface<itk::BiomechanicalSurfaceMeshType>(displaced));
-        loads->SetPreoperativeSurface(surfaces->GetBrainOutput());
+        // A scan images the cortex, so its partner is the smooth surface of
+        // the brain mask, not that of the model's cells: a smoothed staircase
+        // of 5 mm cells lies about a millimetre off the cortex, which bent
+        // the matches and left out a quarter of them (docs/registration.md).
+        loads->SetPreoperativeSurface(
+          itk::MakeMeshFromContactSurface<itk::BiomechanicalSurfaceMeshType>(CortexSurfaceOfMask(mask)));
         loads->SetScanReach(elementSize);
         loads->SetScanSpacing(kDefaultScanSpacing);
       }

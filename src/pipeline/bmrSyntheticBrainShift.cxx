@@ -471,22 +471,23 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
     truth.forwardTransform = forward;
   });
 
-  // The exposed surface as a surface scanner would see it: the smooth
-  // preoperative brain surface inside the craniotomy, moved by the ground truth.
+  // The exposed surface as a surface scanner would see it: the cortex (the
+  // smooth surface of the brain mask, not that of the ground truth's cells)
+  // inside the craniotomy, moved by the ground truth.
   timer.Run("exposed-surface", [&] {
     // A little wider than the opening, as a scanner sees it: the registration's
     // exposed nodes at the rim then find their partners on the surface, not on its edge.
     const double             patchRadius = settings.craniotomyRadius + settings.scanMargin;
-    const ContactSurface &   brain = truth.model.surfaces.brain;
-    std::vector<Index>       newIndex(brain.vertices.size(), -1);
+    const ContactSurface     cortex = CortexSurfaceOfMask(brainMask);
+    std::vector<Index>       newIndex(cortex.vertices.size(), -1);
     ContactSurface &         exposed = truth.exposedSurface;
     exposed.name = "displaced exposed surface";
-    for (const auto & triangle : brain.triangles)
+    for (const auto & triangle : cortex.triangles)
     {
       bool inside = true;
       for (const Index vertex : triangle)
       {
-        inside = inside && (brain.vertices[vertex] - settings.craniotomyCentre).norm() <= patchRadius;
+        inside = inside && (cortex.vertices[vertex] - settings.craniotomyCentre).norm() <= patchRadius;
       }
       if (!inside)
       {
@@ -498,7 +499,7 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
         Index & mapped = newIndex[triangle[k]];
         if (mapped < 0)
         {
-          const Vector3 & v = brain.vertices[triangle[k]];
+          const Vector3 & v = cortex.vertices[triangle[k]];
           const auto      moved = forward->TransformPoint(RegistrationTransform::InputPointType(v.data()));
           mapped = static_cast<Index>(exposed.vertices.size());
           exposed.vertices.emplace_back(moved[0], moved[1], moved[2]);
@@ -507,9 +508,11 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
       }
       exposed.triangles.push_back(copy);
     }
-    // Tracked points: the first surface vertex met in each cube of trackedPointSpacing within the opening.
+    // Tracked points: the first vertex of the ground truth's surface met in
+    // each cube of trackedPointSpacing within the opening (they sample the
+    // truth's motion; the validation study's results rest on them).
     std::set<std::array<long, 3>> taken;
-    for (const Vector3 & v : brain.vertices)
+    for (const Vector3 & v : truth.model.surfaces.brain.vertices)
     {
       if ((v - settings.craniotomyCentre).norm() > settings.craniotomyRadius)
       {

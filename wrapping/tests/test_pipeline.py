@@ -304,21 +304,25 @@ def test_step_functions_compose_into_build_brain_model(colin27):
     np.testing.assert_array_equal(load.nodes, brain.load.nodes)
     np.testing.assert_array_equal(load.displacements, brain.load.displacements)
     assert report["used"] == brain.load_report["used"] == 61
-    # From a displaced surface: the surfaces of the grid's cells (not of the mask), then surface to surface.
+    # The surfaces of the grid's cells (not of the mask): the skull must enclose the staircase.
     brain_surface, skull = bmr.brain_surfaces(mask, body=grid.model)
     np.testing.assert_array_equal(brain_surface.vertices, brain.brain_surface.vertices)
     np.testing.assert_array_equal(skull.vertices, brain.skull_surface.vertices)
-    assert not np.array_equal(bmr.brain_surfaces(mask)[0].vertices.shape, brain_surface.vertices.shape) or \
-        not np.array_equal(bmr.brain_surfaces(mask)[0].vertices, brain_surface.vertices)
-    displaced = bmr.Surface(brain_surface.vertices - [0.0, 0.0, 4.0], brain_surface.triangles)
+    cortex, _ = bmr.brain_surfaces(mask)  # what a surface scan images: the mask's smooth surface
+    assert cortex.vertices.shape != brain_surface.vertices.shape
+    # From a displaced surface (the cortex sunk 4 mm), matched to the cortex.
+    displaced = bmr.Surface(cortex.vertices - [0.0, 0.0, 4.0], cortex.triangles)
     from_surface = bmr.build_brain_model(image, mask, intraoperative_surface=displaced, **CRANIOTOMY)
     reach = max(grid.quality["mean_edge_length_mm"], CRANIOTOMY["element_size"])
-    load, report = bmr.displacements_between_surfaces(model, model.node_sets["exposed"], brain_surface, displaced,
-                                                      reach=reach)
+    load, report = bmr.displacements_between_surfaces(model, model.node_sets["exposed"], cortex, displaced, reach=reach)
     np.testing.assert_array_equal(load.nodes, from_surface.load.nodes)
     np.testing.assert_array_equal(load.displacements, from_surface.load.displacements)
     assert report["used"] == from_surface.load_report["used"] > 20
-    np.testing.assert_allclose(load.displacements[:, 2], -4.0, atol=0.5)  # the surface sank 4 mm
+    assert report["rejected"] == from_surface.load_report["rejected"] == 0  # a rigid sinking: every match agrees
+    # The surface sank 4 mm. Closest points see only the motion along the surface's normal where it slopes
+    # (docs/registration.md), so the nodes move down by 4 mm on the crown and less on the flanks.
+    sinking = -load.displacements[:, 2]
+    assert np.median(sinking) == pytest.approx(4.0, abs=0.5) and sinking.min() > 1.5 and sinking.max() < 4.5, sinking
     # One craniotomy check for every face: a sphere and a mask together are refused.
     with pytest.raises(bmr.Error, match="not both"):
         bmr.model_regions(model, craniotomy_centre=(0, 0, 0), craniotomy_radius=5, craniotomy_mask=mask)
