@@ -104,10 +104,11 @@ struct AtlasSettings
 RegistrationLabelImage::Pointer
 AtlasBrainMask(const RegistrationImage * image, const AtlasSettings & settings = {});
 
-/** Brain surface (level 0) and rigid skull (level skullGap) of a mask
- *  (itk::BrainSurfaceMeshSource); its warnings are appended to `warnings`. */
+/** Brain surface (level 0) and rigid skull (level skullGap; left empty
+ *  without `skull`) of a mask (itk::BrainSurfaceMeshSource); its warnings are
+ *  appended to `warnings`. */
 BrainSurfaces
-BrainSurfacesOfMask(const LabelVolume & mask, double skullGap, std::vector<std::string> & warnings);
+BrainSurfacesOfMask(const LabelVolume & mask, double skullGap, std::vector<std::string> & warnings, bool skull = true);
 
 /** The smooth surface (level 0) of a brain mask alone, without a skull: the
  *  cortex that a surface scan images (itk::BrainSurfaceMeshSource with

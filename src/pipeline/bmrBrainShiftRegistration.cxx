@@ -215,11 +215,12 @@ AtlasBrainMask(const RegistrationImage * image, const AtlasSettings & settings)
 }
 
 BrainSurfaces
-BrainSurfacesOfMask(const LabelVolume & mask, double skullGap, std::vector<std::string> & warnings)
+BrainSurfacesOfMask(const LabelVolume & mask, double skullGap, std::vector<std::string> & warnings, bool skull)
 {
   auto source = itk::BrainSurfaceMeshSource<RegistrationLabelImage>::New();
   source->SetInput(itk::MakeImageFromBiomechanicalVolume<RegistrationLabelImage>(mask));
   source->SetSkullGap(skullGap);
+  source->SetComputeSkull(skull);
   UpdateStage(source.GetPointer(), "brain surfaces");
   warnings.insert(warnings.end(), source->GetWarnings().begin(), source->GetWarnings().end());
   return BrainSurfaces{ source->GetBrainSurface(), source->GetSkullSurface() };

@@ -308,8 +308,9 @@ def test_step_functions_compose_into_build_brain_model(colin27):
     brain_surface, skull = bmr.brain_surfaces(mask, body=grid.model)
     np.testing.assert_array_equal(brain_surface.vertices, brain.brain_surface.vertices)
     np.testing.assert_array_equal(skull.vertices, brain.skull_surface.vertices)
-    cortex, _ = bmr.brain_surfaces(mask)  # what a surface scan images: the mask's smooth surface
-    assert cortex.vertices.shape != brain_surface.vertices.shape
+    cortex, no_skull = bmr.brain_surfaces(mask, skull=False)  # what a surface scan images: the mask's smooth surface
+    assert no_skull is None and cortex.vertices.shape != brain_surface.vertices.shape
+    np.testing.assert_array_equal(cortex.vertices, bmr.brain_surfaces(mask)[0].vertices)
     # From a displaced surface (the cortex sunk 4 mm), matched to the cortex.
     displaced = bmr.Surface(cortex.vertices - [0.0, 0.0, 4.0], cortex.triangles)
     from_surface = bmr.build_brain_model(image, mask, intraoperative_surface=displaced, **CRANIOTOMY)
