@@ -94,9 +94,14 @@ DisplacementsFromSparsePoints(const Model &                model,
                               LoadReport *                 report = nullptr,
                               const ContactSurface *       modelSurface = nullptr);
 
+/** Default spacing (mm) of the scanned surface's points that load the model:
+ *  the tracked-point density of a surface scan. */
+constexpr double kDefaultScanSpacing = 5.0;
+
 /** (c) Surface to surface, for a displaced surface that covers the exposed
  *  region (a scan): the vertices of the smooth `preoperativeSurface` (the
- *  brain surface the model was made from) that lie within `reach` mm of an
+ *  cortex, the surface the scan images: the pipeline gives the smooth
+ *  surface of the brain mask, CortexSurfaceOfMask) that lie within `reach` mm of an
  *  exposed node are viewed along the exposed region's mean normal, as a
  *  scanner looking into the craniotomy sees them: per lateral cell of
  *  `spacing` mm, the highest vertex whose normal is within 60 degrees of
@@ -118,10 +123,6 @@ DisplacementsFromSparsePoints(const Model &                model,
  *
  *  Errors (bmr::Error): those of (b), an empty surface, and no vertex of the
  *  preoperative surface near the exposed nodes. */
-/** Default spacing (mm) of the scanned surface's points that load the model:
- *  the tracked-point density of a surface scan. */
-constexpr double kDefaultScanSpacing = 5.0;
-
 PrescribedDisplacement
 DisplacementsBetweenSurfaces(const Model &               model,
                              const std::vector<Index> &  exposedNodes,

@@ -35,7 +35,8 @@ namespace itk
  *    - "IntraoperativeSurface": a triangle mesh of the displaced surface:
  *      each exposed node moves to its closest point on it
  *      (bmr::DisplacementsFromSurface), or, with "PreoperativeSurface" (the
- *      smooth brain surface the model was made from) also given, the surface
+ *      cortex the scan images: BrainSurfaceMeshSource of the brain mask with
+ *      ComputeSkull off) also given, the surface
  *      is matched to the preoperative one as a scanner sees it and the
  *      matches are interpolated (bmr::DisplacementsBetweenSurfaces, with
  *      ScanReach and ScanSpacing).

@@ -37,9 +37,9 @@ namespace itk
  * GetBrainSurface() and GetSkullSurface() give the same surfaces as
  * bmr::ContactSurface (the skull with bodySide Inside, a ready contact master).
  *
- * Method: the mask is padded by ceil(SkullGap / spacing) + 2 voxels of
- * background (so the skull is closed where the mask touches the image
- * border); the signed distance (mm, negative inside) is the mean of ITK's
+ * Method: the mask's bounding box is padded by ceil(SkullGap / spacing) + 2
+ * voxels of background (so the skull is closed where the mask touches the
+ * image border); the signed distance (mm, negative inside) is the mean of ITK's
  * SignedMaurerDistanceMapImageFilter of the mask (zero on the brain's boundary
  * voxels) and of the negated one of its complement (zero on the background's
  * boundary voxels): each is biased by half a voxel, in opposite directions, so
