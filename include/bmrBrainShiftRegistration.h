@@ -108,13 +108,16 @@ AtlasBrainMask(const RegistrationImage * image, const AtlasSettings & settings =
  *  without `skull`) of a mask (itk::BrainSurfaceMeshSource); its warnings are
  *  appended to `warnings`. */
 BrainSurfaces
+BrainSurfacesOfMask(const RegistrationLabelImage * mask, double skullGap, std::vector<std::string> & warnings,
+                    bool skull = true);
+BrainSurfaces
 BrainSurfacesOfMask(const LabelVolume & mask, double skullGap, std::vector<std::string> & warnings, bool skull = true);
 
 /** The smooth surface (level 0) of a brain mask alone, without a skull: the
- *  cortex that a surface scan images (itk::BrainSurfaceMeshSource with
- *  ComputeSkull off). Throws bmr::Error. */
+ *  cortex that a surface scan images (BrainSurfacesOfMask without the skull).
+ *  Throws bmr::Error. */
 ContactSurface
-CortexSurfaceOfMask(const RegistrationLabelImage * brainMask);
+CortexSurfaceOfMask(const RegistrationLabelImage * brainMask, std::vector<std::string> & warnings);
 
 /** 1 where `image` > 0, 0 elsewhere, same grid: a brain-extracted image
  *  such as Colin27's ch2bet.nii.gz as a mask. */

@@ -30,30 +30,34 @@ IntegerField(std::string name, int SolverSettings::*member, double lowest, doubl
     [member](SolverSettings & settings, double value) { settings.*member = static_cast<int>(value); });
 }
 
+/** A setting of two choices: `first` (value 0, named choices[0]) or `second` (1). */
+template <typename Enum>
+Field
+ChoiceField(std::string name, Enum SolverSettings::*member, Enum first, Enum second, std::vector<std::string> choices,
+            std::string meaning)
+{
+  Field field = MakeSettingField<SolverSettings>(
+    Kind::Choice, "", std::move(name), "", 0, false, 0, false, std::move(meaning),
+    [member, second](const SolverSettings & s) { return s.*member == second ? 1.0 : 0.0; },
+    [member, first, second](SolverSettings & s, double v) { s.*member = v == 1.0 ? second : first; });
+  field.choices = std::move(choices);
+  return field;
+}
+
 constexpr double kInfinity = std::numeric_limits<double>::infinity();
 
 std::vector<Field>
 MakeFields()
 {
   std::vector<Field> fields;
-  Field integrator = MakeSettingField<SolverSettings>(
-    Kind::Choice, "", "integrator", "", 0, false, 0, false,
-    "dynamic relaxation (steady state) or explicit dynamics (time-accurate central difference)",
-    [](const SolverSettings & s) { return s.integrator == Integrator::ExplicitDynamics ? 1.0 : 0.0; },
-    [](SolverSettings & s, double v) {
-      s.integrator = v == 1.0 ? Integrator::ExplicitDynamics : Integrator::DynamicRelaxation;
-    });
-  integrator.choices = { "dynamic_relaxation", "explicit_dynamics" };
-  fields.push_back(integrator);
-  Field tetrahedron = MakeSettingField<SolverSettings>(
-    Kind::Choice, "", "tetrahedron", "", 0, false, 0, false,
-    "average nodal pressure (non-locking) or the plain constant-strain tetrahedron, for comparison",
-    [](const SolverSettings & s) { return s.tetrahedron == TetrahedronFormulation::Linear ? 1.0 : 0.0; },
-    [](SolverSettings & s, double v) {
-      s.tetrahedron = v == 1.0 ? TetrahedronFormulation::Linear : TetrahedronFormulation::AverageNodalPressure;
-    });
-  tetrahedron.choices = { "anp", "linear" };
-  fields.push_back(tetrahedron);
+  fields.push_back(ChoiceField("integrator", &SolverSettings::integrator, Integrator::DynamicRelaxation,
+                               Integrator::ExplicitDynamics, { "dynamic_relaxation", "explicit_dynamics" },
+                               "dynamic relaxation (steady state) or explicit dynamics (time-accurate central "
+                               "difference)"));
+  fields.push_back(ChoiceField("tetrahedron", &SolverSettings::tetrahedron, TetrahedronFormulation::AverageNodalPressure,
+                               TetrahedronFormulation::Linear, { "anp", "linear" },
+                               "average nodal pressure (non-locking) or the plain constant-strain tetrahedron, for "
+                               "comparison"));
   fields.push_back(NumberField("tolerance", "mm", &SolverSettings::tolerance, 0.0, true, kInfinity, false,
                                "dynamic relaxation stops when the estimated distance to the solution is below it"));
   fields.push_back(IntegerField("max_steps", &SolverSettings::maxSteps, 1, std::numeric_limits<int>::max(),

@@ -110,28 +110,27 @@ CheckIntraoperativeData(const IntraoperativeData & data)
   }
 }
 
-/** The exposed surface of an intraoperative image: the boundary of its brain
- *  mask (given, or from atlas skull stripping). */
+/** The exposed surface of an intraoperative image: the smooth surface of its
+ *  brain mask (given, or from atlas skull stripping), made as the cortex it
+ *  is matched to (CortexSurfaceOfMask of the preoperative mask), so that both
+ *  surfaces show the same detail. */
 ContactSurface
-IntraoperativeSurfaceOfImage(const IntraoperativeData & data, const AtlasSettings & atlas, double elementSize,
+IntraoperativeSurfaceOfImage(const IntraoperativeData & data, const AtlasSettings & atlas,
                              std::vector<std::string> & warnings)
 {
-  const RegistrationLabelImage::Pointer mask =
-    data.imageBrainMask.IsNotNull() ? RegistrationLabelImage::Pointer() : AtlasBrainMask(data.image, atlas);
-  const LabelVolume maskVolume =
-    MaskVolume(data.imageBrainMask.IsNotNull() ? data.imageBrainMask.GetPointer() : mask.GetPointer(),
-               "intraoperative brain mask", nullptr);
-  // Made as the preoperative one is (the boundary of a hexahedral grid of
-  // the mask, smoothed), so that both surfaces show the same detail: a
-  // mask's own surface shows sulci the model's does not, and closest
-  // points between the two land in them (a 5 mm Colin27 model folded).
-  ImageGridSettings coarse;
-  coarse.elementSize = elementSize;
-  const ImageGrid grid = MakeGridFromLabels(maskVolume, coarse, &warnings);
-  ContactSurface  surface =
-    BrainSurfacesOfMask(RasterizeCells(grid.model, maskVolume.geometry), BrainSurfaceSettings{}.skullGap, warnings).brain;
-  surface.name = "brain surface of the intraoperative image";
-  return surface;
+  const RegistrationLabelImage::ConstPointer mask =
+    data.imageBrainMask.IsNotNull() ? data.imageBrainMask
+                                    : RegistrationLabelImage::ConstPointer(AtlasBrainMask(data.image, atlas));
+  try
+  {
+    ContactSurface surface = CortexSurfaceOfMask(mask, warnings);
+    surface.name = "brain surface of the intraoperative image";
+    return surface;
+  }
+  catch (const Error & error)
+  {
+    throw Error(std::string("the intraoperative brain mask: ") + error.what());
+  }
 }
 
 /** Runs one filter of the chain; its itk::ExceptionObject becomes the bmr::Error every caller translates. */
@@ -215,10 +214,11 @@ AtlasBrainMask(const RegistrationImage * image, const AtlasSettings & settings)
 }
 
 BrainSurfaces
-BrainSurfacesOfMask(const LabelVolume & mask, double skullGap, std::vector<std::string> & warnings, bool skull)
+BrainSurfacesOfMask(const RegistrationLabelImage * mask, double skullGap, std::vector<std::string> & warnings,
+                    bool skull)
 {
   auto source = itk::BrainSurfaceMeshSource<RegistrationLabelImage>::New();
-  source->SetInput(itk::MakeImageFromBiomechanicalVolume<RegistrationLabelImage>(mask));
+  source->SetInput(mask);
   source->SetSkullGap(skullGap);
   source->SetComputeSkull(skull);
   UpdateStage(source.GetPointer(), "brain surfaces");
@@ -226,14 +226,17 @@ BrainSurfacesOfMask(const LabelVolume & mask, double skullGap, std::vector<std::
   return BrainSurfaces{ source->GetBrainSurface(), source->GetSkullSurface() };
 }
 
-ContactSurface
-CortexSurfaceOfMask(const RegistrationLabelImage * brainMask)
+BrainSurfaces
+BrainSurfacesOfMask(const LabelVolume & mask, double skullGap, std::vector<std::string> & warnings, bool skull)
 {
-  auto source = itk::BrainSurfaceMeshSource<RegistrationLabelImage>::New();
-  source->SetInput(brainMask);
-  source->ComputeSkullOff();
-  UpdateStage(source.GetPointer(), "brain surface of the mask");
-  return source->GetBrainSurface();
+  return BrainSurfacesOfMask(itk::MakeImageFromBiomechanicalVolume<RegistrationLabelImage>(mask).GetPointer(), skullGap,
+                             warnings, skull);
+}
+
+ContactSurface
+CortexSurfaceOfMask(const RegistrationLabelImage * brainMask, std::vector<std::string> & warnings)
+{
+  return BrainSurfacesOfMask(brainMask, BrainSurfaceSettings{}.skullGap, warnings, false).brain;
 }
 
 // ---------------------------------------------------------------------------
@@ -435,7 +438,7 @@ BuildBrainModel(const RegistrationImage *      image,
         const double elementSize = std::max(result.gridQuality.meanEdgeLength, settings.grid.elementSize);
         const ContactSurface displaced =
           intraoperative->surface.triangles.empty()
-            ? IntraoperativeSurfaceOfImage(*intraoperative, settings.atlas, elementSize, warnings)
+            ? IntraoperativeSurfaceOfImage(*intraoperative, settings.atlas, warnings)
             : intraoperative->surface;
         loads->SetIntraoperativeSurface(itk::MakeMeshFromContactSurface<itk::BiomechanicalSurfaceMeshType>(displaced));
         // A scan images the cortex, so its partner is the smooth surface of
@@ -443,7 +446,7 @@ BuildBrainModel(const RegistrationImage *      image,
         // of 5 mm cells lies about a millimetre off the cortex, which bent
         // the matches and left out a quarter of them (docs/registration.md).
         loads->SetPreoperativeSurface(
-          itk::MakeMeshFromContactSurface<itk::BiomechanicalSurfaceMeshType>(CortexSurfaceOfMask(mask)));
+          itk::MakeMeshFromContactSurface<itk::BiomechanicalSurfaceMeshType>(CortexSurfaceOfMask(mask, warnings)));
         loads->SetScanReach(elementSize);
         loads->SetScanSpacing(kDefaultScanSpacing);
       }

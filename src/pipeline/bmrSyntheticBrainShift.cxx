@@ -478,7 +478,8 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
     // A little wider than the opening, as a scanner sees it: the registration's
     // exposed nodes at the rim then find their partners on the surface, not on its edge.
     const double             patchRadius = settings.craniotomyRadius + settings.scanMargin;
-    const ContactSurface     cortex = CortexSurfaceOfMask(brainMask);
+    std::vector<std::string> surfaceWarnings; // the truth's model reports the same mask's
+    const ContactSurface     cortex = CortexSurfaceOfMask(brainMask, surfaceWarnings);
     std::vector<Index>       newIndex(cortex.vertices.size(), -1);
     ContactSurface &         exposed = truth.exposedSurface;
     exposed.name = "displaced exposed surface";
