@@ -508,7 +508,7 @@ FiniteElementForceModel::AddHexahedronForces(Index begin, Index end, const doubl
     {
       xh[c] = XH[c * count + e];
     }
-    double F[3][3];
+    Matrix3x3 F;
     #pragma GCC unroll 32
     for (int i = 0; i < 3; ++i)
     {
@@ -521,21 +521,11 @@ FiniteElementForceModel::AddHexahedronForces(Index begin, Index end, const doubl
         {
           sum += ue[a][i] * b[3 * a + j];
         }
-        F[i][j] = sum;
+        F.m[i][j] = sum;
       }
     }
-    double cof[3][3];
-    #pragma GCC unroll 32
-    for (int i = 0; i < 3; ++i)
-    {
-      #pragma GCC unroll 32
-      for (int j = 0; j < 3; ++j)
-      {
-        const int i1 = (i + 1) % 3, i2 = (i + 2) % 3, j1 = (j + 1) % 3, j2 = (j + 2) % 3;
-        cof[i][j] = F[i1][j1] * F[i2][j2] - F[i1][j2] * F[i2][j1];
-      }
-    }
-    const double J = F[0][0] * cof[0][0] + F[0][1] * cof[0][1] + F[0][2] * cof[0][2];
+    const Matrix3x3 cof = CofactorOf(F);
+    const double    J = DeterminantOf(F, cof);
     if (!(J > 0.0))
     {
       firstInverted = std::min(firstInverted, e);
@@ -557,38 +547,23 @@ FiniteElementForceModel::AddHexahedronForces(Index begin, Index end, const doubl
         #pragma GCC unroll 32
         for (int j = 0; j < 3; ++j)
         {
-          m -= (F[i][j] - (i == j ? 1.0 : 0.0)) * xh[4 * j + alpha];
+          m -= (F.m[i][j] - (i == j ? 1.0 : 0.0)) * xh[4 * j + alpha];
         }
         modes[alpha][i] = m;
       }
     }
-    const double isochoric = m_Mu[e] * InverseCubeRootSquared(J);
-    double       I1 = 0.0;
-    #pragma GCC unroll 32
-    for (int i = 0; i < 3; ++i)
-    {
-      #pragma GCC unroll 32
-      for (int j = 0; j < 3; ++j)
-      {
-        I1 += F[i][j] * F[i][j];
-      }
-    }
-    const double cofactorFactor =
-      m_Kappa[e] * (J - 1.0) + CollapsePressure(J, m_Collapse[e]) - isochoric * I1 / (3.0 * J);
-    const double V = m_Volume[e];
+    Matrix3x3 A = ScaledFirstPiola(F, cof, J, m_Kappa[e] * (J - 1.0), m_Mu[e], m_Collapse[e], m_Volume[e]); // V P
     const double k = m_HexHourglassStiffness[e];
     // Hourglass forces k Gamma m folded in: k h m directly, and -k B (X^T h) m
     // through the same B as the stress term.
-    double A[3][3];
     #pragma GCC unroll 32
     for (int i = 0; i < 3; ++i)
     {
       #pragma GCC unroll 32
       for (int j = 0; j < 3; ++j)
       {
-        A[i][j] = V * (isochoric * F[i][j] + cofactorFactor * cof[i][j]) -
-                  k * (modes[0][i] * xh[4 * j] + modes[1][i] * xh[4 * j + 1] + modes[2][i] * xh[4 * j + 2] +
-                       modes[3][i] * xh[4 * j + 3]);
+        A.m[i][j] -= k * (modes[0][i] * xh[4 * j] + modes[1][i] * xh[4 * j + 1] + modes[2][i] * xh[4 * j + 2] +
+                        modes[3][i] * xh[4 * j + 3]);
       }
     }
     const Index local = e - begin;
@@ -598,7 +573,7 @@ FiniteElementForceModel::AddHexahedronForces(Index begin, Index end, const doubl
       #pragma GCC unroll 32
       for (int i = 0; i < 3; ++i)
       {
-        forces[3 * a + i][local] = A[i][0] * b[3 * a] + A[i][1] * b[3 * a + 1] + A[i][2] * b[3 * a + 2] +
+        forces[3 * a + i][local] = A.m[i][0] * b[3 * a] + A.m[i][1] * b[3 * a + 1] + A.m[i][2] * b[3 * a + 2] +
                                    k * (kHourglassBase[a][0] * modes[0][i] + kHourglassBase[a][1] * modes[1][i] +
                                         kHourglassBase[a][2] * modes[2][i] + kHourglassBase[a][3] * modes[3][i]);
       }
@@ -617,13 +592,13 @@ FiniteElementForceModel::AddHexahedronForces(Index begin, Index end, const doubl
   {                                                                                                              \
     b[c] = B[c * count + t];                                                                                     \
   }                                                                                                              \
-  double F[3][3];                                                                                                \
+  Matrix3x3 F;                                                                                                   \
   for (int i = 0; i < 3; ++i)                                                                                    \
   {                                                                                                              \
     for (int j = 0; j < 3; ++j)                                                                                  \
     {                                                                                                            \
-      F[i][j] = (i == j ? 1.0 : 0.0) + u[3 * i0 + i] * b[j] + u[3 * i1 + i] * b[3 + j] +                         \
-                u[3 * i2 + i] * b[6 + j] + u[3 * i3 + i] * b[9 + j];                                             \
+      F.m[i][j] = (i == j ? 1.0 : 0.0) + u[3 * i0 + i] * b[j] + u[3 * i1 + i] * b[3 + j] +                       \
+                  u[3 * i2 + i] * b[6 + j] + u[3 * i3 + i] * b[9 + j];                                           \
     }                                                                                                            \
   }
 
@@ -637,8 +612,7 @@ FiniteElementForceModel::TetrahedronDilatations(Index begin, Index end, const do
   for (Index t = begin; t < end; ++t)
   {
     BMR_TETRAHEDRON_DEFORMATION_GRADIENT
-    jacobian[t] = F[0][0] * (F[1][1] * F[2][2] - F[1][2] * F[2][1]) - F[0][1] * (F[1][0] * F[2][2] - F[1][2] * F[2][0]) +
-                  F[0][2] * (F[1][0] * F[2][1] - F[1][1] * F[2][0]);
+    jacobian[t] = DeterminantOf(F, CofactorOf(F));
   }
 }
 
@@ -659,16 +633,8 @@ FiniteElementForceModel::AddTetrahedronForces(Index begin, Index end, const doub
   for (Index t = begin; t < end; ++t)
   {
     BMR_TETRAHEDRON_DEFORMATION_GRADIENT
-    double cof[3][3];
-    for (int i = 0; i < 3; ++i)
-    {
-      for (int j = 0; j < 3; ++j)
-      {
-        const int i1 = (i + 1) % 3, i2 = (i + 2) % 3, j1 = (j + 1) % 3, j2 = (j + 2) % 3;
-        cof[i][j] = F[i1][j1] * F[i2][j2] - F[i1][j2] * F[i2][j1];
-      }
-    }
-    const double J = F[0][0] * cof[0][0] + F[0][1] * cof[0][1] + F[0][2] * cof[0][2];
+    const Matrix3x3 cof = CofactorOf(F);
+    const double    J = DeterminantOf(F, cof);
     if (!(J > 0.0))
     {
       firstInverted = std::min(firstInverted, t);
@@ -680,26 +646,14 @@ FiniteElementForceModel::AddTetrahedronForces(Index begin, Index end, const doub
     const double      pressure =
       averaged * 0.25 * (nodalPressure[i0] + nodalPressure[i1] + nodalPressure[i2] + nodalPressure[i3]) +
       (1.0 - averaged) * m_Kappa[k] * (J - 1.0);
-    const double isochoric = m_Mu[k] * InverseCubeRootSquared(J);
-    const double I1 = F[0][0] * F[0][0] + F[0][1] * F[0][1] + F[0][2] * F[0][2] + F[1][0] * F[1][0] +
-                      F[1][1] * F[1][1] + F[1][2] * F[1][2] + F[2][0] * F[2][0] + F[2][1] * F[2][1] + F[2][2] * F[2][2];
     // The collapse barrier acts on the cell's own J, which ANP leaves free.
-    const double cofactorFactor = pressure + CollapsePressure(J, m_Collapse[k]) - isochoric * I1 / (3.0 * J);
-    const double V = m_Volume[k];
-    double       A[3][3]; // V P
-    for (int i = 0; i < 3; ++i)
-    {
-      for (int j = 0; j < 3; ++j)
-      {
-        A[i][j] = V * (isochoric * F[i][j] + cofactorFactor * cof[i][j]);
-      }
-    }
+    const Matrix3x3 A = ScaledFirstPiola(F, cof, J, pressure, m_Mu[k], m_Collapse[k], m_Volume[k]); // V P
     const Index local = t - begin;
     for (int a = 0; a < 4; ++a)
     {
       for (int i = 0; i < 3; ++i)
       {
-        forces[3 * a + i][local] = A[i][0] * b[3 * a] + A[i][1] * b[3 * a + 1] + A[i][2] * b[3 * a + 2];
+        forces[3 * a + i][local] = A.m[i][0] * b[3 * a] + A.m[i][1] * b[3 * a + 1] + A.m[i][2] * b[3 * a + 2];
       }
     }
   }

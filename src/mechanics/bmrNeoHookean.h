@@ -96,6 +96,70 @@ FirstPiola(const Eigen::Matrix3d & F,
                                  cof;
 }
 
+// The same law on plain arrays, for the force kernels' loops that evaluate one
+// cell or integration point per SIMD lane (Eigen's objects do not vectorise
+// across loop iterations). Passed and returned by value: a local whose address
+// is taken inside `omp simd` becomes a per-lane array in memory, which made the
+// element kernels twice as slow.
+struct Matrix3x3
+{
+  double m[3][3];
+};
+
+// The cofactor matrix cof(F) = J F^-T.
+inline Matrix3x3
+CofactorOf(const Matrix3x3 F)
+{
+  Matrix3x3 cof;
+  for (int i = 0; i < 3; ++i)
+  {
+    for (int j = 0; j < 3; ++j)
+    {
+      const int i1 = (i + 1) % 3, i2 = (i + 2) % 3, j1 = (j + 1) % 3, j2 = (j + 2) % 3;
+      cof.m[i][j] = F.m[i1][j1] * F.m[i2][j2] - F.m[i1][j2] * F.m[i2][j1];
+    }
+  }
+  return cof;
+}
+
+inline double
+DeterminantOf(const Matrix3x3 F, const Matrix3x3 cof)
+{
+  return F.m[0][0] * cof.m[0][0] + F.m[0][1] * cof.m[0][1] + F.m[0][2] * cof.m[0][2];
+}
+
+// scale * P, with the volumetric pressure given (kappa (Jv - 1), or the ANP
+// tetrahedron's averaged nodal pressure); the barrier on the unit's own J.
+inline Matrix3x3
+ScaledFirstPiola(const Matrix3x3 F,
+                 const Matrix3x3 cof,
+                 double          J,
+                 double          pressure,
+                 double          mu,
+                 double          collapseModulus,
+                 double          scale)
+{
+  const double isochoric = mu * InverseCubeRootSquared(J);
+  double       I1 = 0.0;
+  for (int i = 0; i < 3; ++i)
+  {
+    for (int j = 0; j < 3; ++j)
+    {
+      I1 += F.m[i][j] * F.m[i][j];
+    }
+  }
+  const double cofactorFactor = pressure + CollapsePressure(J, collapseModulus) - isochoric * I1 / (3.0 * J);
+  Matrix3x3    A;
+  for (int i = 0; i < 3; ++i)
+  {
+    for (int j = 0; j < 3; ++j)
+    {
+      A.m[i][j] = scale * (isochoric * F.m[i][j] + cofactorFactor * cof.m[i][j]);
+    }
+  }
+  return A;
+}
+
 inline double
 StrainEnergyDensity(const Eigen::Matrix3d & F, double J, double volumeRatio, double mu, double kappa,
                     double collapseModulus)
