@@ -63,6 +63,7 @@ struct DemoOptions
   std::vector<double>         tumourCentre;
   std::string                 truthGrid = "hexahedra";
   std::vector<std::string>    variants{ "hexahedra:5" };
+  std::string                 truthCheck; // KIND:SIZE of a second ground truth; empty: none
   std::string                 load = "points";
   std::string                 surfaceMatch = "closest";
   double                      registrationGravity = 0.0; // g
@@ -153,14 +154,14 @@ FormatNumber(double value)
   return text.str();
 }
 
-/** "hexahedra:5" -> grid settings. */
+/** "hexahedra:5" -> grid settings; `option` names the option in errors. */
 ImageGridSettings
-ParseVariant(const std::string & variant)
+ParseVariant(const std::string & variant, const std::string & option = "--variant")
 {
   const auto colon = variant.find(':');
   if (colon == std::string::npos)
   {
-    throw Error("--variant '" + variant + "': write it as KIND:SIZE, e.g. hexahedra:5 or meshless:7");
+    throw Error(option + " '" + variant + "': write it as KIND:SIZE, e.g. hexahedra:5 or meshless:7");
   }
   ImageGridSettings settings;
   settings.kind = ParseImageGridKind(variant.substr(0, colon));
@@ -170,7 +171,7 @@ ParseVariant(const std::string & variant)
   }
   catch (const std::exception &)
   {
-    throw Error("--variant '" + variant + "': the size after ':' must be a number (mm)");
+    throw Error(option + " '" + variant + "': the size after ':' must be a number (mm)");
   }
   return settings;
 }
@@ -400,6 +401,11 @@ RunDemo(DemoOptions options)
   {
     variants.push_back(ParseVariant(variant));
   }
+  std::optional<ImageGridSettings> truthCheckGrid;
+  if (!options.truthCheck.empty())
+  {
+    truthCheckGrid = ParseVariant(options.truthCheck, "--truth-check");
+  }
 
   const RegistrationImage::Pointer      preoperative = ReadImage<RegistrationImage>(options.image, "preoperative image");
   const RegistrationLabelImage::Pointer brainMask = ReadMaskImage(options.mask, "brain mask");
@@ -459,9 +465,66 @@ RunDemo(DemoOptions options)
   itk::WriteBiomechanicalTransform(truth.truthTransform, (output / "ground-truth-transform.h5").string());
   const fs::path overlays = output / "overlays";
 
+  // A second ground truth of the same scene on another discretization: how far
+  // two truths differ is the smallest error a registration can be judged by.
+  json                           truthCheckReport;
+  RegistrationTransform::Pointer secondTruth;
+  if (truthCheckGrid)
+  {
+    SyntheticBrainShiftSettings checkSettings = options.truth;
+    checkSettings.grid.kind = truthCheckGrid->kind;
+    checkSettings.grid.elementSize = truthCheckGrid->elementSize;
+    if (!options.quiet)
+    {
+      std::cerr << "second ground truth: " << ImageGridKindName(checkSettings.grid.kind) << " "
+                << checkSettings.grid.elementSize << " mm\n";
+    }
+    const SyntheticBrainShift check = [&] {
+      try
+      {
+        return MakeSyntheticBrainShift(preoperative, brainMask, checkSettings);
+      }
+      catch (const Error & error)
+      {
+        throw Error("--truth-check " + options.truthCheck + ": the second ground truth failed: " + error.what());
+      }
+    }();
+    const DisplacementError   difference = MeasureDisplacementError(check.truthTransform, truth.truthTransform,
+                                                                  truth.intraoperativeBrainOnPreoperativeGrid);
+    itk::WriteBiomechanicalTransform(check.truthTransform, (output / "ground-truth-check-transform.h5").string());
+    secondTruth = check.truthTransform;
+    truthCheckReport = { { "grid", ImageGridKindName(checkSettings.grid.kind) },
+                         { "element_size_mm", checkSettings.grid.elementSize },
+                         { "nodes", check.model.model.nodes.size() },
+                         { "cells", check.model.model.cells.size() },
+                         { "shift_mm", check.shift },
+                         { "solve_steps", check.solve.steps },
+                         { "solve_estimated_error_mm", check.solve.estimatedError },
+                         { "fit_max_residual_mm", check.truthFitMaxResidual },
+                         { "difference_from_truth_mm",
+                           { { "mean", difference.mean }, { "p95", difference.p95 }, { "max", difference.max },
+                             { "samples", difference.samples } } },
+                         { "seconds", check.timer.Json() } };
+    if (!options.quiet)
+    {
+      std::cerr << "the two ground truths differ by " << difference.mean << " / " << difference.p95 << " / "
+                << difference.max << " mm (mean / p95 / max over the brain)\n";
+    }
+  }
+
   std::vector<MethodResult> methods;
-  const DisplacementError   noRegistrationError =
-    MeasureDisplacementError(nullptr, truth.truthTransform, truth.intraoperativeBrainOnPreoperativeGrid);
+  // A method's error against the ground truth, and against the second truth when there is one.
+  const auto score = [&](const itk::Transform<double, 3, 3> * transform, MethodResult & method) {
+    method.error = MeasureDisplacementError(transform, truth.truthTransform, truth.intraoperativeBrainOnPreoperativeGrid);
+    if (secondTruth)
+    {
+      const DisplacementError second =
+        MeasureDisplacementError(transform, secondTruth, truth.intraoperativeBrainOnPreoperativeGrid);
+      method.details["displacement_error_against_second_truth_mm"] = {
+        { "mean", second.mean }, { "p95", second.p95 }, { "max", second.max }, { "samples", second.samples }
+      };
+    }
+  };
 
   for (std::size_t k = 0; k < variants.size(); ++k)
   {
@@ -512,7 +575,7 @@ RunDemo(DemoOptions options)
     {
       MethodResult none;
       none.name = "no registration";
-      none.error = noRegistrationError;
+      score(nullptr, none);
       none.edges = result.unregistered;
       methods.push_back(none);
       WriteEdgeOverlays(result.unregistered, intraoperative, overlays.string(), "none", options.overlays);
@@ -524,11 +587,10 @@ RunDemo(DemoOptions options)
     method.stages = result.timer.Json();
     // The registration's time: everything but the evaluation, which needs the intraoperative image.
     method.seconds = method.stages["total"].get<double>() - result.timer.Seconds("evaluate");
-    method.error = MeasureDisplacementError(result.transform, truth.truthTransform,
-                                            truth.intraoperativeBrainOnPreoperativeGrid);
     method.edges = result.registered;
     method.details = RegistrationReportJson(result, settings);
     method.details.erase("evaluation");
+    score(result.transform, method);
     methods.push_back(method);
     const std::string tag = std::string(ImageGridKindName(grid.kind)) + "-" + FormatNumber(grid.elementSize);
     WriteImageAtomically(result.warpedImage.GetPointer(), output / ("warped-biomechanical-" + tag + ".nii.gz"));
@@ -555,8 +617,7 @@ RunDemo(DemoOptions options)
     method.name = "B-spline intensity";
     method.seconds = baseline.seconds;
     method.stages = { { "register", baseline.seconds } };
-    method.error = MeasureDisplacementError(baseline.transform, truth.truthTransform,
-                                            truth.intraoperativeBrainOnPreoperativeGrid);
+    score(baseline.transform, method);
     method.edges = EvaluateEdges(intraoperative, baseline.warpedOnFixedGrid, intraoperativeMask);
     methods.push_back(method);
     WriteImageAtomically(baseline.warpedOnFixedGrid.GetPointer(), output / "warped-bspline-on-intraoperative-grid.nii.gz");
@@ -583,10 +644,9 @@ RunDemo(DemoOptions options)
     method.name = "elastix B-spline";
     method.seconds = peer.seconds;
     method.stages = { { "register", peer.seconds }, { "transformix", peer.outputSeconds } };
-    method.error = MeasureDisplacementError(peer.transform, truth.truthTransform,
-                                            truth.intraoperativeBrainOnPreoperativeGrid);
     method.edges = EvaluateEdges(intraoperative, peer.warpedOnFixedGrid, intraoperativeMask);
     method.details = { { "parameter_files", options.elastixParameters }, { "folder", (output / "elastix").string() } };
+    score(peer.transform, method);
     methods.push_back(method);
     WriteEdgeOverlays(method.edges, intraoperative, overlays.string(), "elastix", options.overlays);
   }
@@ -626,6 +686,10 @@ RunDemo(DemoOptions options)
     { "field_of_view_mm", options.truth.fieldOfView },
     { "resection_cavity_radius_mm", truth.resectionCavityRadius },
     { "seconds", truth.timer.Json() } };
+  if (!truthCheckReport.is_null())
+  {
+    report["ground_truth_check"] = truthCheckReport;
+  }
   if (!electrodeReport.is_null())
   {
     report["electrodes"] = electrodeReport;
@@ -722,6 +786,9 @@ AddDemoCommand(CLI::App & app)
   demo->add_option("--variant", options->variants,
                    "Registration grid KIND:SIZE (hexahedra, tetrahedra, mixed, meshless); repeat for several")
     ->capture_default_str();
+  demo->add_option("--truth-check", options->truthCheck,
+                   "Solve the ground truth a second time on this grid KIND:SIZE (e.g. tetrahedra:5 beside the "
+                   "hexahedral truth) and report how far the two truths differ (ground_truth_check)");
   demo->add_option("--load", options->load,
                    "What the registration is given: the displaced exposed surface, its tracked points, or the "
                    "contacts of an 8 x 8 electrode grid found in a simulated CT")

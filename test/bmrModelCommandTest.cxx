@@ -488,8 +488,9 @@ TEST_F(ModelCommandTest, BadInputsExitOneNameTheProblemAndWriteNothing)
   }
 }
 
-// The demo's realistic-image and peer options fail before the ground truth's
-// solve, with the option or the missing program named, and write nothing.
+// The demo's realistic-image, second-truth and peer options fail before the
+// ground truth's solve, with the option or the missing program named, and
+// write nothing.
 TEST_F(ModelCommandTest, DemoNamesAResectionWithoutTumourAndAMissingElastix)
 {
   if (!fs::exists(Colin27Folder / "ch2.nii.gz"))
@@ -500,6 +501,12 @@ TEST_F(ModelCommandTest, DemoNamesAResectionWithoutTumourAndAMissingElastix)
   CommandResult  run = Biomech("demo --resection-margin 3 -o " + Quoted(output));
   EXPECT_EQ(run.exitCode, 1) << run.err;
   EXPECT_NE(run.err.find("tumour"), std::string::npos) << run.err;
+  EXPECT_EQ(FileCount(output), 0u);
+
+  // A second ground truth written without its size: named before any solve.
+  run = Biomech("demo --truth-check tetrahedra -o " + Quoted(output));
+  EXPECT_EQ(run.exitCode, 1) << run.err;
+  EXPECT_NE(run.err.find("--truth-check 'tetrahedra': write it as KIND:SIZE"), std::string::npos) << run.err;
   EXPECT_EQ(FileCount(output), 0u);
 
   const std::string path = std::getenv("PATH") != nullptr ? std::getenv("PATH") : "";
