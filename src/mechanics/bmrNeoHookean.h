@@ -75,28 +75,7 @@ CollapseEnergy(double J, double collapseModulus)
   return J >= Jc ? 0.0 : collapseModulus * (Jc * Jc / J - J + 2.0 * Jc * std::log(J / Jc));
 }
 
-// First Piola-Kirchhoff stress of the compressible neo-Hookean solid,
-// W = mu/2 (J^-2/3 I1 - 3) + kappa/2 (J - 1)^2, with the collapse barrier. The
-// volumetric part takes the dilatation `volumeRatio` (the element's own J, or
-// the averaged nodal J of the ANP tetrahedron); the isochoric part and the
-// barrier always use the element's own F and J.
-inline Eigen::Matrix3d
-FirstPiola(const Eigen::Matrix3d & F,
-           const Eigen::Matrix3d & cof,
-           double                  J,
-           double                  volumeRatio,
-           double                  mu,
-           double                  kappa,
-           double                  collapseModulus)
-{
-  const double isochoricFactor = mu * InverseCubeRootSquared(J);
-  const double I1 = F.squaredNorm();
-  return isochoricFactor * F + (kappa * (volumeRatio - 1.0) + CollapsePressure(J, collapseModulus) -
-                                isochoricFactor * I1 / (3.0 * J)) *
-                                 cof;
-}
-
-// The same law on plain arrays, for the force kernels' loops that evaluate one
+// The law on plain arrays, for the force kernels' loops that evaluate one
 // cell or integration point per SIMD lane (Eigen's objects do not vectorise
 // across loop iterations). Passed and returned by value: a local whose address
 // is taken inside `omp simd` becomes a per-lane array in memory, which made the
@@ -158,6 +137,27 @@ ScaledFirstPiola(const Matrix3x3 F,
     }
   }
   return A;
+}
+
+// First Piola-Kirchhoff stress of the compressible neo-Hookean solid,
+// W = mu/2 (J^-2/3 I1 - 3) + kappa/2 (J - 1)^2, with the collapse barrier. The
+// volumetric part takes the dilatation `volumeRatio` (the element's own J, or
+// the averaged nodal J of the ANP tetrahedron); the isochoric part and the
+// barrier always use the element's own F and J. The kernels' law, for Eigen's types.
+inline Eigen::Matrix3d
+FirstPiola(const Eigen::Matrix3d & F,
+           const Eigen::Matrix3d & cof,
+           double                  J,
+           double                  volumeRatio,
+           double                  mu,
+           double                  kappa,
+           double                  collapseModulus)
+{
+  Matrix3x3 plainF, plainCofactor;
+  Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(&plainF.m[0][0]) = F;
+  Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(&plainCofactor.m[0][0]) = cof;
+  const Matrix3x3 P = ScaledFirstPiola(plainF, plainCofactor, J, kappa * (volumeRatio - 1.0), mu, collapseModulus, 1.0);
+  return Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(&P.m[0][0]);
 }
 
 inline double
