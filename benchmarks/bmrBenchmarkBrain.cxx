@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <iomanip>
+#include <map>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -128,6 +129,38 @@ RunChild(const std::string & self, const std::string & arguments)
                      "). Output:\n" + output);
   }
   return Json::parse(output.substr(at + 11));
+}
+
+/** Bytes a force kernel streams from memory per unit and step, and its
+ *  multiply-adds, counted from the kernels' arrays and loops
+ *  (src/mechanics/bmrForceModel.cxx, bmrMeshlessForceModel.cxx); node arrays
+ *  (u, f, nodal pressures: under 1 MiB each) stay in the caches and are not
+ *  counted. */
+struct KernelTraffic
+{
+  double bytes = 0.0;
+  double multiplyAdds = 0.0;
+};
+
+KernelTraffic
+TrafficPerUnit(const std::string & kind, double meanNeighbours)
+{
+  if (kind == "hex")
+  {
+    // B (24 doubles), X^T h (12), 8 node indices, mu, kappa, collapse modulus, volume, hourglass stiffness;
+    // F 72, cofactor and J 21, hourglass modes 132, the law about 60, hourglass in A 36, nodal forces 168.
+    return { 24 * 8 + 12 * 8 + 8 * 4 + 5 * 8, 72 + 21 + 132 + 60 + 36 + 168 };
+  }
+  if (kind == "tet")
+  {
+    // Dilatation pass: B (12 doubles), 4 node indices, J written; nodal pressures: per cell 4 incidences of
+    // (cell index, weight, J); force pass: B, node indices, mu, kappa, collapse modulus, volume, ANP flag.
+    // F 36 twice, determinant 12, cofactor and J 21, pressure 4, the law about 60, nodal forces 36, averages 4.
+    return { (96 + 16 + 8) + 4 * (4 + 8 + 8) + (96 + 16 + 5 * 8), 36 + 12 + 36 + 21 + 4 + 60 + 36 + 4 };
+  }
+  // Meshless: per neighbour a node index and grad phi (3 doubles); per point weight, mu, kappa, collapse
+  // modulus, its offset and its integration point's index. Per neighbour 9 for F and 9 for the forces.
+  return { 28.0 * meanNeighbours + 4 * 8 + 4 + 4, 18.0 * meanNeighbours + 60 };
 }
 
 /** Runs every brain-sized case (kind x thread count), each in a child process,
@@ -398,6 +431,53 @@ BrainSection(const Options & options, const std::string & self, std::ostream & m
          << "x.\n";
     }
   }
+
+  // (i b) the memory roofline: the kernels' streamed bytes against STREAM's triad
+  std::map<int, double> triad;
+  for (const Json & r : brain)
+  {
+    const int threads = r["threads"].get<int>();
+    if (!triad.count(threads))
+    {
+      triad[threads] = RunChild(self, "triad " + std::to_string(threads))["triad_gb_per_s"].get<double>();
+    }
+  }
+  md << "\n### Memory roofline\n\n"
+     << "Bytes each force kernel streams from memory per unit and step, counted from its arrays (node arrays such as "
+     << "u, f and the nodal pressures, under 1 MiB each, stay in the caches and are not counted), times the measured "
+     << "units per second above, against STREAM's triad (`bmrBenchmark --child triad T`: a = b + 3 c over 3 x 256 "
+     << "MiB, best of 8, 24 bytes per element counted). Multiply-adds are counted from the kernels' loops (the "
+     << "constitutive law as about 60). The time per unit above is the whole explicit step, so the achieved rate is "
+     << "a lower bound of the kernel's own.\n\n"
+     << "| Kernel | Threads | Bytes / unit-step | Multiply-adds / unit-step | Multiply-adds / byte | Achieved GB/s | "
+        "Triad GB/s | Fraction of the triad |\n"
+     << "|---|---|---|---|---|---|---|---|\n";
+  double      highest = 0.0;
+  std::string highestKernel;
+  for (const Json & r : brain)
+  {
+    const std::string  kind = r["cells"].get<std::string>();
+    const int          threads = r["threads"].get<int>();
+    const double       neighbours = r.contains("mean_neighbours") ? r["mean_neighbours"].get<double>() : 0.0;
+    const KernelTraffic traffic = TrafficPerUnit(kind, neighbours);
+    const double       achieved = traffic.bytes * r["element_steps_per_second"].get<double>() / 1e9;
+    md << "| " << KindName(kind) << " | " << threads << " | " << Fixed(traffic.bytes, 0) << " | "
+       << Fixed(traffic.multiplyAdds, 0) << " | " << Fixed(traffic.multiplyAdds / traffic.bytes, 2) << " | "
+       << Fixed(achieved, 1) << " | " << Fixed(triad[threads], 1) << " | " << Fixed(100.0 * achieved / triad[threads], 0)
+       << " % |\n";
+    if (achieved / triad[threads] > highest)
+    {
+      highest = achieved / triad[threads];
+      highestKernel = KindName(kind) + ", " + std::to_string(threads) + " thread(s)";
+    }
+  }
+  md << "\nThe closest to the roof is " << highestKernel << " at " << Fixed(100.0 * highest, 0) << " % of the triad. "
+     << (highest < 0.5 ? "No kernel reaches half of it, so none is limited by memory bandwidth on this machine; "
+                         "docs/thread-scaling.md has what was measured instead (the latency of streamed tables and "
+                         "scattered node accesses, the law's divisions)."
+                       : "Kernels above half of it are near the bandwidth roof: fewer bytes per unit (e.g. single-"
+                         "precision tables) may pay there (not measured for them).")
+     << "\n";
 
   // (ii) dynamic relaxation
   md << "\n### Time to dynamic-relaxation convergence (tolerance " << kBrainTolerance << " mm)\n\n"
