@@ -12,6 +12,7 @@ error-against-run-time plot (docs/validation-error-vs-time.png).
 
     /usr/bin/python3 examples/validation_study.py            # full study (about 60 min on 2 cores)
     /usr/bin/python3 examples/validation_study.py --reduced  # 1 scene, coarse, checked (a CTest case)
+    /usr/bin/python3 examples/validation_study.py --truths   # 2 scenes, each truth solved twice (about 6 min)
 """
 import argparse
 import json
@@ -323,7 +324,7 @@ def truth_agreement(runs, machine):
                          entry["name"], largest, "below" if largest < fits else "above", fits,
                          ", so it may come from the fits as much as from the discretizations" if largest < fits
                          else ": the discretizations differ by more than the fits can explain",
-                         "Both truths are ANP tetrahedra (of different, not nested meshes)." if
+                         "Both truths are %s (of different, not nested meshes)." % first["grid"] if
                          first["grid"] == second["grid"] else "The two truths are different element types."))
     lines += ["* Why the 20 mm scene's second truth is tetrahedral too (measured 2026-11-26, not rerun by this "
               "script): hexahedra of 4 mm fold a cell at 20 mm, mixed cells of 4 mm invert a tetrahedron at the first "
@@ -333,6 +334,13 @@ def truth_agreement(runs, machine):
               "Dirichlet problems with gravity; these scenes also have frictionless contact with the rigid skull, "
               "which it does not write yet."]
     return "\n".join(lines) + "\n"
+
+
+def machine_line(load):
+    """The machine, the date and the load average at the start (given) and now."""
+    return "%s, %d cores, %s, load average %.1f at the start and %.1f at the end" % (
+        platform.processor() or platform.machine(), os.cpu_count(), time.strftime("%Y-%m-%d"), load,
+        os.getloadavg()[0])
 
 
 def main():
@@ -369,9 +377,7 @@ def main():
         load = os.getloadavg()[0]
         runs = [run(name, centre, extra, variants, False, os.path.join(arguments.output, "truths"))
                 for name, centre, extra, variants in TRUTH_CHECKS]
-        machine = "%s, %d cores, %s, load average %.1f at the start and %.1f at the end" % (
-            platform.processor() or platform.machine(), os.cpu_count(), time.strftime("%Y-%m-%d"), load,
-            os.getloadavg()[0])
+        machine = machine_line(load)
         os.makedirs(arguments.docs, exist_ok=True)
         with open(os.path.join(arguments.docs, "ground-truth-agreement.md"), "w") as handle:
             handle.write(truth_agreement(runs, machine))
@@ -389,14 +395,12 @@ def main():
     for name, centre, extra, variants in scenes:
         print("scene", name, flush=True)
         if arguments.reduced:
-            # A coarser ground truth (6 mm) and registration (7 mm); elastix in a few iterations.
+            # A coarser ground truth (6 mm), a second one (8 mm) and registration (7 mm); elastix in a few iterations.
             extra = extra + ["--truth-element-size", "6", "--truth-check", REDUCED_TRUTH_CHECK, "--elastix-parameters",
                              os.path.join(ROOT, "test", "elastix-quick.txt")]
             variants = ["hexahedra:7"]
         runs.append(run(name, centre, extra, variants or VARIANTS, not arguments.reduced, arguments.output))
-    machine = "%s, %d cores, %s, load average %.1f at the start and %.1f at the end" % (
-        platform.processor() or platform.machine(), os.cpu_count(), time.strftime("%Y-%m-%d"), load,
-        os.getloadavg()[0])
+    machine = machine_line(load)
     os.makedirs(arguments.output, exist_ok=True)
     if arguments.update_json:
         with open(arguments.update_json) as handle:

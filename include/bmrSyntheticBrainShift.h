@@ -155,7 +155,9 @@ struct SyntheticBrainShift
   Vector3     down = Vector3::Zero();    // unit vector from the craniotomy towards the brain's centroid
   double      shift = 0.0;    // mm, largest displacement of the exposed nodes
   /** Backward map of the ground truth (intraoperative point -> preoperative point),
-   *  fitted to its nodes within 0.05 mm. */
+   *  fitted to its nodes with a tolerance of 0.05 mm. Not always reached:
+   *  truthFitMaxResidual says how close it came (Colin27, 2026-11-26: 4 mm
+   *  hexahedra 0.07 mm, 5-6 mm ANP tetrahedra 1.5-2.4 mm). */
   RegistrationTransform::Pointer truthTransform;
   double                         truthFitMaxResidual = 0.0;
   /** Forward map of the ground truth (preoperative point -> intraoperative
