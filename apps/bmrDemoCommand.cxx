@@ -90,15 +90,20 @@ struct MethodResult
   json              details = json::object();
 };
 
+/** A displacement error's statistics (mm) as the report writes them. */
+json
+DisplacementErrorJson(const DisplacementError & error)
+{
+  return { { "mean", error.mean }, { "p95", error.p95 }, { "max", error.max }, { "samples", error.samples } };
+}
+
 json
 MethodJson(const MethodResult & method)
 {
   json result = { { "name", method.name },
                   { "seconds", method.seconds },
                   { "stages", method.stages },
-                  { "displacement_error_mm",
-                    { { "mean", method.error.mean }, { "p95", method.error.p95 }, { "max", method.error.max },
-                      { "samples", method.error.samples } } },
+                  { "displacement_error_mm", DisplacementErrorJson(method.error) },
                   { "details", method.details } };
   if (method.edges.valid)
   {
@@ -501,9 +506,7 @@ RunDemo(DemoOptions options)
                          { "solve_steps", check.solve.steps },
                          { "solve_estimated_error_mm", check.solve.estimatedError },
                          { "fit_max_residual_mm", check.truthFitMaxResidual },
-                         { "difference_from_truth_mm",
-                           { { "mean", difference.mean }, { "p95", difference.p95 }, { "max", difference.max },
-                             { "samples", difference.samples } } },
+                         { "difference_from_truth_mm", DisplacementErrorJson(difference) },
                          { "seconds", check.timer.Json() } };
     if (!options.quiet)
     {
@@ -518,11 +521,8 @@ RunDemo(DemoOptions options)
     method.error = MeasureDisplacementError(transform, truth.truthTransform, truth.intraoperativeBrainOnPreoperativeGrid);
     if (secondTruth)
     {
-      const DisplacementError second =
-        MeasureDisplacementError(transform, secondTruth, truth.intraoperativeBrainOnPreoperativeGrid);
-      method.details["displacement_error_against_second_truth_mm"] = {
-        { "mean", second.mean }, { "p95", second.p95 }, { "max", second.max }, { "samples", second.samples }
-      };
+      method.details["displacement_error_against_second_truth_mm"] = DisplacementErrorJson(
+        MeasureDisplacementError(transform, secondTruth, truth.intraoperativeBrainOnPreoperativeGrid));
     }
   };
 

@@ -273,7 +273,8 @@ private:
   std::vector<double> m_KernelGradients; // 3 per entry
   std::vector<double> m_KernelMaterial;  // weight, mu, kappa, collapse modulus per kernel point
   // u and f with 4 slots per node (x, y, z, 0), so that a neighbour's three
-  // components are one SIMD load or store: 40 % fewer instructions per entry.
+  // components are one SIMD load or store (brain-sized kernel, 1 thread:
+  // 105-110 -> 99.5 ns per point-step; docs/thread-scaling.md).
   std::vector<double> m_PaddedDisplacements;
   std::vector<double> m_PaddedForces;
 };

@@ -5,7 +5,6 @@
 #define bmrNeoHookean_h
 
 #include <Eigen/Core>
-#include <Eigen/Geometry>
 
 #include <algorithm>
 #include <cmath>
@@ -15,17 +14,6 @@
 
 namespace bmr
 {
-
-// Cofactor matrix cof(F) = J F^-T, columns from cross products of F's columns.
-inline Eigen::Matrix3d
-Cofactor(const Eigen::Matrix3d & F)
-{
-  Eigen::Matrix3d cof;
-  cof.col(0) = F.col(1).cross(F.col(2));
-  cof.col(1) = F.col(2).cross(F.col(0));
-  cof.col(2) = F.col(0).cross(F.col(1));
-  return cof;
-}
 
 // J^(-2/3) without libm's cbrt (a tenth of the kernel's time, and it does not
 // vectorise): the single-precision exponent estimate of the cube root refined
@@ -139,6 +127,28 @@ ScaledFirstPiola(const Matrix3x3 F,
   return A;
 }
 
+// Between Eigen's matrices and the plain arrays.
+inline Matrix3x3
+ToPlain(const Eigen::Matrix3d & matrix)
+{
+  Matrix3x3 plain;
+  Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(&plain.m[0][0]) = matrix;
+  return plain;
+}
+
+inline Eigen::Matrix3d
+ToEigen(const Matrix3x3 & plain)
+{
+  return Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(&plain.m[0][0]);
+}
+
+// The cofactor matrix cof(F) = J F^-T for Eigen's types (CofactorOf).
+inline Eigen::Matrix3d
+Cofactor(const Eigen::Matrix3d & F)
+{
+  return ToEigen(CofactorOf(ToPlain(F)));
+}
+
 // First Piola-Kirchhoff stress of the compressible neo-Hookean solid,
 // W = mu/2 (J^-2/3 I1 - 3) + kappa/2 (J - 1)^2, with the collapse barrier. The
 // volumetric part takes the dilatation `volumeRatio` (the element's own J, or
@@ -153,11 +163,7 @@ FirstPiola(const Eigen::Matrix3d & F,
            double                  kappa,
            double                  collapseModulus)
 {
-  Matrix3x3 plainF, plainCofactor;
-  Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(&plainF.m[0][0]) = F;
-  Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(&plainCofactor.m[0][0]) = cof;
-  const Matrix3x3 P = ScaledFirstPiola(plainF, plainCofactor, J, kappa * (volumeRatio - 1.0), mu, collapseModulus, 1.0);
-  return Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(&P.m[0][0]);
+  return ToEigen(ScaledFirstPiola(ToPlain(F), ToPlain(cof), J, kappa * (volumeRatio - 1.0), mu, collapseModulus, 1.0));
 }
 
 inline double
