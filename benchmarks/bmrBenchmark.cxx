@@ -1,12 +1,13 @@
 // Benchmark driver (not a test): throughput of the TLED force kernels, time to
 // dynamic-relaxation convergence for a brain-sized model, peak memory, and
 // error against run time for a CalculiX-referenced indentation problem; the
-// meshless (MTLED) discretization on the same nodes beside the TLED elements.
+// meshless (MTLED) discretization on the same nodes beside the TLED elements;
+// ANP tetrahedra beside CalculiX's implicit solve of a brain-like case.
 // Writes a Markdown report (docs/benchmarks.md) and a CSV for the plot script
 // (scripts/plot-benchmarks.py); scripts/run-benchmarks.sh runs both.
 //
 //   bmrBenchmark [--output docs/benchmarks.md] [--csv docs/benchmark-error-vs-time.csv]
-//                [--threads 1,2] [--rounds 3] [--quick] [--skip-brain] [--skip-indentation]
+//                [--threads 1,2] [--rounds 3] [--quick] [--skip-brain] [--skip-indentation] [--skip-implicit]
 //                [--reference-divisions 16] [--indentation-divisions 4,8,16,32]
 //                [--indentation-tolerance 1e-4] [--indentation-poisson 0.45]
 //                [--calculix-threads 1] [--wait-quiet 300] [--reference-cache DIR]
@@ -16,11 +17,14 @@
 // child modes also serve to reproduce or profile one case:
 //   bmrBenchmark --child brain hex|tet|mtled THREADS SPACING STEPS REPEATS
 //   bmrBenchmark --child indentation hex|tet DIVISIONS THREADS TOLERANCE POISSON [HOURGLASS]
+//   bmrBenchmark --child implicit anp|c3d4|c3d10|c3d10-quarter BODY_SPACING SUBDIVISIONS THREADS [INITIAL_INCREMENT]
+//                                        (the brain-like case beside CalculiX)
 //   bmrBenchmark --child triad THREADS   (memory bandwidth: STREAM's triad)
 //
 // This file: the options, the driver that writes the report (its header, the
-// targets table, the footer) and the child modes. bmrBenchmarkBrain.cxx and
-// bmrBenchmarkIndentation.cxx run and write the two measured sections;
+// targets table, the footer) and the child modes. bmrBenchmarkBrain.cxx,
+// bmrBenchmarkIndentation.cxx and bmrBenchmarkImplicit.cxx run and write the
+// three measured sections;
 // bmrBenchmarkCommon.cxx holds the helpers they share (bmrBenchmarkDriver.h).
 #include "bmrBenchmarkDriver.h"
 #include "bmrBenchmarkSupport.h"
@@ -130,6 +134,10 @@ Driver(const Options & options, const std::string & self)
   {
     IndentationSection(options, md);
   }
+  if (!options.skipImplicit)
+  {
+    ImplicitSection(options, self, md, summary);
+  }
 
   md << "---\nTotal benchmark time " << Fixed(Seconds(started), 0) << " s; load average at the end: " << LoadAverage()
      << ". Other processes may have shared the machine; a load average above the number of hardware threads "
@@ -219,6 +227,13 @@ Child(int argc, char ** argv)
     std::cout << "BMR_RESULT " << out.dump() << std::endl;
     return 0;
   }
+  if (kind == "implicit" && (argc == 7 || argc == 8))
+  {
+    const Json result = RunImplicitCase(argv[3], std::stod(argv[4]), std::stoi(argv[5]), std::stoi(argv[6]),
+                                        argc == 8 ? std::stod(argv[7]) : 1.0);
+    std::cout << "BMR_RESULT " << result.dump() << std::endl;
+    return 0;
+  }
   if (kind == "triad" && argc == 4)
   {
     // Memory bandwidth, STREAM's triad a = b + 3 c over 3 x 256 MiB: the
@@ -251,6 +266,7 @@ Child(int argc, char ** argv)
   }
   std::cerr << "bmrBenchmark --child brain hex|tet|mtled THREADS SPACING STEPS REPEATS\n"
                "bmrBenchmark --child indentation hex|tet DIVISIONS THREADS TOLERANCE POISSON [HOURGLASS]\n"
+               "bmrBenchmark --child implicit anp|c3d4|c3d10|c3d10-quarter BODY_SPACING SUBDIVISIONS THREADS [INITIAL_INCREMENT]\n"
                "bmrBenchmark --child triad THREADS\n";
   return 2;
 }
@@ -303,6 +319,10 @@ main(int argc, char ** argv)
       {
         options.skipIndentation = true;
       }
+      else if (argument == "--skip-implicit")
+      {
+        options.skipImplicit = true;
+      }
       else if (argument == "--reference-divisions")
       {
         options.referenceDivisions = std::stoi(value());
@@ -338,12 +358,14 @@ main(int argc, char ** argv)
       else if (argument == "--help" || argument == "-h")
       {
         std::cout << "bmrBenchmark [--output docs/benchmarks.md] [--csv docs/benchmark-error-vs-time.csv]\n"
-                     "             [--threads 1,2] [--quick] [--skip-brain] [--skip-indentation]\n"
+                     "             [--threads 1,2] [--quick] [--skip-brain] [--skip-indentation] [--skip-implicit]\n"
                      "             [--reference-divisions 16] [--indentation-divisions 4,8,16,32]\n"
                      "             [--indentation-tolerance 1e-4] [--indentation-poisson 0.45]\n"
                      "             [--calculix-threads 1] [--wait-quiet 300] [--reference-cache DIR] [--rounds 3]\n"
                      "bmrBenchmark --child brain hex|tet|mtled THREADS SPACING STEPS REPEATS\n"
-                     "bmrBenchmark --child indentation hex|tet DIVISIONS THREADS TOLERANCE POISSON [HOURGLASS]\n";
+                     "bmrBenchmark --child indentation hex|tet DIVISIONS THREADS TOLERANCE POISSON [HOURGLASS]\n"
+                     "bmrBenchmark --child implicit anp|c3d4|c3d10|c3d10-quarter BODY_SPACING SUBDIVISIONS THREADS [INITIAL_INCREMENT]\n"
+                     "bmrBenchmark --child triad THREADS\n";
         return 0;
       }
       else

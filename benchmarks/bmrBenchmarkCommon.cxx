@@ -5,6 +5,7 @@
 #include "bmrModel.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
@@ -156,6 +157,39 @@ WriteCreatingFolder(const std::string & path, const std::string & text)
     std::filesystem::create_directories(target.parent_path());
   }
   WriteTextFileAtomically(path, text);
+}
+
+Json
+RunChild(const std::string & self, const std::string & arguments)
+{
+  const std::string command = "'" + self + "' --child " + arguments;
+  FILE *            pipe = ::popen(command.c_str(), "r");
+  if (!pipe)
+  {
+    throw bmr::Error("bmrBenchmark: could not start " + command);
+  }
+  std::string output;
+  char        buffer[4096];
+  while (std::fgets(buffer, sizeof buffer, pipe))
+  {
+    output += buffer;
+  }
+  const int   status = ::pclose(pipe);
+  const auto  at = output.rfind("BMR_RESULT ");
+  if (status != 0 || at == std::string::npos)
+  {
+    throw bmr::Error("bmrBenchmark: child '" + arguments + "' failed (status " + std::to_string(status) +
+                     "). Output:\n" + output);
+  }
+  return Json::parse(output.substr(at + 11));
+}
+
+double
+PeakMemoryMiB(int who)
+{
+  rusage usage{};
+  getrusage(who, &usage);
+  return usage.ru_maxrss / 1024.0; // Linux: kB
 }
 
 } // namespace benchmark

@@ -12,6 +12,8 @@
 #include <string>
 #include <vector>
 
+#include <sys/resource.h>
+
 namespace bmr
 {
 namespace benchmark
@@ -27,6 +29,7 @@ constexpr double kTargetTetElementStepsPerSecond = 20e6; // ANP tetrahedra, 2 th
 constexpr double kTargetBrainHexSeconds = 2.0;
 constexpr double kTargetBrainTetSeconds = 6.0;
 constexpr double kTargetBrainMeshlessSeconds = 6.0; // including precomputation, 2 threads
+constexpr double kTargetMeshlessTableMiB = 150.0;   // shape-function tables at about 100,000 DOF
 constexpr double kMillerDesktopSeconds = 19.2; // ~100,000 DOF, desktop CPU (Joldes, Wittek, Miller)
 constexpr double kMillerGpuSeconds = 4.0;
 
@@ -41,6 +44,7 @@ struct Options
   bool             quick = false;
   bool             skipBrain = false;
   bool             skipIndentation = false;
+  bool             skipImplicit = false;
   int              referenceDivisions = 16;
   std::vector<int> indentationDivisions{ 4, 8, 16, 32 };
   double           indentationTolerance = 1e-4;
@@ -97,6 +101,16 @@ WaitForQuiet(double maxSeconds, double threshold = 0.15);
 bmr::GridCells
 CellsFromKey(const std::string & key);
 
+/** Peak resident memory (MiB) of this process (RUSAGE_SELF) or of its
+ *  finished children (RUSAGE_CHILDREN, e.g. a CalculiX run). */
+double
+PeakMemoryMiB(int who = RUSAGE_SELF);
+
+/** Runs `self --child ARGUMENTS` and returns the JSON of its BMR_RESULT line;
+ *  throws bmr::Error with the child's output when it fails. */
+Json
+RunChild(const std::string & self, const std::string & arguments);
+
 /** Writes `text` to `path` (bmr::WriteTextFileAtomically), creating its folder first. */
 void
 WriteCreatingFolder(const std::string & path, const std::string & text);
@@ -121,6 +135,21 @@ BrainSection(const Options & options, const std::string & self, std::ostream & m
  *  of the report to `md` and their figures to options.csv. */
 void
 IndentationSection(const Options & options, std::ostream & md);
+
+// ---------------------------------------------------------------------------
+// Side by side with an implicit solver, CalculiX (bmrBenchmarkImplicit.cxx).
+// ---------------------------------------------------------------------------
+/** Child process: the brain-like case solved once: "anp" (TLED, dynamic
+ *  relaxation), "c3d4" (CalculiX on the same tetrahedra) or "c3d10-quarter"
+ *  (the CalculiX reference on the quarter model). Returns the time, the peak
+ *  memory and the nodes' positions and displacements. */
+Json
+RunImplicitCase(const std::string & kind, double bodySpacing, int subdivisions, int threads, double initialIncrement);
+
+/** Runs the CalculiX reference and the brain-like cases (children of `self`),
+ *  writes their section to `md` and the target's row to `summary`. */
+void
+ImplicitSection(const Options & options, const std::string & self, std::ostream & md, std::vector<std::string> & summary);
 
 } // namespace benchmark
 } // namespace bmr

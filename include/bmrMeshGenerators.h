@@ -37,9 +37,16 @@ DistortInteriorNodes(Model & model, double fraction, std::uint32_t seed = 1);
 /** Ellipsoid with the given semi-axes (mm), centred at the origin, meshed on a
  *  regular grid of spacing h: grid cells whose centre lies inside become cells
  *  (hexahedra or 6 tetrahedra each). Node sets: "surface" (boundary nodes) and
- *  "all". A brain is roughly semi-axes (70, 85, 60) mm. */
+ *  "all". A brain is roughly semi-axes (70, 85, 60) mm.
+ *  With `subdivisions` s > 1 each of those cells is split into s^3 cells of
+ *  spacing h / s: meshes of one h bound the same body at every s and their
+ *  nodes nest (a convergence study's reference and its coarser meshes). */
 Model
-MakeEllipsoidMesh(const Vector3 & semiAxes, double spacing, GridCells cells, const Material & material = Material{});
+MakeEllipsoidMesh(const Vector3 &  semiAxes,
+                  double           spacing,
+                  GridCells        cells,
+                  const Material & material = Material{},
+                  int              subdivisions = 1);
 
 /** Closed triangulated ellipsoid surface (outward normals), e.g. a rigid skull
  *  around MakeEllipsoidMesh's body; `subdivisions` refines an icosahedron. */

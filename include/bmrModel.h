@@ -264,6 +264,13 @@ FormatPoint(const Vector3 & point);
 double
 CellVolume(const Model & model, Index cell);
 
+/** The cells c with keep[c] != 0 and the nodes they use, renumbered in order
+ *  of first use; materials kept; node sets, constraints and loads are not
+ *  carried (the caller maps them). `newIndexOfNode`, when given, receives the
+ *  old -> new node indices (-1 for a dropped node). */
+Model
+KeepCells(const Model & model, const std::vector<char> & keep, std::vector<Index> * newIndexOfNode = nullptr);
+
 } // namespace bmr
 
 #endif

@@ -172,9 +172,47 @@ MakeIndentationModel(const IndentationProblem & problem, const std::array<int, 3
 Model
 MakeIndentationQuarterModel(const IndentationProblem & problem, const std::array<int, 3> & divisions, GridCells cells);
 
-/** Full-block displacements at `points` from a quarter-model solution, by
+/** A brain-like case for comparing with CalculiX: the brain-sized ellipsoid
+ *  (semi-axes 70, 85, 60 mm), its surface at or below the body grid's node
+ *  plane nearest z = baseZ held (a grid plane, so that every subdivision holds
+ *  the same part of the surface), and the surface
+ *  nodes within craniotomyRadius of the top (0, 0, 60) sagging by
+ *  depth (1 - (r / R)^2) along -z (all components prescribed; zero at the rim,
+ *  so the solution has no rim singularity and a refinement study converges).
+ *  Node sets "surface", "base", "craniotomy". */
+struct BrainSagProblem
+{
+  Vector3  semiAxes{ 70.0, 85.0, 60.0 }; // mm
+  double   baseZ = -45.0;                // mm, rounded to the body grid's nearest node plane
+  double   craniotomyRadius = 25.0;      // mm
+  double   depth = 10.0;                 // mm
+  Material material{ "brain", 3000.0, 0.49, 1000.0 };
+};
+
+/** The body is the ellipsoid's grid cells of `bodySpacing` (MakeEllipsoidMesh),
+ *  each split into subdivisions^3 cells of 6 tetrahedra: meshes of one body
+ *  spacing bound the same body at every subdivision and their nodes nest.
+ *  `quarter`: the part x, y >= 0 with symmetry conditions u_x = 0 on x = 0
+ *  (set "xmin") and u_y = 0 on y = 0 ("ymin"); body, supports and load are
+ *  symmetric about both planes (the Kuhn tetrahedra are not, which a
+ *  reference may ignore). Throws bmr::Error when the grid has no node plane
+ *  at x = 0 or y = 0 (choose a body spacing or an even subdivision that has). */
+Model
+MakeBrainSagModel(const BrainSagProblem & problem, double bodySpacing, int subdivisions, bool quarter = false);
+
+/** Full-model displacements at `points` from the solution on the quarter
+ *  x >= mirrorX, y >= mirrorY of a model symmetric about both planes, by
  *  reflection: u(p) = S u(S p) with S the reflection that brings p into the
  *  quarter. Throws bmr::Error if a reflected point is not a quarter node. */
+std::vector<Vector3>
+UnfoldQuarterDisplacements(double                       mirrorX,
+                           double                       mirrorY,
+                           const std::vector<Vector3> & quarterNodes,
+                           const std::vector<Vector3> & quarterDisplacements,
+                           const std::vector<Vector3> & points,
+                           double                       tolerance = 1e-6);
+
+/** The same for the indentation block (mirrored about its mid-planes). */
 std::vector<Vector3>
 UnfoldQuarterDisplacements(const IndentationProblem &   problem,
                            const std::vector<Vector3> & quarterNodes,

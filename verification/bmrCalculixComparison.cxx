@@ -195,8 +195,18 @@ UnfoldQuarterDisplacements(const IndentationProblem &   problem,
                            const std::vector<Vector3> & points,
                            double                       tolerance)
 {
-  const double         cx = 0.5 * problem.size.x();
-  const double         cy = 0.5 * problem.size.y();
+  return UnfoldQuarterDisplacements(
+    0.5 * problem.size.x(), 0.5 * problem.size.y(), quarterNodes, quarterDisplacements, points, tolerance);
+}
+
+std::vector<Vector3>
+UnfoldQuarterDisplacements(double                       cx,
+                           double                       cy,
+                           const std::vector<Vector3> & quarterNodes,
+                           const std::vector<Vector3> & quarterDisplacements,
+                           const std::vector<Vector3> & points,
+                           double                       tolerance)
+{
   std::vector<Vector3> reflected(points.size());
   std::vector<Vector3> signs(points.size());
   for (std::size_t i = 0; i < points.size(); ++i)
@@ -221,6 +231,104 @@ UnfoldQuarterDisplacements(const IndentationProblem &   problem,
     result[i] = quarterDisplacements[match[i]].cwiseProduct(signs[i]);
   }
   return result;
+}
+
+Model
+MakeBrainSagModel(const BrainSagProblem & problem, double bodySpacing, int subdivisions, bool quarter)
+{
+  const Model full = MakeEllipsoidMesh(problem.semiAxes, bodySpacing, GridCells::Tetrahedra, problem.material, subdivisions);
+  std::vector<char> onSurface(full.nodes.size(), 0);
+  for (const Index node : full.NodeSet("surface"))
+  {
+    onSurface[node] = 1;
+  }
+
+  std::vector<char> keep(full.cells.size(), 1);
+  for (std::size_t c = 0; c < full.cells.size() && quarter; ++c)
+  {
+    Vector3 centre = Vector3::Zero();
+    for (int v = 0; v < 4; ++v)
+    {
+      centre += 0.25 * full.nodes[full.cells[c].nodes[v]];
+    }
+    keep[c] = centre.x() > 0.0 && centre.y() > 0.0;
+  }
+  std::vector<Index> newIndex;
+  Model              model = KeepCells(full, keep, &newIndex);
+
+  const Vector3        top(0.0, 0.0, problem.semiAxes.z());
+  const double         onPlane = 1e-9 * bodySpacing;
+  // The body grid's node planes lie a whole number of body spacings above its lowest node.
+  double lowest = std::numeric_limits<double>::infinity();
+  for (const Vector3 & p : full.nodes)
+  {
+    lowest = std::min(lowest, p.z());
+  }
+  const double baseZ = lowest + bodySpacing * std::round((problem.baseZ - lowest) / bodySpacing) + onPlane;
+  const double         radius = problem.craniotomyRadius;
+  std::vector<Index>   surface, base, craniotomy, symmetryX, symmetryY;
+  std::vector<Vector3> sag;
+  for (std::size_t old = 0; old < full.nodes.size(); ++old)
+  {
+    const Index node = newIndex[old];
+    if (node < 0)
+    {
+      continue;
+    }
+    const Vector3 & p = model.nodes[node];
+    if (quarter && std::abs(p.x()) < onPlane)
+    {
+      symmetryX.push_back(node);
+    }
+    if (quarter && std::abs(p.y()) < onPlane)
+    {
+      symmetryY.push_back(node);
+    }
+    if (!onSurface[old])
+    {
+      continue;
+    }
+    surface.push_back(node);
+    const double r = (p - top).norm();
+    if (p.z() <= baseZ)
+    {
+      base.push_back(node);
+    }
+    else if (r <= radius)
+    {
+      craniotomy.push_back(node);
+      sag.emplace_back(0.0, 0.0, -problem.depth * (1.0 - (r / radius) * (r / radius)));
+    }
+  }
+  if (quarter && (symmetryX.empty() || symmetryY.empty()))
+  {
+    std::ostringstream message;
+    message << "MakeBrainSagModel: the grid of spacing " << bodySpacing / subdivisions
+            << " mm has no node plane at x = 0 or y = 0, so it has no quarter model; choose a body spacing that "
+               "divides the ellipsoid's box into an even number of cells along x and y, or an even subdivision.";
+    throw Error(message.str());
+  }
+  if (craniotomy.empty() || base.empty())
+  {
+    throw Error("MakeBrainSagModel: no surface node lies in the craniotomy or below the base; refine the body spacing.");
+  }
+  model.nodeSets["surface"] = surface;
+  model.nodeSets["base"] = base;
+  model.nodeSets["craniotomy"] = craniotomy;
+  model.fixedConstraints.push_back(FixedConstraint{ "base", { true, true, true } });
+  if (quarter)
+  {
+    model.nodeSets["xmin"] = symmetryX;
+    model.nodeSets["ymin"] = symmetryY;
+    model.fixedConstraints.push_back(FixedConstraint{ "xmin", { true, false, false } });
+    model.fixedConstraints.push_back(FixedConstraint{ "ymin", { false, true, false } });
+  }
+  PrescribedDisplacement push;
+  push.nodes = craniotomy;
+  push.displacements = sag;
+  model.prescribedDisplacements.push_back(push);
+  model.Validate();
+  return model;
 }
 
 } // namespace bmr

@@ -318,29 +318,32 @@ DistortInteriorNodes(Model & model, double fraction, std::uint32_t seed)
 }
 
 Model
-MakeEllipsoidMesh(const Vector3 & semiAxes, double spacing, GridCells cells, const Material & material)
+MakeEllipsoidMesh(const Vector3 & semiAxes, double spacing, GridCells cells, const Material & material, int subdivisions)
 {
-  if (!(spacing > 0.0) || !(semiAxes.minCoeff() > 0.0))
+  if (!(spacing > 0.0) || !(semiAxes.minCoeff() > 0.0) || subdivisions < 1)
   {
     std::ostringstream message;
-    message << "MakeEllipsoidMesh: semi-axes (" << semiAxes.transpose() << ") mm and spacing " << spacing
-            << " mm must be positive";
+    message << "MakeEllipsoidMesh: semi-axes (" << semiAxes.transpose() << ") mm, spacing " << spacing
+            << " mm and subdivisions " << subdivisions << " must be positive";
     throw Error(message.str());
   }
-  // Grid symmetric about the origin that covers the ellipsoid.
-  const Vector3 gridCells = (2.0 * semiAxes / spacing).array().ceil().max(1.0).matrix();
+  // Grid symmetric about the origin that covers the ellipsoid; the body is
+  // decided on the grid of `spacing`, the cells are `subdivisions` finer.
+  const Vector3 gridCells = (2.0 * semiAxes / spacing).array().ceil().max(1.0).matrix() * subdivisions;
   RequireIndexableGrid("MakeEllipsoidMesh", gridCells[0], gridCells[1], gridCells[2]);
+  const double       h = spacing / subdivisions;
   std::array<int, 3> n{};
   Vector3            lower;
   for (int d = 0; d < 3; ++d)
   {
     n[d] = static_cast<int>(gridCells[d]);
-    lower[d] = -0.5 * n[d] * spacing;
+    lower[d] = -0.5 * n[d] * h;
   }
   auto inside = [&](int i, int j, int k) {
     if (i < 0 || j < 0 || k < 0 || i >= n[0] || j >= n[1] || k >= n[2])
       return false;
-    const Vector3 centre = lower + spacing * Vector3(i + 0.5, j + 0.5, k + 0.5);
+    const Vector3 centre =
+      lower + spacing * Vector3(i / subdivisions + 0.5, j / subdivisions + 0.5, k / subdivisions + 0.5);
     return centre.cwiseQuotient(semiAxes).squaredNorm() < 1.0;
   };
 
@@ -357,7 +360,7 @@ MakeEllipsoidMesh(const Vector3 & semiAxes, double spacing, GridCells cells, con
     if (id < 0)
     {
       id = static_cast<Index>(model.nodes.size());
-      model.nodes.push_back(lower + spacing * Vector3(i, j, k));
+      model.nodes.push_back(lower + h * Vector3(i, j, k));
       gridOfNode.push_back({ i, j, k });
     }
     return id;
@@ -379,7 +382,7 @@ MakeEllipsoidMesh(const Vector3 & semiAxes, double spacing, GridCells cells, con
         bool hexahedron = cells == GridCells::Hexahedra;
         if (cells == GridCells::Mixed)
         {
-          hexahedron = (lower.x() + spacing * (i + 0.5)) < 0.0;
+          hexahedron = (lower.x() + h * (i + 0.5)) < 0.0;
         }
         AddGridCell(model, corners, hexahedron);
       }

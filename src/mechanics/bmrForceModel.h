@@ -227,7 +227,7 @@ public:
                      int threads);
 
   Index                        NodeCount() const override { return m_NodeCount; }
-  Index                        PointCount() const { return m_Table.PointCount(); }
+  Index                        PointCount() const { return static_cast<Index>(m_KernelPoint.size()); }
   Index                        ComputeInternalForces(const double * u, double * f) override;
   std::vector<double>          LumpedMasses() const override;
   std::vector<double>          ScaledMasses(double timeStep, double safety, bool collapse) const override;
@@ -250,7 +250,6 @@ private:
 
   int                  m_Threads;
   Index                m_NodeCount;
-  ShapeFunctionTable   m_Table; // rows: integration points
   std::vector<Vector3> m_Positions;
   std::vector<double>  m_Weight;    // mm^3
   std::vector<double>  m_Mu;        // internal units
@@ -259,10 +258,12 @@ private:
   std::vector<double>  m_Density;
   std::vector<double>  m_WaveBound; // (lambda + 2 mu) n sum |grad phi|^2
   std::vector<double>  m_CollapseWaveBound; // added to m_WaveBound once the collapse barrier engages
-  // The force kernel's copy of the table, in the order of the coloured
-  // schedule, so that one pass streams it once per step: per kernel point its
-  // integration point, weight and moduli; per entry the node and grad phi.
-  // Reading the rows of m_Table in schedule order instead took 2.7 times as
+  // The force kernel's table, in the order of the coloured schedule, so that
+  // one pass streams it once per step: per kernel point its integration point,
+  // weight and moduli; per entry the node and grad phi. It is the only copy
+  // (the MLS table given to the constructor is released): at 100,000 DOF it
+  // holds 4 M entries, 28 bytes each.
+  // Reading the MLS table's rows in schedule order instead took 2.7 times as
   // long (brain-sized benchmark, 2 threads, 2026-11-25): the rows' jumps
   // defeat the prefetcher.
   std::vector<Index>  m_KernelPoint;
@@ -272,6 +273,7 @@ private:
   std::vector<Index>  m_KernelNodes;
   std::vector<double> m_KernelGradients; // 3 per entry
   std::vector<double> m_KernelMaterial;  // weight, mu, kappa, collapse modulus per kernel point
+  std::vector<Index>  m_KernelIndexOfPoint; // integration point -> its kernel point
   // u and f with 4 slots per node (x, y, z, 0), so that a neighbour's three
   // components are one SIMD load or store (brain-sized kernel, 1 thread:
   // 105-110 -> 99.5 ns per point-step; docs/thread-scaling.md).

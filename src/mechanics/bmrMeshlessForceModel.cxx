@@ -26,13 +26,15 @@ MeshlessForceModel::MeshlessForceModel(const Model &          model,
                                        int                    threads)
   : m_Threads(std::max(1, threads))
   , m_NodeCount(static_cast<Index>(model.nodes.size()))
-  , m_Table(std::move(shapeFunctions))
   , m_Positions(model.meshless.integrationPoints)
   , m_Weight(model.meshless.integrationWeights)
 {
-  const Index pointCount = m_Table.PointCount();
+  // The table is needed only to build the kernel's copy: keeping it as well
+  // would hold every entry twice (and its unused values) through the solve.
+  const ShapeFunctionTable table = std::move(shapeFunctions);
+  const Index              pointCount = table.PointCount();
   if (pointCount != static_cast<Index>(m_Positions.size()) ||
-      m_Table.gradients.size() != 3 * m_Table.nodes.size())
+      table.gradients.size() != 3 * table.nodes.size())
   {
     throw Error("meshless force model: the shape-function table does not match the integration points "
                 "(internal error; please report it).");
@@ -51,14 +53,14 @@ MeshlessForceModel::MeshlessForceModel(const Model &          model,
     // shared equally by its n neighbours: omega^2 <= (lambda + 2 mu) n sum|grad phi|^2 / rho,
     // the same bound as the finite elements' n B:B.
     double gradientSquares = 0.0;
-    for (Index k = m_Table.offsets[p]; k < m_Table.offsets[p + 1]; ++k)
+    for (Index k = table.offsets[p]; k < table.offsets[p + 1]; ++k)
     {
       for (int j = 0; j < 3; ++j)
       {
-        gradientSquares += m_Table.gradients[3 * k + j] * m_Table.gradients[3 * k + j];
+        gradientSquares += table.gradients[3 * k + j] * table.gradients[3 * k + j];
       }
     }
-    const Index neighbours = m_Table.offsets[p + 1] - m_Table.offsets[p];
+    const Index neighbours = table.offsets[p + 1] - table.offsets[p];
     m_WaveBound[p] = (m_Kappa[p] + 4.0 * m_Mu[p] / 3.0) * neighbours * gradientSquares;
   }
   // The bound once the collapse barrier engages (masses of dynamic relaxation).
@@ -71,7 +73,7 @@ MeshlessForceModel::MeshlessForceModel(const Model &          model,
   }
 
   std::vector<Index> pointsOfNode(m_NodeCount, 0);
-  for (const Index node : m_Table.nodes)
+  for (const Index node : table.nodes)
   {
     ++pointsOfNode[node];
   }
@@ -91,28 +93,33 @@ MeshlessForceModel::MeshlessForceModel(const Model &          model,
 
   // The kernel's table in schedule order.
   const ColouredSchedule schedule =
-    ScheduleByColour(m_Table.offsets, m_Table.nodes, m_Positions, BoundingBox(model.nodes), m_NodeCount, kPointsPerBlock);
+    ScheduleByColour(table.offsets, table.nodes, m_Positions, BoundingBox(model.nodes), m_NodeCount, kPointsPerBlock);
   m_KernelPoint = schedule.items;
   m_KernelBlockOffsets = schedule.blockOffsets;
   m_KernelColourOffsets = schedule.colourOffsets;
   m_PaddedDisplacements.assign(4 * static_cast<std::size_t>(m_NodeCount), 0.0);
   m_PaddedForces.assign(4 * static_cast<std::size_t>(m_NodeCount), 0.0);
   m_KernelOffsets.assign(1, 0);
-  m_KernelNodes.reserve(m_Table.nodes.size());
-  m_KernelGradients.reserve(m_Table.gradients.size());
+  m_KernelNodes.reserve(table.nodes.size());
+  m_KernelGradients.reserve(table.gradients.size());
   m_KernelMaterial.reserve(4 * static_cast<std::size_t>(pointCount));
   for (const Index p : m_KernelPoint)
   {
-    for (Index k = m_Table.offsets[p]; k < m_Table.offsets[p + 1]; ++k)
+    for (Index k = table.offsets[p]; k < table.offsets[p + 1]; ++k)
     {
-      m_KernelNodes.push_back(m_Table.nodes[k]);
+      m_KernelNodes.push_back(table.nodes[k]);
       for (int j = 0; j < 3; ++j)
       {
-        m_KernelGradients.push_back(m_Table.gradients[3 * k + j]);
+        m_KernelGradients.push_back(table.gradients[3 * k + j]);
       }
     }
     m_KernelOffsets.push_back(static_cast<Index>(m_KernelNodes.size()));
     m_KernelMaterial.insert(m_KernelMaterial.end(), { m_Weight[p], m_Mu[p], m_Kappa[p], m_Collapse[p] });
+  }
+  m_KernelIndexOfPoint.resize(pointCount);
+  for (Index q = 0; q < pointCount; ++q)
+  {
+    m_KernelIndexOfPoint[m_KernelPoint[q]] = q;
   }
 }
 
@@ -120,9 +127,10 @@ Eigen::Matrix3d
 MeshlessForceModel::DeformationGradientAt(Index p, const double * u) const
 {
   double F[9] = { 1, 0, 0, 0, 1, 0, 0, 0, 1 }; // row-major F_ij
-  const Index * nodes = m_Table.nodes.data();
-  const double *gradients = m_Table.gradients.data();
-  for (Index k = m_Table.offsets[p]; k < m_Table.offsets[p + 1]; ++k)
+  const Index * nodes = m_KernelNodes.data();
+  const double *gradients = m_KernelGradients.data();
+  const Index   q = m_KernelIndexOfPoint[p];
+  for (Index k = m_KernelOffsets[q]; k < m_KernelOffsets[q + 1]; ++k)
   {
     const double * uI = u + 3 * static_cast<std::size_t>(nodes[k]);
     const double * g = gradients + 3 * static_cast<std::size_t>(k);
@@ -286,13 +294,14 @@ std::vector<double>
 MeshlessForceModel::LumpToNodes(const PointMass & pointMass) const
 {
   std::vector<double> masses(m_NodeCount, 0.0);
-  for (Index p = 0; p < m_Table.PointCount(); ++p)
+  for (Index p = 0; p < PointCount(); ++p)
   {
-    const Index  begin = m_Table.offsets[p], end = m_Table.offsets[p + 1];
+    const Index  q = m_KernelIndexOfPoint[p];
+    const Index  begin = m_KernelOffsets[q], end = m_KernelOffsets[q + 1];
     const double share = pointMass(p) / (end - begin);
     for (Index k = begin; k < end; ++k)
     {
-      masses[m_Table.nodes[k]] += share;
+      masses[m_KernelNodes[k]] += share;
     }
   }
   return masses;
@@ -323,7 +332,7 @@ Energies
 MeshlessForceModel::ComputeEnergies(const double * u) const
 {
   Energies energies;
-  for (Index p = 0; p < m_Table.PointCount(); ++p)
+  for (Index p = 0; p < PointCount(); ++p)
   {
     const Eigen::Matrix3d F = DeformationGradientAt(p, u);
     const double          J = F.determinant();
@@ -335,8 +344,8 @@ MeshlessForceModel::ComputeEnergies(const double * u) const
 std::vector<Eigen::Matrix3d>
 MeshlessForceModel::CauchyStress(const double * u) const
 {
-  std::vector<Eigen::Matrix3d> stress(m_Table.PointCount());
-  for (Index p = 0; p < m_Table.PointCount(); ++p)
+  std::vector<Eigen::Matrix3d> stress(PointCount());
+  for (Index p = 0; p < PointCount(); ++p)
   {
     const Eigen::Matrix3d F = DeformationGradientAt(p, u);
     const Eigen::Matrix3d cof = Cofactor(F);

@@ -77,6 +77,38 @@ CellVolume(const Model & model, Index cellIndex)
   return HexahedronIntegrals(x).volume;
 }
 
+Model
+KeepCells(const Model & model, const std::vector<char> & keep, std::vector<Index> * newIndexOfNode)
+{
+  Model kept;
+  kept.materials = model.materials;
+  std::vector<Index> newIndex(model.nodes.size(), -1);
+  for (std::size_t c = 0; c < model.cells.size(); ++c)
+  {
+    if (!keep[c])
+    {
+      continue;
+    }
+    Cell cell = model.cells[c];
+    for (int v = 0; v < NodesPerCell(cell.type); ++v)
+    {
+      Index & node = newIndex[cell.nodes[v]];
+      if (node < 0)
+      {
+        node = static_cast<Index>(kept.nodes.size());
+        kept.nodes.push_back(model.nodes[cell.nodes[v]]);
+      }
+      cell.nodes[v] = node;
+    }
+    kept.cells.push_back(cell);
+  }
+  if (newIndexOfNode)
+  {
+    *newIndexOfNode = std::move(newIndex);
+  }
+  return kept;
+}
+
 namespace
 {
 

@@ -90,30 +90,17 @@ KeepLargestFaceConnectedTetrahedra(ImageGrid & grid, std::vector<std::string> * 
   const auto largest = std::max_element(sizeOfRoot.begin(), sizeOfRoot.end(), [](const auto & a, const auto & b) {
                          return a.second < b.second;
                        })->first;
-  Model              kept;
-  kept.materials = model.materials;
-  std::vector<int>   keptLabels;
-  std::vector<Index> newIndex(model.nodes.size(), -1);
+  std::vector<char> keep(cellCount, 0);
+  std::vector<int>  keptLabels;
   for (std::size_t c = 0; c < cellCount; ++c)
   {
-    if (root(c) != largest)
+    if (root(c) == largest)
     {
-      continue;
+      keep[c] = 1;
+      keptLabels.push_back(grid.cellLabels[c]);
     }
-    Cell cell = model.cells[c];
-    for (int v = 0; v < 4; ++v)
-    {
-      Index & node = newIndex[cell.nodes[v]];
-      if (node < 0)
-      {
-        node = static_cast<Index>(kept.nodes.size());
-        kept.nodes.push_back(model.nodes[cell.nodes[v]]);
-      }
-      cell.nodes[v] = node;
-    }
-    kept.cells.push_back(cell);
-    keptLabels.push_back(grid.cellLabels[c]);
   }
+  Model kept = KeepCells(model, keep);
   if (warnings)
   {
     warnings->push_back("grid: the tetrahedral mesh has " + std::to_string(sizeOfRoot.size()) +
