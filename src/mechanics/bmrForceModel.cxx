@@ -202,8 +202,8 @@ FiniteElementForceModel::FiniteElementForceModel(const Model & model, const Solv
     m_CellTypes.push_back(cell.type);
   }
   // Kernel order: hexahedra, then tetrahedra, each colour by colour and block by block.
-  const ColouredSchedule hexSchedule = ScheduleCells(model, CellType::Hexahedron, kCellsPerBlock);
-  const ColouredSchedule tetSchedule = ScheduleCells(model, CellType::Tetrahedron, kCellsPerBlock);
+  const ColouredSchedule hexSchedule = ScheduleCells(model, CellType::Hexahedron, kHexahedraPerBlock);
+  const ColouredSchedule tetSchedule = ScheduleCells(model, CellType::Tetrahedron, kTetrahedraPerBlock);
   m_ModelCell = hexSchedule.items;
   m_ModelCell.insert(m_ModelCell.end(), tetSchedule.items.begin(), tetSchedule.items.end());
   m_HexBlockOffsets = hexSchedule.blockOffsets;
@@ -481,7 +481,7 @@ FiniteElementForceModel::AddHexahedronForces(Index begin, Index end, const doubl
   const std::size_t  count = m_HexNodes.size();
   const double *     B = m_HexB.data();
   const double *     XH = m_HexXH.data();
-  alignas(64) double forces[24][kCellsPerBlock];
+  alignas(64) double forces[24][kHexahedraPerBlock];
   Index              firstInverted = std::numeric_limits<Index>::max();
 #pragma omp simd reduction(min : firstInverted)
   for (Index e = begin; e < end; ++e)
@@ -627,7 +627,7 @@ FiniteElementForceModel::AddTetrahedronForces(Index begin, Index end, const doub
   const double * averagedCell = m_TetAveraged.data();
   const double * nodalPressure = m_NodalPressure.data();
   // Per-cell nodal forces of the block, component-major, then added serially.
-  alignas(64) double forces[12][kCellsPerBlock];
+  alignas(64) double forces[12][kTetrahedraPerBlock];
   Index              firstInverted = std::numeric_limits<Index>::max();
 #pragma omp simd reduction(min : firstInverted)
   for (Index t = begin; t < end; ++t)
