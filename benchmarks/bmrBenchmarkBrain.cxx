@@ -442,8 +442,10 @@ BrainSection(const Options & options, const std::string & self, std::ostream & m
      << (highest < 0.5 ? "No kernel reaches half of it, so none is limited by memory bandwidth on this machine; "
                          "docs/thread-scaling.md has what was measured instead (the latency of streamed tables and "
                          "scattered node accesses, the law's divisions)."
-                       : "Kernels above half of it are near the bandwidth roof: fewer bytes per unit (e.g. single-"
-                         "precision tables) may pay there (not measured for them).")
+                       : "Kernels above half of it are near the bandwidth roof, but fewer bytes do not simply "
+                         "buy time: the ANP kernel with its shape-function derivatives in single precision (a "
+                         "quarter less traffic) was 2-3 % faster (docs/thread-scaling.md, 2026-11-26), since its "
+                         "node-indexed gathers wait on latency, not on the stream.")
      << "\n";
 
   // (ii) dynamic relaxation
