@@ -128,14 +128,16 @@ public:
   Index ModelCell(Index kernelCell) const { return m_ModelCell[kernelCell]; }
 
 private:
-  /** Cells per block of the parallel schedule (see ScheduleCells). Hexahedra
-   *  in blocks of 256 made 116 blocks in 14 colours on the brain-sized
-   *  benchmark (3-15 blocks a colour); blocks of 128 took 37.2 instead of
-   *  40.9 ns per element-step with 2 threads and 56.8 instead of 54.5 with
-   *  one (2026-11-26; 64: 41, 32: 44 ns with 2 threads). Colours balanced
-   *  in size gained nothing. */
+  /** Cells per block of the parallel schedule (see ScheduleCells), measured
+   *  on the brain-sized benchmark (2026-11-26, docs/thread-scaling.md).
+   *  Hexahedra in blocks of 256 made 116 blocks in 14 colours (3-15 blocks a
+   *  colour); blocks of 128 took 37.2 instead of 40.9 ns per element-step
+   *  with 2 threads and 56.8 instead of 54.5 with one (64: 41, 32: 44 ns with
+   *  2 threads); colours balanced in size gained nothing. Tetrahedra in
+   *  blocks of 512 took 16.7-17.4 instead of 18.2-18.5 ns with 2 threads
+   *  (1024: 17.4; 128: 19.2). */
   static constexpr Index kHexahedraPerBlock = 128;
-  static constexpr Index kTetrahedraPerBlock = 256;
+  static constexpr Index kTetrahedraPerBlock = 512;
 
   /** The `Width` values of one cell from component-major storage. */
   template <int Width>
@@ -251,8 +253,11 @@ private:
   template <typename PointMass>
   std::vector<double> LumpToNodes(const PointMass & pointMass) const;
 
-  /** Integration points per block of the parallel schedule (ScheduleByColour). */
-  static constexpr Index kPointsPerBlock = 32;
+  /** Integration points per block of the parallel schedule (ScheduleByColour):
+   *  blocks of 128 took 45.2-48.1 instead of 54.3-59.3 ns per point-step with
+   *  2 threads on the brain-sized benchmark, 85.8 instead of 81.3 with one
+   *  (2026-11-26; 64: 50, 256: 45.0 and 87.8 ns). */
+  static constexpr Index kPointsPerBlock = 128;
 
   int                  m_Threads;
   Index                m_NodeCount;
