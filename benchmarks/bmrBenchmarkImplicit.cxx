@@ -12,11 +12,9 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
-#include <map>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -293,7 +291,8 @@ ImplicitSection(const Options & options, const std::string & self, std::ostream 
     md << "| " << SolverLabel(row.kind) << " | " << Fixed(bodySpacing / row.subdivisions, 1) << " | "
        << r["nodes"].get<int>() << " | " << r["elements"].get<int>() << " | " << r["dof"].get<int>() << " | "
        << Fixed(Median(row.seconds), 2) << " | " << Fixed(*range.first, 2) << ".." << Fixed(*range.second, 2) << " | "
-       << (row.kind == "anp" ? std::to_string(r["steps"].get<int>())
+       << (row.kind == "anp" ? std::to_string(r["steps"].get<int>()) +
+                                 (r["converged"].get<bool>() ? "" : " (**not converged**)")
                              : std::to_string(r["iterations"].get<int>()) + " (" +
                                  std::to_string(r["increments"].get<int>()) + " increments)")
        << " | " << Fixed(row.rmsError, 3) << " | " << Fixed(row.maxError, 3) << " | "
