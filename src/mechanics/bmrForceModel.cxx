@@ -157,8 +157,9 @@ ComponentMajor(const std::vector<double> & records, std::size_t width)
   return out;
 }
 
-// The model's cells of one type, scheduled by ScheduleByColour (centres:
-// their centroids); the schedule's items are model cell indices.
+// The model's cells of one type, scheduled in slabs (ScheduleBySlabs), or by
+// ScheduleByColour where the slabs would be too thin (centres: their
+// centroids); the schedule's items are model cell indices.
 ColouredSchedule
 ScheduleCells(const Model & model, CellType type, Index blockSize)
 {
@@ -180,8 +181,13 @@ ScheduleCells(const Model & model, CellType type, Index blockSize)
       centres.push_back(centre / count);
     }
   }
-  ColouredSchedule schedule =
-    ScheduleByColour(offsets, nodes, centres, BoundingBox(model.nodes), static_cast<Index>(model.nodes.size()), blockSize);
+  const Eigen::AlignedBox3d box = BoundingBox(model.nodes);
+  const Index               nodeCount = static_cast<Index>(model.nodes.size());
+  ColouredSchedule          schedule = ScheduleBySlabs(offsets, nodes, centres, box, nodeCount, kSlabsPerColour);
+  if (schedule.items.empty())
+  {
+    schedule = ScheduleByColour(offsets, nodes, centres, box, nodeCount, blockSize);
+  }
   for (Index & item : schedule.items)
   {
     item = cells[item];
@@ -429,18 +435,24 @@ FiniteElementForceModel::ComputeInternalForces(const double * u, double * f)
     {
       f[d] = 0.0;
     }
-    // Hexahedra: static, since their few blocks a colour (2-27) are dealt
-    // out as evenly as by a dynamic hand-out, which took 5-7 % longer with
-    // 2 threads (2026-11-26); the many tetrahedral blocks gain from it.
+    // Hexahedra: static, since their blocks (slabs of equal size, or a few
+    // coloured blocks a colour) are dealt out as evenly as by a dynamic
+    // hand-out, which took 5-7 % longer with 2 threads on coloured blocks
+    // (2026-11-26); the tetrahedra gain from the dynamic one.
     for (std::size_t colour = 0; colour + 1 < m_HexColourOffsets.size(); ++colour)
     {
 #pragma omp for schedule(static)
       for (Index block = m_HexColourOffsets[colour]; block < m_HexColourOffsets[colour + 1]; ++block)
       {
-        const Index inverted = AddHexahedronForces(m_HexBlockOffsets[block], m_HexBlockOffsets[block + 1], u, f);
-        if (inverted >= 0)
+        // A slab (ScheduleBySlabs) is one block of many chunks; a coloured block is one chunk.
+        for (Index chunk = m_HexBlockOffsets[block]; chunk < m_HexBlockOffsets[block + 1]; chunk += kHexahedraPerBlock)
         {
-          firstInverted = std::min(firstInverted, inverted);
+          const Index inverted =
+            AddHexahedronForces(chunk, std::min(chunk + kHexahedraPerBlock, m_HexBlockOffsets[block + 1]), u, f);
+          if (inverted >= 0)
+          {
+            firstInverted = std::min(firstInverted, inverted);
+          }
         }
       }
     }
@@ -465,10 +477,14 @@ FiniteElementForceModel::ComputeInternalForces(const double * u, double * f)
 #pragma omp for schedule(dynamic, 1)
       for (Index block = m_TetColourOffsets[colour]; block < m_TetColourOffsets[colour + 1]; ++block)
       {
-        const Index inverted = AddTetrahedronForces(m_TetBlockOffsets[block], m_TetBlockOffsets[block + 1], u, f);
-        if (inverted >= 0)
+        for (Index chunk = m_TetBlockOffsets[block]; chunk < m_TetBlockOffsets[block + 1]; chunk += kTetrahedraPerBlock)
         {
-          firstInverted = std::min(firstInverted, hexCount + inverted);
+          const Index inverted =
+            AddTetrahedronForces(chunk, std::min(chunk + kTetrahedraPerBlock, m_TetBlockOffsets[block + 1]), u, f);
+          if (inverted >= 0)
+          {
+            firstInverted = std::min(firstInverted, hexCount + inverted);
+          }
         }
       }
     }

@@ -2,9 +2,10 @@
 //
 // Everything that depends only on the reference configuration is computed once:
 // shape-function gradients, volumes, hourglass shape vectors and stiffnesses,
-// nodal volumes for the average-nodal-pressure tetrahedron, and a colouring of
-// the cells that lets forces be assembled in parallel without atomics and in a
-// fixed order (deterministic for any thread count).
+// nodal volumes for the average-nodal-pressure tetrahedron, and a schedule of
+// the cells (two colours of slabs, or many colours of blocks) that lets forces
+// be assembled in parallel without atomics and in a fixed order (deterministic
+// for any thread count).
 #ifndef bmrForceModel_h
 #define bmrForceModel_h
 
@@ -32,12 +33,12 @@ struct Energies
 double
 SmallestStableStep(const std::vector<double> & waveBound, const std::vector<double> & density, Index * unit);
 
-/** Work items (cells or integration points) in a locality-preserving (Morton)
- *  order of their centres, cut into blocks of consecutive items, and the blocks
- *  coloured greedily so that blocks of one colour share no node. Blocks of a
- *  colour are processed in parallel, each sequentially, scattering forces
- *  without atomics; every node then receives its contributions in the same
- *  order whatever the number of threads. */
+/** Work items (cells or integration points) in blocks of consecutive items,
+ *  the blocks coloured so that blocks of one colour share no node. Blocks of
+ *  a colour are processed in parallel, each sequentially (in chunks of the
+ *  kernel's SIMD block), scattering forces without atomics; every node then
+ *  receives its contributions in the same order whatever the number of
+ *  threads. */
 struct ColouredSchedule
 {
   std::vector<Index> items;         // item indices, colour by colour, block by block
@@ -46,7 +47,10 @@ struct ColouredSchedule
 };
 
 /** Schedules items whose nodes are the rows of (offsets, nodes), with one
- *  centre each; `box` is the frame of the Morton code (e.g. the model's nodes). */
+ *  centre each: in a locality-preserving (Morton) order of their centres, cut
+ *  into blocks of `blockSize`, coloured greedily (14-43 colours on the
+ *  brain-sized benchmark); `box` is the frame of the Morton code (e.g. the
+ *  model's nodes). */
 ColouredSchedule
 ScheduleByColour(const std::vector<Index> &   offsets,
                  const std::vector<Index> &   nodes,
@@ -54,6 +58,28 @@ ScheduleByColour(const std::vector<Index> &   offsets,
                  const Eigen::AlignedBox3d &  box,
                  Index                        nodeCount,
                  Index                        blockSize);
+
+/** Slabs per colour of the force kernels' schedules. Fixed, not taken from
+ *  the thread count, so that results stay independent of it; it bounds the
+ *  useful threads at 8 (the slabs of a colour are dealt out whole). */
+constexpr Index kSlabsPerColour = 8;
+
+/** Two colours of slabs instead: the items cut along the box's longest axis
+ *  into 2 x slabsPerColour slabs of equal count (halved while a node is
+ *  shared by slabs two apart, down to 4), even slabs one colour, odd slabs
+ *  the other; each slab is one block (Morton order within), processed by one
+ *  thread in chunks. Two barriers per pass instead of one per colour, and
+ *  each thread's nodes stay together: on the brain-sized benchmark with 2
+ *  threads, hexahedra 35-38 -> 31-34 ns per element-step, ANP 18-19 -> 15-16,
+ *  meshless 50 -> 44-48 (2026-11-26, docs/thread-scaling.md). Empty when
+ *  even 4 slabs are too thin (the caller then colours blocks). */
+ColouredSchedule
+ScheduleBySlabs(const std::vector<Index> &   offsets,
+                const std::vector<Index> &   nodes,
+                const std::vector<Vector3> & centres,
+                const Eigen::AlignedBox3d &  box,
+                Index                        nodeCount,
+                Index                        slabsPerColour);
 
 Eigen::AlignedBox3d
 BoundingBox(const std::vector<Vector3> & points);
@@ -128,14 +154,14 @@ public:
   Index ModelCell(Index kernelCell) const { return m_ModelCell[kernelCell]; }
 
 private:
-  /** Cells per block of the parallel schedule (see ScheduleCells), measured
-   *  on the brain-sized benchmark (2026-11-26, docs/thread-scaling.md).
-   *  Hexahedra in blocks of 256 made 116 blocks in 14 colours (3-15 blocks a
-   *  colour); blocks of 128 took 37.2 instead of 40.9 ns per element-step
-   *  with 2 threads and 56.8 instead of 54.5 with one (64: 41, 32: 44 ns with
-   *  2 threads); colours balanced in size gained nothing. Tetrahedra in
-   *  blocks of 512 took 16.7-17.4 instead of 18.2-18.5 ns with 2 threads
-   *  (1024: 17.4; 128: 19.2). */
+  /** Cells per chunk of a slab, and per block where ScheduleCells falls back
+   *  to colours; measured with colours on the brain-sized benchmark
+   *  (2026-11-26, docs/thread-scaling.md): hexahedra in blocks of 256 made
+   *  116 blocks in 14 colours (3-15 blocks a colour); blocks of 128 took
+   *  37.2 instead of 40.9 ns per element-step with 2 threads and 56.8
+   *  instead of 54.5 with one (64: 41, 32: 44 ns); colours balanced in size
+   *  gained nothing. Tetrahedra in blocks of 512 took 16.7-17.4 instead of
+   *  18.2-18.5 ns with 2 threads (1024: 17.4; 128: 19.2). */
   static constexpr Index kHexahedraPerBlock = 128;
   static constexpr Index kTetrahedraPerBlock = 512;
 
@@ -212,8 +238,8 @@ private:
   std::vector<double> m_CollapseWaveBound; // added to m_WaveBound once the collapse barrier engages
   std::vector<Index>  m_ModelCell;
 
-  // Kernel cells are stored colour by colour, block by block; blocks of one
-  // colour share no node (see ScheduleCells).
+  // Kernel cells are stored colour by colour, block (slab) by block; blocks of
+  // one colour share no node (see ScheduleCells).
   std::vector<Index> m_HexBlockOffsets;
   std::vector<Index> m_HexColourOffsets;
   std::vector<Index> m_TetBlockOffsets;
@@ -253,7 +279,8 @@ private:
   template <typename PointMass>
   std::vector<double> LumpToNodes(const PointMass & pointMass) const;
 
-  /** Integration points per block of the parallel schedule (ScheduleByColour):
+  /** Integration points per chunk of a slab, or per block of ScheduleByColour
+   *  where slabs are too thin; measured with colours:
    *  blocks of 128 took 45.2-48.1 instead of 54.3-59.3 ns per point-step with
    *  2 threads on the brain-sized benchmark, 85.8 instead of 81.3 with one
    *  (2026-11-26; 64: 50, 256: 45.0 and 87.8 ns). */

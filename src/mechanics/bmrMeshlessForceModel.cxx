@@ -92,8 +92,12 @@ MeshlessForceModel::MeshlessForceModel(const Model &          model,
   }
 
   // The kernel's table in schedule order.
-  const ColouredSchedule schedule =
-    ScheduleByColour(table.offsets, table.nodes, m_Positions, BoundingBox(model.nodes), m_NodeCount, kPointsPerBlock);
+  const Eigen::AlignedBox3d box = BoundingBox(model.nodes);
+  ColouredSchedule schedule = ScheduleBySlabs(table.offsets, table.nodes, m_Positions, box, m_NodeCount, kSlabsPerColour);
+  if (schedule.items.empty())
+  {
+    schedule = ScheduleByColour(table.offsets, table.nodes, m_Positions, box, m_NodeCount, kPointsPerBlock);
+  }
   m_KernelPoint = schedule.items;
   m_KernelBlockOffsets = schedule.blockOffsets;
   m_KernelColourOffsets = schedule.colourOffsets;
@@ -198,7 +202,10 @@ MeshlessForceModel::ComputeInternalForces(const double * u, double * f)
 #pragma omp for schedule(dynamic, 1)
       for (Index block = m_KernelColourOffsets[colour]; block < m_KernelColourOffsets[colour + 1]; ++block)
       {
-        const Index first = m_KernelBlockOffsets[block], last = m_KernelBlockOffsets[block + 1];
+      // A slab (ScheduleBySlabs) is one block of many chunks; a coloured block is one chunk.
+      for (Index first = m_KernelBlockOffsets[block]; first < m_KernelBlockOffsets[block + 1]; first += kPointsPerBlock)
+      {
+        const Index last = std::min(first + kPointsPerBlock, m_KernelBlockOffsets[block + 1]);
         for (Index q = first; q < last; ++q)
         {
           // The columns of F = I + sum_I u_I grad phi_I^T, over even and odd
@@ -275,6 +282,7 @@ MeshlessForceModel::ComputeInternalForces(const double * u, double * f)
             StoreLanes(fI, LoadLanes(fI) + (column[0] * g[0] + column[1] * g[1] + column[2] * g[2]));
           }
         }
+      }
       }
     }
 #pragma omp for schedule(static)

@@ -22,6 +22,102 @@ BoundingBox(const std::vector<Vector3> & points)
   return box;
 }
 
+namespace
+{
+
+/** Morton (Z-order) code of a point in the frame of `box`, 10 bits per axis. */
+std::uint64_t
+MortonCode(const Vector3 & centre, const Eigen::AlignedBox3d & box)
+{
+  const Vector3 extent = box.sizes().cwiseMax(1e-300);
+  const Vector3 unit = ((centre - box.min()).cwiseQuotient(extent)).cwiseMax(0.0).cwiseMin(1.0);
+  std::uint64_t code = 0;
+  for (int bit = 9; bit >= 0; --bit)
+  {
+    for (int axis = 0; axis < 3; ++axis)
+    {
+      const auto q = static_cast<std::uint64_t>(unit[axis] * 1023.0);
+      code = (code << 1) | ((q >> bit) & 1u);
+    }
+  }
+  return code;
+}
+
+} // namespace
+
+ColouredSchedule
+ScheduleBySlabs(const std::vector<Index> &   offsets,
+                const std::vector<Index> &   nodes,
+                const std::vector<Vector3> & centres,
+                const Eigen::AlignedBox3d &  box,
+                Index                        nodeCount,
+                Index                        slabsPerColour)
+{
+  const Index count = static_cast<Index>(centres.size());
+  int         axis = 0;
+  box.sizes().maxCoeff(&axis);
+  std::vector<Index> order(count);
+  for (Index i = 0; i < count; ++i)
+  {
+    order[i] = i;
+  }
+  std::stable_sort(order.begin(), order.end(), [&](Index l, Index r) { return centres[l][axis] < centres[r][axis]; });
+
+  std::vector<Index> slabOf(count);
+  std::vector<Index> lowest(nodeCount), highest(nodeCount);
+  for (Index slabs = 2 * slabsPerColour; slabs >= 4; slabs /= 2)
+  {
+    // Equal item counts per slab, cut along the longest axis.
+    for (Index position = 0; position < count; ++position)
+    {
+      slabOf[order[position]] = static_cast<Index>(static_cast<std::int64_t>(position) * slabs / count);
+    }
+    std::fill(lowest.begin(), lowest.end(), slabs);
+    std::fill(highest.begin(), highest.end(), Index{ -1 });
+    for (Index item = 0; item < count; ++item)
+    {
+      for (Index k = offsets[item]; k < offsets[item + 1]; ++k)
+      {
+        lowest[nodes[k]] = std::min(lowest[nodes[k]], slabOf[item]);
+        highest[nodes[k]] = std::max(highest[nodes[k]], slabOf[item]);
+      }
+    }
+    bool valid = true;
+    for (Index n = 0; n < nodeCount && valid; ++n)
+    {
+      valid = highest[n] - lowest[n] <= 1;
+    }
+    if (!valid)
+    {
+      continue; // a slab thinner than an item: fewer, thicker slabs
+    }
+    std::vector<std::vector<std::pair<std::uint64_t, Index>>> itemsOfSlab(slabs);
+    for (Index item = 0; item < count; ++item)
+    {
+      itemsOfSlab[slabOf[item]].emplace_back(MortonCode(centres[item], box), item);
+    }
+    ColouredSchedule schedule;
+    schedule.blockOffsets.push_back(0);
+    schedule.colourOffsets.push_back(0);
+    for (Index parity = 0; parity < 2; ++parity)
+    {
+      for (Index slab = parity; slab < slabs; slab += 2)
+      {
+        auto & keyed = itemsOfSlab[slab];
+        std::stable_sort(keyed.begin(), keyed.end(), [](const auto & l, const auto & r) { return l.first < r.first; });
+        for (const auto & entry : keyed)
+        {
+          schedule.items.push_back(entry.second);
+        }
+        schedule.blockOffsets.push_back(static_cast<Index>(schedule.items.size()));
+      }
+      schedule.colourOffsets.push_back(static_cast<Index>(schedule.blockOffsets.size()) - 1);
+    }
+    return schedule;
+  }
+  return {};
+}
+
 ColouredSchedule
 ScheduleByColour(const std::vector<Index> &   offsets,
                  const std::vector<Index> &   nodes,
@@ -30,24 +126,10 @@ ScheduleByColour(const std::vector<Index> &   offsets,
                  Index                        nodeCount,
                  Index                        blockSize)
 {
-  const Vector3 extent = box.sizes().cwiseMax(1e-300);
-  auto          morton = [&](const Vector3 & centre) {
-    const Vector3 unit = ((centre - box.min()).cwiseQuotient(extent)).cwiseMax(0.0).cwiseMin(1.0);
-    std::uint64_t code = 0;
-    for (int bit = 9; bit >= 0; --bit)
-    {
-      for (int axis = 0; axis < 3; ++axis)
-      {
-        const auto q = static_cast<std::uint64_t>(unit[axis] * 1023.0);
-        code = (code << 1) | ((q >> bit) & 1u);
-      }
-    }
-    return code;
-  };
   std::vector<std::pair<std::uint64_t, Index>> keyed;
   for (Index item = 0; item < static_cast<Index>(centres.size()); ++item)
   {
-    keyed.emplace_back(morton(centres[item]), item);
+    keyed.emplace_back(MortonCode(centres[item], box), item);
   }
   std::stable_sort(keyed.begin(), keyed.end(), [](const auto & l, const auto & r) { return l.first < r.first; });
 
