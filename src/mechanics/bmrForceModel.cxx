@@ -157,8 +157,7 @@ ComponentMajor(const std::vector<double> & records, std::size_t width)
   return out;
 }
 
-// The model's cells of one type, scheduled in slabs (ScheduleBySlabs), or by
-// ScheduleByColour where the slabs would be too thin (centres: their
+// The model's cells of one type, scheduled by ScheduleWork (centres: their
 // centroids); the schedule's items are model cell indices.
 ColouredSchedule
 ScheduleCells(const Model & model, CellType type, Index blockSize)
@@ -181,13 +180,8 @@ ScheduleCells(const Model & model, CellType type, Index blockSize)
       centres.push_back(centre / count);
     }
   }
-  const Eigen::AlignedBox3d box = BoundingBox(model.nodes);
-  const Index               nodeCount = static_cast<Index>(model.nodes.size());
-  ColouredSchedule          schedule = ScheduleBySlabs(offsets, nodes, centres, box, nodeCount, kSlabsPerColour);
-  if (schedule.items.empty())
-  {
-    schedule = ScheduleByColour(offsets, nodes, centres, box, nodeCount, blockSize);
-  }
+  ColouredSchedule schedule =
+    ScheduleWork(offsets, nodes, centres, BoundingBox(model.nodes), static_cast<Index>(model.nodes.size()), blockSize);
   for (Index & item : schedule.items)
   {
     item = cells[item];

@@ -81,6 +81,17 @@ ScheduleBySlabs(const std::vector<Index> &   offsets,
                 Index                        nodeCount,
                 Index                        slabsPerColour);
 
+/** The force kernels' schedule: slabs (ScheduleBySlabs, kSlabsPerColour),
+ *  or coloured blocks of `blockSize` (ScheduleByColour) where slabs would be
+ *  too thin. */
+ColouredSchedule
+ScheduleWork(const std::vector<Index> &   offsets,
+             const std::vector<Index> &   nodes,
+             const std::vector<Vector3> & centres,
+             const Eigen::AlignedBox3d &  box,
+             Index                        nodeCount,
+             Index                        blockSize);
+
 Eigen::AlignedBox3d
 BoundingBox(const std::vector<Vector3> & points);
 
@@ -275,6 +286,10 @@ public:
   Eigen::Matrix3d DeformationGradientAt(Index point, const double * u) const;
 
 private:
+  /** Adds the forces of kernel points [first, last) (at most kPointsPerBlock)
+   *  to the padded forces; returns the first inverted integration point or -1. */
+  Index AddPointForces(Index first, Index last);
+
   /** Nodal lumped masses from a mass per integration point, shared equally by its neighbours. */
   template <typename PointMass>
   std::vector<double> LumpToNodes(const PointMass & pointMass) const;

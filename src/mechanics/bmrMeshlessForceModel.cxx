@@ -92,12 +92,8 @@ MeshlessForceModel::MeshlessForceModel(const Model &          model,
   }
 
   // The kernel's table in schedule order.
-  const Eigen::AlignedBox3d box = BoundingBox(model.nodes);
-  ColouredSchedule schedule = ScheduleBySlabs(table.offsets, table.nodes, m_Positions, box, m_NodeCount, kSlabsPerColour);
-  if (schedule.items.empty())
-  {
-    schedule = ScheduleByColour(table.offsets, table.nodes, m_Positions, box, m_NodeCount, kPointsPerBlock);
-  }
+  const ColouredSchedule schedule =
+    ScheduleWork(table.offsets, table.nodes, m_Positions, BoundingBox(model.nodes), m_NodeCount, kPointsPerBlock);
   m_KernelPoint = schedule.items;
   m_KernelBlockOffsets = schedule.blockOffsets;
   m_KernelColourOffsets = schedule.colourOffsets;
@@ -172,19 +168,105 @@ StoreLanes(double * target, Lanes lanes)
 }
 } // namespace
 
+// Points [first, last) of the kernel's order, three passes: F of each point
+// from its neighbours, then w P with one point per SIMD lane (the
+// constitutive law, with its divisions, was 40 % of a scalar one-pass
+// kernel), then f_I += w P grad phi_I scattered to the neighbours. Returns
+// the first inverted integration point, or -1.
+Index
+MeshlessForceModel::AddPointForces(Index first, Index last)
+{
+  const Index *      nodes = m_KernelNodes.data();
+  const double *     gradients = m_KernelGradients.data();
+  const double *     material = m_KernelMaterial.data();
+  const double *     paddedU = m_PaddedDisplacements.data();
+  double *           paddedF = m_PaddedForces.data();
+  alignas(64) double stress[9][kPointsPerBlock]; // F, then w P, component-major
+  for (Index q = first; q < last; ++q)
+  {
+    // The columns of F = I + sum_I u_I grad phi_I^T, over even and odd
+    // entries apart to halve the chain of dependent additions.
+    Lanes       even0 = { 1, 0, 0, 0 }, even1 = { 0, 1, 0, 0 }, even2 = { 0, 0, 1, 0 };
+    Lanes       odd0 = {}, odd1 = {}, odd2 = {};
+    const Index begin = m_KernelOffsets[q], end = m_KernelOffsets[q + 1];
+    Index       k = begin;
+    for (; k + 1 < end; k += 2)
+    {
+      const Lanes    uA = LoadLanes(paddedU + 4 * static_cast<std::size_t>(nodes[k]));
+      const Lanes    uB = LoadLanes(paddedU + 4 * static_cast<std::size_t>(nodes[k + 1]));
+      const double * g = gradients + 3 * static_cast<std::size_t>(k);
+      __builtin_prefetch(g + kGradientPrefetchDistance);
+      even0 += uA * g[0];
+      even1 += uA * g[1];
+      even2 += uA * g[2];
+      odd0 += uB * g[3];
+      odd1 += uB * g[4];
+      odd2 += uB * g[5];
+    }
+    if (k < end)
+    {
+      const Lanes    uA = LoadLanes(paddedU + 4 * static_cast<std::size_t>(nodes[k]));
+      const double * g = gradients + 3 * static_cast<std::size_t>(k);
+      even0 += uA * g[0];
+      even1 += uA * g[1];
+      even2 += uA * g[2];
+    }
+    const Lanes column[3] = { even0 + odd0, even1 + odd1, even2 + odd2 };
+    for (int c = 0; c < 9; ++c)
+    {
+      stress[c][q - first] = column[c % 3][c / 3];
+    }
+  }
+  Index inverted = std::numeric_limits<Index>::max();
+#pragma omp simd reduction(min : inverted)
+  for (Index q = first; q < last; ++q)
+  {
+    const Index local = q - first;
+    Matrix3x3   F;
+    for (int c = 0; c < 9; ++c)
+    {
+      F.m[c / 3][c % 3] = stress[c][local];
+    }
+    const Matrix3x3 cof = CofactorOf(F);
+    const double    J = DeterminantOf(F, cof);
+    const double *  m = material + 4 * static_cast<std::size_t>(q); // weight, mu, kappa, collapse
+    const Matrix3x3 A = ScaledFirstPiola(F, cof, J, m[2] * (J - 1.0), m[1], m[3], m[0]);
+    if (!(J > 0.0))
+    {
+      inverted = std::min(inverted, m_KernelPoint[q]);
+    }
+    for (int c = 0; c < 9; ++c)
+    {
+      stress[c][local] = A.m[c / 3][c % 3];
+    }
+  }
+  if (inverted != std::numeric_limits<Index>::max())
+  {
+    return inverted; // forces are meaningless now; the caller stops
+  }
+  for (Index q = first; q < last; ++q)
+  {
+    const Index local = q - first;
+    const Lanes column[3] = { { stress[0][local], stress[3][local], stress[6][local], 0.0 },
+                              { stress[1][local], stress[4][local], stress[7][local], 0.0 },
+                              { stress[2][local], stress[5][local], stress[8][local], 0.0 } };
+    for (Index k = m_KernelOffsets[q]; k < m_KernelOffsets[q + 1]; ++k)
+    {
+      double *       fI = paddedF + 4 * static_cast<std::size_t>(nodes[k]);
+      const double * g = gradients + 3 * static_cast<std::size_t>(k);
+      StoreLanes(fI, LoadLanes(fI) + (column[0] * g[0] + column[1] * g[1] + column[2] * g[2]));
+    }
+  }
+  return -1;
+}
+
 Index
 MeshlessForceModel::ComputeInternalForces(const double * u, double * f)
 {
-  // Per block of points, three passes: F of each point from its neighbours,
-  // then w P with one point per SIMD lane (the constitutive law, with its
-  // divisions, was 40 % of a scalar one-pass kernel), then f_I += w P grad phi_I
-  // scattered to the neighbours. Blocks of one colour share no node, so the
-  // scatter needs no atomics and each node sums its contributions in schedule
-  // order for any thread count.
+  // Blocks of one colour share no node, so the scatter of AddPointForces
+  // needs no atomics and each node sums its contributions in schedule order
+  // for any thread count.
   const Index       nodeCount = m_NodeCount;
-  const Index *     nodes = m_KernelNodes.data();
-  const double *    gradients = m_KernelGradients.data();
-  const double *    material = m_KernelMaterial.data();
   double *          paddedU = m_PaddedDisplacements.data();
   double *          paddedF = m_PaddedForces.data();
   Index             firstInverted = std::numeric_limits<Index>::max();
@@ -196,93 +278,20 @@ MeshlessForceModel::ComputeInternalForces(const double * u, double * f)
       StoreLanes(paddedU + 4 * static_cast<std::size_t>(n), Lanes{ u[3 * n], u[3 * n + 1], u[3 * n + 2], 0.0 });
       StoreLanes(paddedF + 4 * static_cast<std::size_t>(n), Lanes{});
     }
-    alignas(64) double stress[9][kPointsPerBlock]; // F, then w P, component-major
     for (std::size_t colour = 0; colour + 1 < m_KernelColourOffsets.size(); ++colour)
     {
 #pragma omp for schedule(dynamic, 1)
       for (Index block = m_KernelColourOffsets[colour]; block < m_KernelColourOffsets[colour + 1]; ++block)
       {
-      // A slab (ScheduleBySlabs) is one block of many chunks; a coloured block is one chunk.
-      for (Index first = m_KernelBlockOffsets[block]; first < m_KernelBlockOffsets[block + 1]; first += kPointsPerBlock)
-      {
-        const Index last = std::min(first + kPointsPerBlock, m_KernelBlockOffsets[block + 1]);
-        for (Index q = first; q < last; ++q)
+        // A slab (ScheduleBySlabs) is one block of many chunks; a coloured block is one chunk.
+        for (Index first = m_KernelBlockOffsets[block]; first < m_KernelBlockOffsets[block + 1]; first += kPointsPerBlock)
         {
-          // The columns of F = I + sum_I u_I grad phi_I^T, over even and odd
-          // entries apart to halve the chain of dependent additions.
-          Lanes       even0 = { 1, 0, 0, 0 }, even1 = { 0, 1, 0, 0 }, even2 = { 0, 0, 1, 0 };
-          Lanes       odd0 = {}, odd1 = {}, odd2 = {};
-          const Index begin = m_KernelOffsets[q], end = m_KernelOffsets[q + 1];
-          Index       k = begin;
-          for (; k + 1 < end; k += 2)
+          const Index inverted = AddPointForces(first, std::min(first + kPointsPerBlock, m_KernelBlockOffsets[block + 1]));
+          if (inverted >= 0)
           {
-            const Lanes    uA = LoadLanes(paddedU + 4 * static_cast<std::size_t>(nodes[k]));
-            const Lanes    uB = LoadLanes(paddedU + 4 * static_cast<std::size_t>(nodes[k + 1]));
-            const double * g = gradients + 3 * static_cast<std::size_t>(k);
-            __builtin_prefetch(g + kGradientPrefetchDistance);
-            even0 += uA * g[0];
-            even1 += uA * g[1];
-            even2 += uA * g[2];
-            odd0 += uB * g[3];
-            odd1 += uB * g[4];
-            odd2 += uB * g[5];
-          }
-          if (k < end)
-          {
-            const Lanes    uA = LoadLanes(paddedU + 4 * static_cast<std::size_t>(nodes[k]));
-            const double * g = gradients + 3 * static_cast<std::size_t>(k);
-            even0 += uA * g[0];
-            even1 += uA * g[1];
-            even2 += uA * g[2];
-          }
-          const Lanes column[3] = { even0 + odd0, even1 + odd1, even2 + odd2 };
-          for (int c = 0; c < 9; ++c)
-          {
-            stress[c][q - first] = column[c % 3][c / 3];
+            firstInverted = std::min(firstInverted, inverted);
           }
         }
-        Index inverted = std::numeric_limits<Index>::max();
-#pragma omp simd reduction(min : inverted)
-        for (Index q = first; q < last; ++q)
-        {
-          const Index local = q - first;
-          Matrix3x3   F;
-          for (int c = 0; c < 9; ++c)
-          {
-            F.m[c / 3][c % 3] = stress[c][local];
-          }
-          const Matrix3x3 cof = CofactorOf(F);
-          const double    J = DeterminantOf(F, cof);
-          const double *  m = material + 4 * static_cast<std::size_t>(q); // weight, mu, kappa, collapse
-          const Matrix3x3 A = ScaledFirstPiola(F, cof, J, m[2] * (J - 1.0), m[1], m[3], m[0]);
-          if (!(J > 0.0))
-          {
-            inverted = std::min(inverted, m_KernelPoint[q]); // forces are meaningless now; the caller stops
-          }
-          for (int c = 0; c < 9; ++c)
-          {
-            stress[c][local] = A.m[c / 3][c % 3];
-          }
-        }
-        if (inverted != std::numeric_limits<Index>::max())
-        {
-          firstInverted = std::min(firstInverted, inverted);
-          continue;
-        }
-        for (Index q = first; q < last; ++q)
-        {
-          const Index local = q - first;
-          const Lanes column[3] = { { stress[0][local], stress[3][local], stress[6][local], 0.0 },
-                                    { stress[1][local], stress[4][local], stress[7][local], 0.0 },
-                                    { stress[2][local], stress[5][local], stress[8][local], 0.0 } };
-          for (Index k = m_KernelOffsets[q]; k < m_KernelOffsets[q + 1]; ++k)
-          {
-            double *       fI = paddedF + 4 * static_cast<std::size_t>(nodes[k]);
-            const double * g = gradients + 3 * static_cast<std::size_t>(k);
-            StoreLanes(fI, LoadLanes(fI) + (column[0] * g[0] + column[1] * g[1] + column[2] * g[2]));
-          }
-        }
-      }
       }
     }
 #pragma omp for schedule(static)

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <numeric>
 #include <utility>
 #include <vector>
 
@@ -57,10 +58,7 @@ ScheduleBySlabs(const std::vector<Index> &   offsets,
   int         axis = 0;
   box.sizes().maxCoeff(&axis);
   std::vector<Index> order(count);
-  for (Index i = 0; i < count; ++i)
-  {
-    order[i] = i;
-  }
+  std::iota(order.begin(), order.end(), Index{ 0 });
   std::stable_sort(order.begin(), order.end(), [&](Index l, Index r) { return centres[l][axis] < centres[r][axis]; });
 
   std::vector<Index> slabOf(count);
@@ -195,6 +193,18 @@ ScheduleByColour(const std::vector<Index> &   offsets,
     schedule.colourOffsets.push_back(static_cast<Index>(schedule.blockOffsets.size()) - 1);
   }
   return schedule;
+}
+
+ColouredSchedule
+ScheduleWork(const std::vector<Index> &   offsets,
+             const std::vector<Index> &   nodes,
+             const std::vector<Vector3> & centres,
+             const Eigen::AlignedBox3d &  box,
+             Index                        nodeCount,
+             Index                        blockSize)
+{
+  ColouredSchedule schedule = ScheduleBySlabs(offsets, nodes, centres, box, nodeCount, kSlabsPerColour);
+  return schedule.items.empty() ? ScheduleByColour(offsets, nodes, centres, box, nodeCount, blockSize) : schedule;
 }
 
 } // namespace bmr
