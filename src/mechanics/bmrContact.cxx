@@ -1,11 +1,10 @@
 #include "bmrContact.h"
-#include "bmrClosestPoint.h"
 
 #include <Eigen/Geometry>
 
 #include <algorithm>
 #include <cmath>
-#include <map>
+#include <numeric>
 
 namespace bmr
 {
@@ -21,17 +20,23 @@ struct RigidContact::Tree
   std::vector<std::array<Index, 3>>          corners; // after the orientation flip
   std::vector<Vector3>                       faceNormals;
   std::vector<Vector3>                       vertexNormals; // angle-weighted pseudo-normals
-  std::map<std::pair<Index, Index>, Vector3> edgeNormals;
+  std::vector<std::array<Vector3, 3>>        edgeNormals; // per triangle, of its edge from corner k to k + 1: sum of the adjacent face normals
   std::unique_ptr<TriangleSurfaceTree>       surface; // over `corners`: none is degenerate, so none is left out
   bool                                       closed = false;
   double                                     sideSign = -1.0; // -1: body inside, +1: body outside
 
   // Signed distance of x to the surface (positive outside), the closest point
   // and (when asked) the unit outward normal there: the direction from the
-  // closest point to x, or the pseudo-normal where x is on the surface.
-  double SignedDistance(const Vector3 & x, Vector3 & closest, Vector3 * outwardNormal = nullptr) const
+  // closest point to x, or the pseudo-normal where x is on the surface. `hint`
+  // (when given): a nearby earlier hit, which speeds the search; it receives this one.
+  double SignedDistance(const Vector3 & x, Vector3 & closest, Vector3 * outwardNormal = nullptr,
+                        TriangleSurfaceTree::Hit * hint = nullptr) const
   {
-    const auto   hit = surface->Closest(x);
+    const auto hit = hint != nullptr ? surface->Closest(x, *hint) : surface->Closest(x);
+    if (hint != nullptr)
+    {
+      *hint = hit;
+    }
     const auto   t = static_cast<std::size_t>(hit.triangle);
     const auto & c = corners[t];
     closest = hit.point;
@@ -64,11 +69,8 @@ struct RigidContact::Tree
     }
     else if (count == 2)
     {
-      const auto edge = edgeNormals.find(std::minmax(c[nonzero[0]], c[nonzero[1]]));
-      if (edge != edgeNormals.end())
-      {
-        normal = edge->second;
-      }
+      // Corners (0, 1) are edge 0, (1, 2) edge 1, (0, 2) edge 2.
+      normal = edgeNormals[t][nonzero[0] == 0 && nonzero[1] == 2 ? 2 : nonzero[0]];
     }
     const double distance = (x - closest).dot(normal);
     if (outwardNormal != nullptr)
@@ -90,26 +92,39 @@ RigidContact::RigidContact(const ContactSurface & surface, std::vector<Index> sl
   Tree & tree = *m_Tree;
   tree.corners = surface.triangles;
 
-  // Closed means every edge is shared by exactly two triangles.
-  std::map<std::pair<Index, Index>, int> edgeUse;
-  std::map<std::pair<Index, Index>, int> directedUse;
-  for (const auto & c : tree.corners)
+  // Closed means every edge is shared by exactly two triangles. The edges,
+  // sorted by their end points then by triangle, are numbered 3 t + k (edge k
+  // of the input's triangle t, from corner k to corner k + 1).
+  const std::size_t        edgeCount = 3 * surface.triangles.size();
+  const auto               endPoints = [&](std::size_t e, bool directed) {
+    const auto & c = surface.triangles[e / 3];
+    const Index  a = c[e % 3], b = c[(e % 3 + 1) % 3];
+    return directed || a < b ? std::make_pair(a, b) : std::make_pair(b, a);
+  };
+  std::vector<std::size_t> edges(edgeCount);
+  std::iota(edges.begin(), edges.end(), std::size_t{ 0 });
+  std::sort(edges.begin(), edges.end(), [&](std::size_t p, std::size_t q) {
+    return std::make_pair(endPoints(p, false), p) < std::make_pair(endPoints(q, false), q);
+  });
+  tree.closed = true;
+  bool oriented = true;
+  for (std::size_t first = 0, last = 0; first < edgeCount; first = last)
   {
-    for (int k = 0; k < 3; ++k)
+    while (last < edgeCount && endPoints(edges[last], false) == endPoints(edges[first], false))
     {
-      ++edgeUse[std::minmax(c[k], c[(k + 1) % 3])];
-      ++directedUse[{ c[k], c[(k + 1) % 3] }];
+      ++last;
     }
+    tree.closed = tree.closed && last - first == 2;
+    oriented = oriented && (last - first != 2 || endPoints(edges[first], true) != endPoints(edges[first + 1], true));
   }
-  tree.closed = std::all_of(edgeUse.begin(), edgeUse.end(), [](const auto & e) { return e.second == 2; });
+  if (tree.closed && !oriented)
+  {
+    throw Error("contact surface '" + surface.name +
+                "' is closed but its triangles are not consistently oriented. Repair the surface.");
+  }
   bool flip = surface.flipNormals;
   if (tree.closed)
   {
-    if (std::any_of(directedUse.begin(), directedUse.end(), [](const auto & e) { return e.second != 1; }))
-    {
-      throw Error("contact surface '" + surface.name +
-                  "' is closed but its triangles are not consistently oriented. Repair the surface.");
-    }
     double signedVolume = 0.0;
     for (const auto & c : tree.corners)
     {
@@ -144,8 +159,21 @@ RigidContact::RigidContact(const ContactSurface & surface, std::vector<Index> sl
       const Vector3 e1 = (p[(k + 1) % 3] - p[k]).normalized();
       const Vector3 e2 = (p[(k + 2) % 3] - p[k]).normalized();
       tree.vertexNormals[c[k]] += std::acos(std::clamp(e1.dot(e2), -1.0, 1.0)) * normal;
-      // try_emplace with an explicit zero: Eigen's default constructor leaves values uninitialised.
-      tree.edgeNormals.try_emplace(std::minmax(c[k], c[(k + 1) % 3]), Vector3::Zero()).first->second += normal;
+    }
+  }
+  // An edge's pseudo-normal sums the normals of the triangles that share it,
+  // in triangle order. The flip above turned edge k of each triangle into edge 2 - k.
+  tree.edgeNormals.resize(tree.corners.size());
+  for (std::size_t first = 0, last = 0; first < edgeCount; first = last)
+  {
+    Vector3 sum = Vector3::Zero();
+    for (last = first; last < edgeCount && endPoints(edges[last], false) == endPoints(edges[first], false); ++last)
+    {
+      sum += tree.faceNormals[edges[last] / 3];
+    }
+    for (std::size_t e = first; e < last; ++e)
+    {
+      tree.edgeNormals[edges[e] / 3][flip ? 2 - edges[e] % 3 : edges[e] % 3] = sum;
     }
   }
   tree.vertices = surface.vertices;
@@ -158,6 +186,7 @@ RigidContact::RigidContact(const ContactSurface & surface, std::vector<Index> sl
   }
   m_LastQueried = m_Reference;
   m_SafeDistance.assign(m_SlaveNodes.size(), 0.0);
+  m_LastHit.assign(m_SlaveNodes.size(), TriangleSurfaceTree::Hit{ Vector3::Zero(), -1, 0.0 });
 }
 
 RigidContact::~RigidContact() = default;
@@ -210,7 +239,8 @@ RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std:
       continue;
     }
     Vector3 closest, outward;
-    if (tree.sideSign * tree.SignedDistance(x, closest, &outward) >= 0.0)
+    TriangleSurfaceTree::Hit & hint = m_LastHit[static_cast<std::size_t>(i)];
+    if (tree.sideSign * tree.SignedDistance(x, closest, &outward, &hint) >= 0.0)
     {
       m_LastQueried[i] = x;
       m_SafeDistance[i] = (x - closest).norm();
@@ -236,7 +266,7 @@ RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std:
         }
       }
       position = m_Reference[i] + displacement;
-      if (!(held[0] || held[1] || held[2]) || tree.sideSign * tree.SignedDistance(toSurface(position), closest) >= 0.0)
+      if (!(held[0] || held[1] || held[2]) || tree.sideSign * tree.SignedDistance(toSurface(position), closest, nullptr, &hint) >= 0.0)
       {
         break;
       }
