@@ -4,7 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
-#include <numeric>
+#include <cstdint>
 
 namespace bmr
 {
@@ -92,30 +92,40 @@ RigidContact::RigidContact(const ContactSurface & surface, std::vector<Index> sl
   Tree & tree = *m_Tree;
   tree.corners = surface.triangles;
 
-  // Closed means every edge is shared by exactly two triangles. The edges,
-  // sorted by their end points then by triangle, are numbered 3 t + k (edge k
-  // of the input's triangle t, from corner k to corner k + 1).
-  const std::size_t        edgeCount = 3 * surface.triangles.size();
-  const auto               endPoints = [&](std::size_t e, bool directed) {
-    const auto & c = surface.triangles[e / 3];
-    const Index  a = c[e % 3], b = c[(e % 3 + 1) % 3];
-    return directed || a < b ? std::make_pair(a, b) : std::make_pair(b, a);
+  // Closed means every edge is shared by exactly two triangles. The edges are
+  // numbered 3 t + k (edge k of the input's triangle t, from corner k to
+  // corner k + 1) and sorted by their end points (the smaller first, packed
+  // in one key), then by number.
+  struct Edge
+  {
+    std::uint64_t ends;
+    std::size_t   number;
+    bool          operator<(const Edge & other) const
+    {
+      return ends != other.ends ? ends < other.ends : number < other.number;
+    }
   };
-  std::vector<std::size_t> edges(edgeCount);
-  std::iota(edges.begin(), edges.end(), std::size_t{ 0 });
-  std::sort(edges.begin(), edges.end(), [&](std::size_t p, std::size_t q) {
-    return std::make_pair(endPoints(p, false), p) < std::make_pair(endPoints(q, false), q);
-  });
+  const std::size_t edgeCount = 3 * surface.triangles.size();
+  std::vector<Edge> edges(edgeCount);
+  for (std::size_t e = 0; e < edgeCount; ++e)
+  {
+    const auto &  c = surface.triangles[e / 3];
+    const auto    a = static_cast<std::uint32_t>(c[e % 3]), b = static_cast<std::uint32_t>(c[(e % 3 + 1) % 3]);
+    edges[e] = { (std::uint64_t{ std::min(a, b) } << 32) | std::max(a, b), e };
+  }
+  std::sort(edges.begin(), edges.end());
+  const auto fromCorner = [&](const Edge & edge) { return surface.triangles[edge.number / 3][edge.number % 3]; };
   tree.closed = true;
   bool oriented = true;
   for (std::size_t first = 0, last = 0; first < edgeCount; first = last)
   {
-    while (last < edgeCount && endPoints(edges[last], false) == endPoints(edges[first], false))
+    while (last < edgeCount && edges[last].ends == edges[first].ends)
     {
       ++last;
     }
     tree.closed = tree.closed && last - first == 2;
-    oriented = oriented && (last - first != 2 || endPoints(edges[first], true) != endPoints(edges[first + 1], true));
+    // Consistently oriented: the two triangles run along their shared edge in opposite directions.
+    oriented = oriented && (last - first != 2 || fromCorner(edges[first]) != fromCorner(edges[first + 1]));
   }
   if (tree.closed && !oriented)
   {
@@ -167,13 +177,14 @@ RigidContact::RigidContact(const ContactSurface & surface, std::vector<Index> sl
   for (std::size_t first = 0, last = 0; first < edgeCount; first = last)
   {
     Vector3 sum = Vector3::Zero();
-    for (last = first; last < edgeCount && endPoints(edges[last], false) == endPoints(edges[first], false); ++last)
+    for (last = first; last < edgeCount && edges[last].ends == edges[first].ends; ++last)
     {
-      sum += tree.faceNormals[edges[last] / 3];
+      sum += tree.faceNormals[edges[last].number / 3];
     }
     for (std::size_t e = first; e < last; ++e)
     {
-      tree.edgeNormals[edges[e] / 3][flip ? 2 - edges[e] % 3 : edges[e] % 3] = sum;
+      const std::size_t k = edges[e].number % 3;
+      tree.edgeNormals[edges[e].number / 3][flip ? 2 - k : k] = sum;
     }
   }
   tree.vertices = surface.vertices;
