@@ -37,6 +37,8 @@ if [ -f docs/benchmark-error-vs-time.csv ]; then
   /usr/bin/python3 scripts/plot-benchmarks.py docs/benchmark-error-vs-time.csv docs/benchmark-error-vs-time.png
 fi
 # Stiff and extreme cases on every discretization: docs/stability-matrix.md.
+# Two threads under each OpenMP wait policy, quiet and beside a busy core (docs/wait-policy.md).
+/usr/bin/python3 scripts/benchmark-wait-policy.py --build "${build}"
 "${build}/benchmarks/bmrStabilityBenchmark" --output docs/stability-matrix.md
 # Image stages (fit, warp, B-spline baseline): their own section of docs/benchmarks.md.
 "${build}/benchmarks/bmrImageBenchmark" --output docs/benchmarks.md
@@ -47,4 +49,4 @@ fi
 # Surgical simulation on the generic brain (haptic rate): its section of docs/benchmarks.md.
 cmake --build "${build}" --target _bmr
 PYTHONPATH="${build}/python" /usr/bin/python3 scripts/benchmark-simulation.py
-echo "run-benchmarks: wrote docs/benchmarks.md, docs/model-building-benchmark.md and docs/registration-benchmark.md"
+echo "run-benchmarks: wrote docs/benchmarks.md, docs/wait-policy.md, docs/model-building-benchmark.md and docs/registration-benchmark.md"

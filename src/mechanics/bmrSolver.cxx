@@ -234,20 +234,19 @@ Solver::Impl::BuildConstraints()
 void
 Solver::Impl::ApplyConstraints(double * u, const std::vector<double> & curveFactors)
 {
-  auto target = [&](const ConstrainedDof & c) { return c.curve < 0 ? 0.0 : c.value * curveFactors[c.curve]; };
   if (essential)
   {
     constraintTargets.resize(constrained.size());
     for (std::size_t k = 0; k < constrained.size(); ++k)
     {
-      constraintTargets[k] = target(constrained[k]);
+      constraintTargets[k] = constrained[k].Target(curveFactors);
     }
     essential->Impose(u, constraintTargets);
     return;
   }
   for (const ConstrainedDof & c : constrained)
   {
-    u[c.dof] = target(c);
+    u[c.dof] = c.Target(curveFactors);
   }
 }
 
@@ -316,8 +315,7 @@ Solver::Impl::CentralDifferenceStep(const std::vector<double> & u,
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (Index d = 0; d < dofCount; ++d)
   {
-    const double residual = (g ? gravityFactor * g[d] : 0.0) - f[d];
-    uNext[d] = u[d] + beta * (u[d] - uPrevious[d]) + alpha * residual * inverseMass[d];
+    uNext[d] = CentralDifferenceUpdate(u[d], uPrevious[d], f[d], g ? gravityFactor * g[d] : 0.0, inverseMass[d], alpha, beta);
   }
   ApplyConstraints(uNext.data(), curveFactors);
   EnforceContact(uNext.data(), inContact, inverseMass);

@@ -26,7 +26,19 @@ struct ConstrainedDof
   Index  dof;
   double value; // mm at full load
   int    curve; // index into the solver's curves; -1 for fixed (value 0)
+
+  /** Its value at the curves' present factors. */
+  double Target(const std::vector<double> & curveFactors) const { return curve < 0 ? 0.0 : value * curveFactors[curve]; }
 };
+
+/** The central-difference update of one dof, u+ = u + beta (u - u-) + alpha
+ *  M^-1 (f_ext - f_int): the one form of both integrators' steps. */
+inline double
+CentralDifferenceUpdate(double u, double uPrevious, double force, double externalForce, double inverseMass, double alpha,
+                        double beta)
+{
+  return u + beta * (u - uPrevious) + alpha * (externalForce - force) * inverseMass;
+}
 
 inline std::string
 StepLabel(int step)
@@ -79,6 +91,7 @@ struct Solver::Impl
   std::vector<double>                activeNorms;
   std::vector<char>                  essentialSupport;
   std::vector<double>                constraintTargets; // EBCIEM, per step
+  std::vector<double>                dofTargets;        // per dof, the constrained dofs' targets of the step (fused update)
 
   Impl(const Model & m, const SolverSettings & s);
   void        CheckSettings() const;

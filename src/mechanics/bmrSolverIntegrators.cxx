@@ -68,14 +68,12 @@ struct IncrementStatistics
   Index  firstBad = -1;
 };
 
+// `increment(d)` returns |du| of dof d (and may write the dof's new value):
+// fixed blocks, so the sums do not depend on the number of threads.
+template <typename Increment>
 IncrementStatistics
-MeasureIncrement(const std::vector<double> & next,
-                 const std::vector<double> & current,
-                 const std::vector<char> &   constrained,
-                 double                      limit,
-                 int                         threads)
+MeasureIncrements(Index count, const std::vector<char> & constrained, double limit, int threads, const Increment & increment)
 {
-  const Index count = static_cast<Index>(next.size());
   double      maxima[kReductionBlocks], sums[kReductionBlocks];
   Index       bad[kReductionBlocks];
 #pragma omp parallel for num_threads(threads) schedule(static)
@@ -87,7 +85,7 @@ MeasureIncrement(const std::vector<double> & next,
     Index       firstBad = -1;
     for (Index d = begin; d < end; ++d)
     {
-      const double du = std::abs(next[d] - current[d]);
+      const double du = increment(d);
       // A prescribed jump is the user's load, not instability.
       if (!(du <= limit) && firstBad < 0 && !constrained[d])
       {
@@ -112,6 +110,17 @@ MeasureIncrement(const std::vector<double> & next,
   }
   statistics.norm = std::sqrt(statistics.norm);
   return statistics;
+}
+
+IncrementStatistics
+MeasureIncrement(const std::vector<double> & next,
+                 const std::vector<double> & current,
+                 const std::vector<char> &   constrained,
+                 double                      limit,
+                 int                         threads)
+{
+  return MeasureIncrements(static_cast<Index>(next.size()), constrained, limit, threads,
+                           [&](Index d) { return std::abs(next[d] - current[d]); });
 }
 } // namespace
 
@@ -190,6 +199,10 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   PrepareEssentialBoundary(mass); // uniform rescaling on restart leaves the projection unchanged
   std::vector<char>   inContact(model.nodes.size(), 0);
   std::vector<double> curveFactors(curves.size(), 0.0);
+  // Without contact, tools or EBCIEM's projection, the constraints are values
+  // per dof and the update can be fused with them and with the increment's measure.
+  const bool fusedUpdate = !essential && model.contactSurfaces.empty() && tools.empty();
+  dofTargets.assign(fusedUpdate ? dofConstrained.size() : 0, 0.0);
 
   // Damping for the current estimate of the lowest eigenvalue: critical damping
   // of that mode, c = omega sqrt(4 - h^2 omega^2), double root sqrt(beta).
@@ -275,10 +288,30 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
       {
         curveFactors[k] = loadFactor(curves[k], step + 1);
       }
-      CentralDifferenceStep(u, uPrevious, f, inverseMass, alpha, beta, gravityFactor, curveFactors, uNext, inContact,
-                            LoadCurve{}.Factor(rampPosition(step + 1)));
-
-      const IncrementStatistics increment = MeasureIncrement(uNext, u, dofConstrained, lengthScale, threads);
+      IncrementStatistics increment;
+      if (fusedUpdate)
+      {
+        // Update, constraints and the increment's size in one pass over the
+        // dofs (one parallel region instead of two, u read once): nothing
+        // moves the dofs between them.
+        for (const ConstrainedDof & c : constrained)
+        {
+          dofTargets[c.dof] = c.Target(curveFactors);
+        }
+        const double * g = gravityForce.empty() ? nullptr : gravityForce.data();
+        increment = MeasureIncrements(dofCount, dofConstrained, lengthScale, threads, [&](Index d) {
+          uNext[d] = dofConstrained[d] ? dofTargets[d]
+                                       : CentralDifferenceUpdate(u[d], uPrevious[d], f[d], g ? gravityFactor * g[d] : 0.0,
+                                                                 inverseMass[d], alpha, beta);
+          return std::abs(uNext[d] - u[d]);
+        });
+      }
+      else
+      {
+        CentralDifferenceStep(u, uPrevious, f, inverseMass, alpha, beta, gravityFactor, curveFactors, uNext, inContact,
+                              LoadCurve{}.Factor(rampPosition(step + 1)));
+        increment = MeasureIncrement(uNext, u, dofConstrained, lengthScale, threads);
+      }
       CheckIncrement(uNext, u, increment.firstBad, step, false, h);
       incrementNorms.push_back(increment.norm);
       if (static_cast<int>(incrementNorms.size()) > window + 1)
