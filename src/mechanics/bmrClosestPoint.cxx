@@ -28,16 +28,7 @@ struct TriangleSurfaceTree::Impl
 {
   std::vector<Triangle> triangles;  // the tree's primitives point into this
   std::vector<Index>    inputIndex; // input triangle of each primitive
-  std::vector<Index>    primitiveOf; // primitive of each input triangle, -1 if left out
   AabbTree              tree;
-
-  Hit ToHit(const Vector3 & query, const AabbTree::Point_and_primitive_id & hit) const
-  {
-    const auto   primitive = static_cast<std::size_t>(hit.second - triangles.begin());
-    // The kernel's squared distance, as AABB_tree::squared_distance computes it.
-    const double squaredDistance = AabbTraits().squared_distance_object()(ToPoint(query), hit.first);
-    return { Vector3(hit.first.x(), hit.first.y(), hit.first.z()), inputIndex[primitive], squaredDistance };
-  }
 };
 
 TriangleSurfaceTree::TriangleSurfaceTree(const std::vector<Vector3> &              vertices,
@@ -62,10 +53,8 @@ TriangleSurfaceTree::TriangleSurfaceTree(const std::vector<Vector3> &           
         throw Error(surfaceName + ": vertex " + std::to_string(v) + " is not finite; fix the surface file");
       }
     }
-    impl->primitiveOf.push_back(-1);
     if ((p[1] - p[0]).cross(p[2] - p[0]).norm() > 0.0)
     {
-      impl->primitiveOf.back() = static_cast<Index>(impl->triangles.size());
       impl->triangles.emplace_back(ToPoint(p[0]), ToPoint(p[1]), ToPoint(p[2]));
       impl->inputIndex.push_back(static_cast<Index>(t));
     }
@@ -88,20 +77,12 @@ TriangleSurfaceTree::~TriangleSurfaceTree() = default;
 TriangleSurfaceTree::Hit
 TriangleSurfaceTree::Closest(const Vector3 & query) const
 {
-  return m_Impl->ToHit(query, m_Impl->tree.closest_point_and_primitive(ToPoint(query)));
-}
-
-TriangleSurfaceTree::Hit
-TriangleSurfaceTree::Closest(const Vector3 & query, const Hit & hint) const
-{
-  const std::size_t input = static_cast<std::size_t>(hint.triangle);
-  if (hint.triangle < 0 || input >= m_Impl->primitiveOf.size() || m_Impl->primitiveOf[input] < 0)
-  {
-    return Closest(query);
-  }
-  const AabbTree::Point_and_primitive_id start(ToPoint(hint.point),
-                                               m_Impl->triangles.begin() + m_Impl->primitiveOf[input]);
-  return m_Impl->ToHit(query, m_Impl->tree.closest_point_and_primitive(ToPoint(query), start));
+  const Point  q = ToPoint(query);
+  const auto   hit = m_Impl->tree.closest_point_and_primitive(q);
+  const auto   primitive = static_cast<std::size_t>(hit.second - m_Impl->triangles.begin());
+  // The kernel's squared distance, as AABB_tree::squared_distance computes it.
+  const double squaredDistance = AabbTraits().squared_distance_object()(q, hit.first);
+  return { Vector3(hit.first.x(), hit.first.y(), hit.first.z()), m_Impl->inputIndex[primitive], squaredDistance };
 }
 
 } // namespace bmr

@@ -41,13 +41,6 @@ public:
    *  queries: every search structure is built by the constructor. */
   Hit Closest(const Vector3 & query) const;
 
-  /** The same closest point, found faster from a `hint`: an earlier Hit of
-   *  this tree near `query` (a neighbouring voxel's, or the same node's at
-   *  the last step). The hint only bounds the search: the result is the
-   *  closest point whatever the hint; among points at exactly the same
-   *  distance (an edge shared by two triangles) the triangle may differ. */
-  Hit Closest(const Vector3 & query, const Hit & hint) const;
-
 private:
   struct Impl;
   std::unique_ptr<const Impl> m_Impl;

@@ -1,4 +1,5 @@
 #include "bmrContact.h"
+#include "bmrClosestPoint.h"
 
 #include <Eigen/Geometry>
 
@@ -27,16 +28,10 @@ struct RigidContact::Tree
 
   // Signed distance of x to the surface (positive outside), the closest point
   // and (when asked) the unit outward normal there: the direction from the
-  // closest point to x, or the pseudo-normal where x is on the surface. `hint`
-  // (when given): a nearby earlier hit, which speeds the search; it receives this one.
-  double SignedDistance(const Vector3 & x, Vector3 & closest, Vector3 * outwardNormal = nullptr,
-                        TriangleSurfaceTree::Hit * hint = nullptr) const
+  // closest point to x, or the pseudo-normal where x is on the surface.
+  double SignedDistance(const Vector3 & x, Vector3 & closest, Vector3 * outwardNormal = nullptr) const
   {
-    const auto hit = hint != nullptr ? surface->Closest(x, *hint) : surface->Closest(x);
-    if (hint != nullptr)
-    {
-      *hint = hit;
-    }
+    const auto   hit = surface->Closest(x);
     const auto   t = static_cast<std::size_t>(hit.triangle);
     const auto & c = corners[t];
     closest = hit.point;
@@ -197,7 +192,6 @@ RigidContact::RigidContact(const ContactSurface & surface, std::vector<Index> sl
   }
   m_LastQueried = m_Reference;
   m_SafeDistance.assign(m_SlaveNodes.size(), 0.0);
-  m_LastHit.assign(m_SlaveNodes.size(), TriangleSurfaceTree::Hit{ Vector3::Zero(), -1, 0.0 });
 }
 
 RigidContact::~RigidContact() = default;
@@ -250,8 +244,7 @@ RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std:
       continue;
     }
     Vector3 closest, outward;
-    TriangleSurfaceTree::Hit & hint = m_LastHit[static_cast<std::size_t>(i)];
-    if (tree.sideSign * tree.SignedDistance(x, closest, &outward, &hint) >= 0.0)
+    if (tree.sideSign * tree.SignedDistance(x, closest, &outward) >= 0.0)
     {
       m_LastQueried[i] = x;
       m_SafeDistance[i] = (x - closest).norm();
@@ -277,7 +270,7 @@ RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std:
         }
       }
       position = m_Reference[i] + displacement;
-      if (!(held[0] || held[1] || held[2]) || tree.sideSign * tree.SignedDistance(toSurface(position), closest, nullptr, &hint) >= 0.0)
+      if (!(held[0] || held[1] || held[2]) || tree.sideSign * tree.SignedDistance(toSurface(position), closest) >= 0.0)
       {
         break;
       }
