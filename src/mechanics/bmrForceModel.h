@@ -255,6 +255,14 @@ private:
   std::vector<Index> m_HexColourOffsets;
   std::vector<Index> m_TetBlockOffsets;
   std::vector<Index> m_TetColourOffsets;
+  // The nodes each block touches first in that order (hexahedral blocks,
+  // then tetrahedral ones): the block zeroes their forces before it adds to
+  // them, so the force pass needs no zeroing pass and no barrier after it.
+  // Nodes of no cell are zeroed apart.
+  std::vector<Index> m_FirstTouchOffsets;
+  std::vector<Index> m_FirstTouchNodes;
+  std::vector<Index> m_UntouchedNodes;
+  void               ZeroFirstTouched(Index block, double * f) const;
 };
 
 /** Meshless (MTLED) internal forces: the deformation gradient at each
