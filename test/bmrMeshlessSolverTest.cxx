@@ -369,6 +369,50 @@ TEST(MeshlessFailure, InversionNamesTheIntegrationPoint)
   }
 }
 
+TEST(MeshlessFailure, TheNamedIntegrationPointIsAnInvertedOne)
+{
+  // Only one end of the block is folded back on itself, so few points invert;
+  // the force kernel visits points in its own order and must name one of
+  // them by its index in the model. J is computed here from the shape
+  // functions, independently of the force kernel.
+  Model model = MeshlessBlock(MakeMaterial(3000.0, 0.45), {}, {}, { 10, 8, 6 });
+  std::vector<Vector3> displacements(model.nodes.size(), Vector3::Zero());
+  for (std::size_t node = 0; node < model.nodes.size(); ++node)
+  {
+    displacements[node].x() = -3.0 * std::max(0.0, model.nodes[node].x() - 8.5);
+  }
+  const auto               mls = MovingLeastSquares::ForModel(model);
+  const ShapeFunctionTable table = mls->Evaluate(model.meshless.integrationPoints, true, 1);
+  std::vector<Index>       inverted;
+  for (std::size_t point = 0; point + 1 < table.offsets.size(); ++point)
+  {
+    Eigen::Matrix3d F = Eigen::Matrix3d::Identity();
+    for (Index entry = table.offsets[point]; entry < table.offsets[point + 1]; ++entry)
+    {
+      const Eigen::Map<const Eigen::Vector3d> gradient(&table.gradients[3 * static_cast<std::size_t>(entry)]);
+      F += displacements[table.nodes[entry]] * gradient.transpose();
+    }
+    if (F.determinant() <= 0.0)
+    {
+      inverted.push_back(static_cast<Index>(point));
+    }
+  }
+  ASSERT_FALSE(inverted.empty());
+  ASSERT_LT(inverted.size(), model.meshless.integrationPoints.size() / 4);
+
+  Solver solver(model, TightRelaxation());
+  try
+  {
+    solver.InternalForces(displacements);
+    FAIL() << "an inverted integration point must be an error";
+  }
+  catch (const SolveError & error)
+  {
+    EXPECT_TRUE(std::binary_search(inverted.begin(), inverted.end(), error.Element()))
+      << "integration point " << error.Element() << " is named but is not inverted";
+  }
+}
+
 TEST(MeshlessFailure, NodeOutsideEveryIntegrationSupportIsAnError)
 {
   Model model = MeshlessBlock(MakeMaterial(3000.0, 0.45));

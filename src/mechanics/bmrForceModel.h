@@ -295,7 +295,8 @@ public:
 
 private:
   /** Adds the forces of kernel points [first, last) (at most kPointsPerBlock)
-   *  to the padded forces; returns the first inverted integration point or -1. */
+   *  to the padded forces; returns the first inverted point in the kernel's
+   *  order (its index there, not the point's) or -1. */
   Index AddPointForces(Index first, Index last);
 
   /** Nodal lumped masses from a mass per integration point, shared equally by its neighbours. */

@@ -172,7 +172,7 @@ StoreLanes(double * target, Lanes lanes)
 // from its neighbours, then w P with one point per SIMD lane (the
 // constitutive law, with its divisions, was 40 % of a scalar one-pass
 // kernel), then f_I += w P grad phi_I scattered to the neighbours. Returns
-// the first inverted integration point, or -1.
+// the first inverted point's index in the kernel's order, or -1.
 Index
 MeshlessForceModel::AddPointForces(Index first, Index last)
 {
@@ -222,19 +222,18 @@ MeshlessForceModel::AddPointForces(Index first, Index last)
   for (Index q = first; q < last; ++q)
   {
     const Index local = q - first;
-    Matrix3x3   F;
-    for (int c = 0; c < 9; ++c)
-    {
-      F.m[c / 3][c % 3] = stress[c][local];
-    }
+    const Matrix3x3 F = { { { stress[0][local], stress[1][local], stress[2][local] },
+                            { stress[3][local], stress[4][local], stress[5][local] },
+                            { stress[6][local], stress[7][local], stress[8][local] } } };
     const Matrix3x3 cof = CofactorOf(F);
     const double    J = DeterminantOf(F, cof);
     const double *  m = material + 4 * static_cast<std::size_t>(q); // weight, mu, kappa, collapse
     const Matrix3x3 A = ScaledFirstPiola(F, cof, J, m[2] * (J - 1.0), m[1], m[3], m[0]);
     if (!(J > 0.0))
     {
-      inverted = std::min(inverted, m_KernelPoint[q]);
+      inverted = std::min(inverted, q); // the kernel's order: a lookup here kept GCC from vectorising the loop
     }
+    #pragma GCC unroll 9
     for (int c = 0; c < 9; ++c)
     {
       stress[c][local] = A.m[c / 3][c % 3];
@@ -303,7 +302,7 @@ MeshlessForceModel::ComputeInternalForces(const double * u, double * f)
       }
     }
   }
-  return firstInverted == std::numeric_limits<Index>::max() ? -1 : firstInverted;
+  return firstInverted == std::numeric_limits<Index>::max() ? -1 : m_KernelPoint[firstInverted];
 }
 
 template <typename PointMass>
