@@ -120,10 +120,12 @@ public:
   /** Lumped nodal masses (t) of the physical densities. */
   virtual std::vector<double> LumpedMasses() const = 0;
 
-  /** Lumped nodal masses chosen so that every unit's critical time step equals
-   *  timeStep / safety (mass scaling of dynamic relaxation); with `collapse`,
-   *  for the stiffness a unit has once its collapse barrier engages (soft
-   *  units get heavier), else for the reference state. */
+  /** Nodal masses of dynamic relaxation, chosen so that a bound on the
+   *  stiffness keeps the step timeStep / safety stable: finite elements share
+   *  each cell's bound equally among its nodes; the meshless model follows the
+   *  stiffness diagonal, scaled to Gershgorin's bound. With `collapse`, for
+   *  the stiffness once the collapse barrier engages (soft units get
+   *  heavier), else for the reference state. */
   virtual std::vector<double> ScaledMasses(double timeStep, double safety, bool collapse) const = 0;
 
   /** Smallest unit critical time step (s) for the physical densities, and its unit. */
@@ -318,8 +320,7 @@ private:
   std::vector<double>  m_Kappa;
   std::vector<double>  m_Collapse;  // the collapse barrier's bulk modulus (CollapseModuli)
   std::vector<double>  m_Density;
-  std::vector<double>  m_WaveBound; // (lambda + 2 mu) n sum |grad phi|^2
-  std::vector<double>  m_CollapseWaveBound; // added to m_WaveBound once the collapse barrier engages
+  std::vector<double>  m_WaveBound; // (lambda + 2 mu) n sum |grad phi|^2 (explicit dynamics' time step)
   // The force kernel's table, in the order of the coloured schedule, so that
   // one pass streams it once per step: per kernel point its integration point,
   // weight and moduli; per entry the node and grad phi. It is the only copy
