@@ -333,7 +333,7 @@ MeshlessForceModel::ScaledMasses(double timeStep, double safety, bool collapse) 
   // |grad phi_J|. Sharing each point's bound equally among its neighbours
   // instead gave a node at the rim of most of its supports (small gradients,
   // little stiffness) as much mass as a node at their centres: slow modes,
-  // and on Colin27 at 4.25 mm 4,834 instead of 2,081 steps (docs/solver.md).
+  // and on Colin27 at 4.25 mm 5,128 instead of 2,681 steps (docs/solver.md).
   const double        factor = 0.25 * (timeStep / safety) * (timeStep / safety);
   std::vector<double> diagonal(m_NodeCount, 0.0), rowSums(m_NodeCount, 0.0), norms;
   for (Index q = 0; q < PointCount(); ++q)
