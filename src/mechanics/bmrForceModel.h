@@ -102,6 +102,30 @@ BoundingBox(const std::vector<Vector3> & points);
 std::vector<double>
 CollapseModuli(const std::vector<double> & kappa, const std::vector<double> & volume, double settingPascal);
 
+/** Dynamic relaxation's masses that follow the stiffness diagonal (Jacobi)
+ *  and are scaled so that Gershgorin's bound holds. A unit (cell or
+ *  integration point) of stiffness s = M V (P-wave modulus times volume)
+ *  with shape-function gradient norms g_a adds s g_a^2 to node a's diagonal
+ *  and s g_a sum_b g_b to its row bound; the masses are the diagonal times
+ *  the largest row-to-diagonal ratio. Sharing each unit's bound equally
+ *  instead gives a node with small gradients (the rim of a meshless
+ *  support, the blunt corner of a flat tetrahedron) as much mass as the
+ *  others: slow modes (docs/solver.md). */
+class DiagonalMasses
+{
+public:
+  explicit DiagonalMasses(Index nodeCount);
+  void AddUnit(const Index * nodes, const double * gradientNorms, int count, double stiffness);
+  /** A unit whose bound is already shared equally (hexahedra with hourglass control). */
+  void AddEqualShares(const Index * nodes, int count, double bound);
+  /** The masses times `factor`. */
+  std::vector<double> Masses(double factor) const;
+
+private:
+  std::vector<double> m_Diagonal;
+  std::vector<double> m_RowBounds;
+};
+
 /** Internal forces, masses and stable time steps of one discretization; the
  *  integrators see only this. Failures are reported by the index of the
  *  integration unit (model cell, or integration point), which Describe() names. */
@@ -121,9 +145,9 @@ public:
   virtual std::vector<double> LumpedMasses() const = 0;
 
   /** Nodal masses of dynamic relaxation, chosen so that a bound on the
-   *  stiffness keeps the step timeStep / safety stable: finite elements share
-   *  each cell's bound equally among its nodes; the meshless model follows the
-   *  stiffness diagonal, scaled to Gershgorin's bound. With `collapse`, for
+   *  stiffness keeps the step timeStep / safety stable: hexahedra share each
+   *  cell's bound equally among their nodes, tetrahedra and the meshless
+   *  model follow the stiffness diagonal (DiagonalMasses). With `collapse`, for
    *  the stiffness once the collapse barrier engages (soft units get
    *  heavier), else for the reference state. */
   virtual std::vector<double> ScaledMasses(double timeStep, double safety, bool collapse) const = 0;

@@ -95,14 +95,85 @@ FiniteElementForceModel::LumpedMasses() const
   return LumpToNodes([this](Index k) { return m_Density[k] * m_Volume[k]; });
 }
 
+DiagonalMasses::DiagonalMasses(Index nodeCount)
+  : m_Diagonal(static_cast<std::size_t>(nodeCount), 0.0)
+  , m_RowBounds(static_cast<std::size_t>(nodeCount), 0.0)
+{}
+
+void
+DiagonalMasses::AddUnit(const Index * nodes, const double * gradientNorms, int count, double stiffness)
+{
+  double normSum = 0.0;
+  for (int a = 0; a < count; ++a)
+  {
+    normSum += gradientNorms[a];
+  }
+  for (int a = 0; a < count; ++a)
+  {
+    m_Diagonal[nodes[a]] += stiffness * gradientNorms[a] * gradientNorms[a];
+    m_RowBounds[nodes[a]] += stiffness * gradientNorms[a] * normSum;
+  }
+}
+
+void
+DiagonalMasses::AddEqualShares(const Index * nodes, int count, double bound)
+{
+  for (int a = 0; a < count; ++a)
+  {
+    m_Diagonal[nodes[a]] += bound / count;
+    m_RowBounds[nodes[a]] += bound / count;
+  }
+}
+
+std::vector<double>
+DiagonalMasses::Masses(double factor) const
+{
+  // A node whose gradients all vanish has no stiffness; the floor keeps its
+  // mass finite (the solve then reports what does not converge).
+  const double floor = 1e-12 * *std::max_element(m_Diagonal.begin(), m_Diagonal.end());
+  double       ratio = 1.0;
+  for (std::size_t n = 0; n < m_Diagonal.size(); ++n)
+  {
+    ratio = std::max(ratio, m_RowBounds[n] / std::max(m_Diagonal[n], floor));
+  }
+  std::vector<double> masses(m_Diagonal.size());
+  for (std::size_t n = 0; n < m_Diagonal.size(); ++n)
+  {
+    masses[n] = factor * ratio * std::max(m_Diagonal[n], floor);
+  }
+  return masses;
+}
+
 std::vector<double>
 FiniteElementForceModel::ScaledMasses(double timeStep, double safety, bool collapse) const
 {
   // Critical step 2 / sqrt(q M / rho) = timeStep / safety  =>  rho = q M (timeStep / safety)^2 / 4.
-  const double factor = 0.25 * (timeStep / safety) * (timeStep / safety);
-  return LumpToNodes([this, factor, collapse](Index k) {
-    return factor * (m_WaveBound[k] + (collapse ? m_CollapseWaveBound[k] : 0.0)) * m_Volume[k];
-  });
+  const double   factor = 0.25 * (timeStep / safety) * (timeStep / safety);
+  const auto     bound = [&](Index k) { return (m_WaveBound[k] + (collapse ? m_CollapseWaveBound[k] : 0.0)) * m_Volume[k]; };
+  DiagonalMasses masses(m_NodeCount);
+  for (Index e = 0; e < HexahedronCount(); ++e)
+  {
+    masses.AddEqualShares(m_HexNodes[e].data(), 8, bound(e));
+  }
+  // A tetrahedron's bound is 4 B:B M V: its stiffness M V follows from it.
+  const std::size_t count = m_TetNodes.size();
+  for (Index t = 0; t < TetrahedronCount(); ++t)
+  {
+    double norms[4], squares = 0.0;
+    for (int a = 0; a < 4; ++a)
+    {
+      double square = 0.0;
+      for (int j = 0; j < 3; ++j)
+      {
+        const double g = m_TetB[(3 * a + j) * count + static_cast<std::size_t>(t)];
+        square += g * g;
+      }
+      norms[a] = std::sqrt(square);
+      squares += square;
+    }
+    masses.AddUnit(m_TetNodes[t].data(), norms, 4, bound(HexahedronCount() + t) / (4.0 * squares));
+  }
+  return masses.Masses(factor);
 }
 
 std::vector<double>

@@ -326,51 +326,26 @@ MeshlessForceModel::LumpedMasses() const
 std::vector<double>
 MeshlessForceModel::ScaledMasses(double timeStep, double safety, bool collapse) const
 {
-  // Dynamic relaxation's masses follow the diagonal of the stiffness at the
-  // reference state (Jacobi): K_II ~ sum_p w_p M_p |grad phi_I(x_p)|^2, M_p
-  // the point's P-wave modulus. They are scaled so that Gershgorin's bound
-  // holds, sum_J ||K_IJ|| <= m_I, with ||K_IJ|| <= sum_p w_p M_p |grad phi_I|
-  // |grad phi_J|. Sharing each point's bound equally among its neighbours
-  // instead gave a node at the rim of most of its supports (small gradients,
-  // little stiffness) as much mass as a node at their centres: slow modes,
-  // and on Colin27 at 4.25 mm 5,128 instead of 2,681 steps (docs/solver.md).
+  // Following the stiffness diagonal rather than sharing each point's bound
+  // equally: on Colin27 at 4.25 mm 2,681 instead of 5,128 steps (docs/solver.md).
   const double        factor = 0.25 * (timeStep / safety) * (timeStep / safety);
-  std::vector<double> diagonal(m_NodeCount, 0.0), rowSums(m_NodeCount, 0.0), norms;
+  DiagonalMasses      masses(m_NodeCount);
+  std::vector<double> norms;
   for (Index q = 0; q < PointCount(); ++q)
   {
     const Index  p = m_KernelPoint[q];
     const double modulus = m_Kappa[p] + 4.0 * m_Mu[p] / 3.0;
-    const double stiffness = m_Weight[p] * (collapse ? std::max(modulus, m_Collapse[p]) : modulus);
     const Index  begin = m_KernelOffsets[q], end = m_KernelOffsets[q + 1];
     norms.resize(end - begin);
-    double normSum = 0.0;
     for (Index k = begin; k < end; ++k)
     {
       const double * g = &m_KernelGradients[3 * static_cast<std::size_t>(k)];
       norms[k - begin] = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
-      normSum += norms[k - begin];
     }
-    for (Index k = begin; k < end; ++k)
-    {
-      const double norm = norms[k - begin];
-      diagonal[m_KernelNodes[k]] += stiffness * norm * norm;
-      rowSums[m_KernelNodes[k]] += stiffness * norm * normSum;
-    }
+    masses.AddUnit(&m_KernelNodes[begin], norms.data(), static_cast<int>(end - begin),
+                   m_Weight[p] * (collapse ? std::max(modulus, m_Collapse[p]) : modulus));
   }
-  // A node whose gradients all vanish has no stiffness; the floor keeps its
-  // mass finite (the solve then reports what does not converge).
-  const double floor = 1e-12 * *std::max_element(diagonal.begin(), diagonal.end());
-  double       ratio = 1.0;
-  for (Index n = 0; n < m_NodeCount; ++n)
-  {
-    diagonal[n] = std::max(diagonal[n], floor);
-    ratio = std::max(ratio, rowSums[n] / diagonal[n]);
-  }
-  for (double & mass : diagonal)
-  {
-    mass *= factor * ratio;
-  }
-  return diagonal;
+  return masses.Masses(factor);
 }
 
 double
