@@ -334,7 +334,7 @@ TEST(Locking, AnpTetrahedraBesideSoftCsfRelaxAsFastAsHexahedra)
 {
   // The top pushed down 1 mm (10 %). The CSF cells keep their own dilatation,
   // the nearly incompressible ones share nodal pressures; the step count
-  // stays within twice the hexahedra's on the same grid, and on a twice finer
+  // stays within 1.15 times the hexahedra's on the same grid, and on a twice finer
   // grid the push force agrees with the hexahedra's (measured: 0.187 N against
   // 0.169 N; the tetrahedra's force fell 7 % from the coarse grid).
   auto solve = [](GridCells cells, int refinement) {
@@ -355,7 +355,9 @@ TEST(Locking, AnpTetrahedraBesideSoftCsfRelaxAsFastAsHexahedra)
   RecordProperty("hexahedra_force_N", Sci(hexForce));
   RecordProperty("anp_force_N", Sci(tetForce));
   RecordProperty("fine_hexahedra_force_N", Sci(fineForce));
-  EXPECT_LE(tetSteps, 2 * hexSteps);
+  // 3,067 steps against 2,726 with dynamic relaxation's masses following the
+  // stiffness diagonal; 3,248 when each tetrahedron's bound was shared equally.
+  EXPECT_LE(tetSteps, 1.15 * hexSteps);
   EXPECT_NEAR(fineTetForce, fineForce, 0.15 * fineForce) << "coarse: ANP " << tetForce << " N, hexahedra " << hexForce << " N";
 }
 
