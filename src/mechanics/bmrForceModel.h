@@ -116,7 +116,8 @@ class DiagonalMasses
 public:
   explicit DiagonalMasses(Index nodeCount);
   void AddUnit(const Index * nodes, const double * gradientNorms, int count, double stiffness);
-  /** A unit whose bound is already shared equally (hexahedra with hourglass control). */
+  /** A unit whose bound is already shared equally (hexahedra with hourglass
+   *  control); added as it is, outside the Gershgorin scaling. */
   void AddEqualShares(const Index * nodes, int count, double bound);
   /** The masses times `factor`. */
   std::vector<double> Masses(double factor) const;
@@ -124,6 +125,7 @@ public:
 private:
   std::vector<double> m_Diagonal;
   std::vector<double> m_RowBounds;
+  std::vector<double> m_EqualShares;
 };
 
 /** Internal forces, masses and stable time steps of one discretization; the
@@ -214,10 +216,6 @@ private:
     }
     return out;
   }
-
-  /** Nodal lumped masses from a mass per kernel cell, shared equally by its nodes. */
-  template <typename CellMass>
-  std::vector<double> LumpToNodes(const CellMass & cellMass) const;
 
   void TetrahedronDilatations(Index begin, Index end, const double * u);
   /** Adds the forces of hexahedra [begin, end) to f; returns the first inverted one or -1. */
@@ -324,10 +322,6 @@ private:
    *  to the padded forces; returns the first inverted point in the kernel's
    *  order (its index there, not the point's) or -1. */
   Index AddPointForces(Index first, Index last);
-
-  /** Nodal lumped masses from a mass per integration point, shared equally by its neighbours. */
-  template <typename PointMass>
-  std::vector<double> LumpToNodes(const PointMass & pointMass) const;
 
   /** Integration points per chunk of a slab, or per block of ScheduleByColour
    *  where slabs are too thin; measured with colours:

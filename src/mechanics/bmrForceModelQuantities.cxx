@@ -66,13 +66,13 @@ HourglassModes(const double (&u)[8][3], const Eigen::Matrix3d & F, const double 
 
 } // namespace
 
-template <typename CellMass>
 std::vector<double>
-FiniteElementForceModel::LumpToNodes(const CellMass & cellMass) const
+FiniteElementForceModel::LumpedMasses() const
 {
+  // Each cell's mass shared equally by its nodes.
   std::vector<double> masses(m_NodeCount, 0.0);
   auto                add = [&](Index k, const Index * nodes, int count) {
-    const double share = cellMass(k) / count;
+    const double share = m_Density[k] * m_Volume[k] / count;
     for (int a = 0; a < count; ++a)
     {
       masses[nodes[a]] += share;
@@ -89,15 +89,10 @@ FiniteElementForceModel::LumpToNodes(const CellMass & cellMass) const
   return masses;
 }
 
-std::vector<double>
-FiniteElementForceModel::LumpedMasses() const
-{
-  return LumpToNodes([this](Index k) { return m_Density[k] * m_Volume[k]; });
-}
-
 DiagonalMasses::DiagonalMasses(Index nodeCount)
   : m_Diagonal(static_cast<std::size_t>(nodeCount), 0.0)
   , m_RowBounds(static_cast<std::size_t>(nodeCount), 0.0)
+  , m_EqualShares(static_cast<std::size_t>(nodeCount), 0.0)
 {}
 
 void
@@ -120,26 +115,37 @@ DiagonalMasses::AddEqualShares(const Index * nodes, int count, double bound)
 {
   for (int a = 0; a < count; ++a)
   {
-    m_Diagonal[nodes[a]] += bound / count;
-    m_RowBounds[nodes[a]] += bound / count;
+    m_EqualShares[nodes[a]] += bound / count;
   }
 }
 
 std::vector<double>
 DiagonalMasses::Masses(double factor) const
 {
-  // A node whose gradients all vanish has no stiffness; the floor keeps its
-  // mass finite (the solve then reports what does not converge).
-  const double floor = 1e-12 * *std::max_element(m_Diagonal.begin(), m_Diagonal.end());
-  double       ratio = 1.0;
+  // The ratio comes from the diagonal-shaped units only: the equal shares
+  // already bound their rows, and scaling them too would make the nodes of
+  // hexahedra in a mixed mesh heavier than needed. m = ratio D + B still
+  // bounds every Gershgorin row sum.
+  double ratio = 1.0;
   for (std::size_t n = 0; n < m_Diagonal.size(); ++n)
   {
-    ratio = std::max(ratio, m_RowBounds[n] / std::max(m_Diagonal[n], floor));
+    if (m_Diagonal[n] > 0.0)
+    {
+      ratio = std::max(ratio, m_RowBounds[n] / m_Diagonal[n]);
+    }
   }
   std::vector<double> masses(m_Diagonal.size());
+  double              largest = 0.0;
   for (std::size_t n = 0; n < m_Diagonal.size(); ++n)
   {
-    masses[n] = factor * ratio * std::max(m_Diagonal[n], floor);
+    masses[n] = ratio * m_Diagonal[n] + m_EqualShares[n];
+    largest = std::max(largest, masses[n]);
+  }
+  // A node whose gradients all vanish has no stiffness; the floor keeps its
+  // mass finite (the solve then reports what does not converge).
+  for (double & mass : masses)
+  {
+    mass = factor * std::max(mass, 1e-12 * largest);
   }
   return masses;
 }

@@ -299,28 +299,22 @@ MeshlessForceModel::ComputeInternalForces(const double * u, double * f)
   return firstInverted == std::numeric_limits<Index>::max() ? -1 : m_KernelPoint[firstInverted];
 }
 
-template <typename PointMass>
 std::vector<double>
-MeshlessForceModel::LumpToNodes(const PointMass & pointMass) const
+MeshlessForceModel::LumpedMasses() const
 {
+  // Each integration point's mass shared equally by its neighbours.
   std::vector<double> masses(m_NodeCount, 0.0);
   for (Index p = 0; p < PointCount(); ++p)
   {
     const Index  q = m_KernelIndexOfPoint[p];
     const Index  begin = m_KernelOffsets[q], end = m_KernelOffsets[q + 1];
-    const double share = pointMass(p) / (end - begin);
+    const double share = m_Density[p] * m_Weight[p] / (end - begin);
     for (Index k = begin; k < end; ++k)
     {
       masses[m_KernelNodes[k]] += share;
     }
   }
   return masses;
-}
-
-std::vector<double>
-MeshlessForceModel::LumpedMasses() const
-{
-  return LumpToNodes([this](Index p) { return m_Density[p] * m_Weight[p]; });
 }
 
 std::vector<double>
