@@ -124,9 +124,9 @@ TrafficPerUnit(const std::string & kind, double meanNeighbours)
     // F 36 twice, determinant 12, cofactor and J 21, pressure 4, the law about 60, nodal forces 36, averages 4.
     return { (96 + 16 + 8) + 4 * (4 + 8 + 8) + (96 + 16 + 5 * 8), 36 + 12 + 36 + 21 + 4 + 60 + 36 + 4 };
   }
-  // Meshless: per neighbour a node index and grad phi (3 doubles); per point weight, mu, kappa, collapse
+  // Meshless: per neighbour a node index and grad phi (3 floats); per point weight, mu, kappa, collapse
   // modulus, its offset and its integration point's index. Per neighbour 9 for F and 9 for the forces.
-  return { 28.0 * meanNeighbours + 4 * 8 + 4 + 4, 18.0 * meanNeighbours + 60 };
+  return { 16.0 * meanNeighbours + 4 * 8 + 4 + 4, 18.0 * meanNeighbours + 60 };
 }
 
 /** Runs every brain-sized case (kind x thread count), each in a child process,
@@ -312,7 +312,7 @@ RunBrainCase(double spacing, const std::string & kind, int threads, int throughp
     out["mean_neighbours"] = entries / std::max<Index>(1, table.PointCount());
     // What the solve holds (MeshlessForceModel): per entry the node and grad phi; per point its offset, index,
     // kernel index, weight and moduli. The MLS table (node, value, gradient) is released once the kernel's is built.
-    out["table_bytes"] = entries * (sizeof(Index) + 24.0) + table.PointCount() * (3.0 * sizeof(Index) + 32.0);
+    out["table_bytes"] = entries * (sizeof(Index) + 3.0 * sizeof(float)) + table.PointCount() * (3.0 * sizeof(Index) + 32.0);
   }
   return out;
 }

@@ -343,7 +343,7 @@ private:
   // one pass streams it once per step: per kernel point its integration point,
   // weight and moduli; per entry the node and grad phi. It is the only copy
   // (the MLS table given to the constructor is released): at 100,000 DOF it
-  // holds 4 M entries, 28 bytes each.
+  // holds 4 M entries, 16 bytes each.
   // Reading the MLS table's rows in schedule order instead took 2.7 times as
   // long (brain-sized benchmark, 2 threads, 2026-11-25): the rows' jumps
   // defeat the prefetcher.
@@ -352,7 +352,14 @@ private:
   std::vector<Index>  m_KernelColourOffsets;
   std::vector<Index>  m_KernelOffsets;
   std::vector<Index>  m_KernelNodes;
-  std::vector<double> m_KernelGradients; // 3 per entry
+  // grad phi in single precision: 16 instead of 28 bytes an entry streamed
+  // per step, for relative errors of 6e-8 (docs/solver.md); sums in double.
+  std::vector<float>  m_KernelGradients; // 3 per entry
+  Vector3 KernelGradient(Index k) const
+  {
+    const float * g = &m_KernelGradients[3 * static_cast<std::size_t>(k)];
+    return Vector3(g[0], g[1], g[2]);
+  }
   std::vector<double> m_KernelMaterial;  // weight, mu, kappa, collapse modulus per kernel point
   std::vector<Index>  m_KernelIndexOfPoint; // integration point -> its kernel point
   // u and f with 4 slots per node (x, y, z, 0), so that a neighbour's three

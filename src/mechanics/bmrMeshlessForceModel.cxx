@@ -13,7 +13,7 @@
 
 namespace bmr
 {
-// How far ahead (in doubles, 2 KiB) the force kernel asks for its streamed
+// How far ahead (in floats, 1 KiB) the force kernel asks for its streamed
 // shape-function gradients. The hardware prefetcher alone left the kernel
 // waiting on that stream: 129 -> 105-110 ns per point-step with one thread,
 // 76 -> 66 with two (brain-sized model, 2026-11-26); the same prefetch made
@@ -104,12 +104,13 @@ MeshlessForceModel::MeshlessForceModel(const Model &          model,
       m_KernelNodes.push_back(table.nodes[k]);
       for (int j = 0; j < 3; ++j)
       {
-        m_KernelGradients.push_back(table.gradients[3 * k + j]);
+        m_KernelGradients.push_back(static_cast<float>(table.gradients[3 * k + j]));
       }
     }
     m_KernelOffsets.push_back(static_cast<Index>(m_KernelNodes.size()));
     m_KernelMaterial.insert(m_KernelMaterial.end(), { m_Weight[p], m_Mu[p], m_Kappa[p], m_Collapse[p] });
   }
+  m_KernelGradients.push_back(0.0f); // the last entry's 4-float load (LoadGradient)
   m_KernelIndexOfPoint.resize(pointCount);
   for (Index q = 0; q < pointCount; ++q)
   {
@@ -122,12 +123,11 @@ MeshlessForceModel::DeformationGradientAt(Index p, const double * u) const
 {
   double F[9] = { 1, 0, 0, 0, 1, 0, 0, 0, 1 }; // row-major F_ij
   const Index * nodes = m_KernelNodes.data();
-  const double *gradients = m_KernelGradients.data();
   const Index   q = m_KernelIndexOfPoint[p];
   for (Index k = m_KernelOffsets[q]; k < m_KernelOffsets[q + 1]; ++k)
   {
     const double * uI = u + 3 * static_cast<std::size_t>(nodes[k]);
-    const double * g = gradients + 3 * static_cast<std::size_t>(k);
+    const Vector3  g = KernelGradient(k);
     for (int i = 0; i < 3; ++i)
     {
       for (int j = 0; j < 3; ++j)
@@ -155,6 +155,16 @@ LoadLanes(const double * source)
   return lanes;
 }
 
+/** Entry k's gradient and the next float (lane 3, to be ignored), widened to double. */
+inline Lanes
+LoadGradient(const float * source)
+{
+  using Floats = float __attribute__((vector_size(16)));
+  Floats floats;
+  std::memcpy(&floats, source, sizeof floats);
+  return __builtin_convertvector(floats, Lanes);
+}
+
 inline void
 StoreLanes(double * target, Lanes lanes)
 {
@@ -171,14 +181,15 @@ Index
 MeshlessForceModel::AddPointForces(Index first, Index last)
 {
   const Index *      nodes = m_KernelNodes.data();
-  const double *     gradients = m_KernelGradients.data();
+  const float *      gradients = m_KernelGradients.data();
   const double *     material = m_KernelMaterial.data();
   const double *     paddedU = m_PaddedDisplacements.data();
   double *           paddedF = m_PaddedForces.data();
   alignas(64) double stress[9][kPointsPerBlock]; // F, then w P, component-major
   for (Index q = first; q < last; ++q)
   {
-    // The columns of F = I + sum_I u_I grad phi_I^T, over even and odd
+    // The rows of F = I + sum_I u_I grad phi_I^T (one converted load of the
+    // gradient, its 4th lane the next entry's and ignored), over even and odd
     // entries apart to halve the chain of dependent additions.
     Lanes       even0 = { 1, 0, 0, 0 }, even1 = { 0, 1, 0, 0 }, even2 = { 0, 0, 1, 0 };
     Lanes       odd0 = {}, odd1 = {}, odd2 = {};
@@ -186,29 +197,30 @@ MeshlessForceModel::AddPointForces(Index first, Index last)
     Index       k = begin;
     for (; k + 1 < end; k += 2)
     {
-      const Lanes    uA = LoadLanes(paddedU + 4 * static_cast<std::size_t>(nodes[k]));
-      const Lanes    uB = LoadLanes(paddedU + 4 * static_cast<std::size_t>(nodes[k + 1]));
-      const double * g = gradients + 3 * static_cast<std::size_t>(k);
+      const double * uA = paddedU + 4 * static_cast<std::size_t>(nodes[k]);
+      const double * uB = paddedU + 4 * static_cast<std::size_t>(nodes[k + 1]);
+      const float *  g = gradients + 3 * static_cast<std::size_t>(k);
       __builtin_prefetch(g + kGradientPrefetchDistance);
-      even0 += uA * g[0];
-      even1 += uA * g[1];
-      even2 += uA * g[2];
-      odd0 += uB * g[3];
-      odd1 += uB * g[4];
-      odd2 += uB * g[5];
+      const Lanes gA = LoadGradient(g), gB = LoadGradient(g + 3);
+      even0 += uA[0] * gA;
+      even1 += uA[1] * gA;
+      even2 += uA[2] * gA;
+      odd0 += uB[0] * gB;
+      odd1 += uB[1] * gB;
+      odd2 += uB[2] * gB;
     }
     if (k < end)
     {
-      const Lanes    uA = LoadLanes(paddedU + 4 * static_cast<std::size_t>(nodes[k]));
-      const double * g = gradients + 3 * static_cast<std::size_t>(k);
-      even0 += uA * g[0];
-      even1 += uA * g[1];
-      even2 += uA * g[2];
+      const double * uA = paddedU + 4 * static_cast<std::size_t>(nodes[k]);
+      const Lanes    gA = LoadGradient(gradients + 3 * static_cast<std::size_t>(k));
+      even0 += uA[0] * gA;
+      even1 += uA[1] * gA;
+      even2 += uA[2] * gA;
     }
-    const Lanes column[3] = { even0 + odd0, even1 + odd1, even2 + odd2 };
+    const Lanes row[3] = { even0 + odd0, even1 + odd1, even2 + odd2 };
     for (int c = 0; c < 9; ++c)
     {
-      stress[c][q - first] = column[c % 3][c / 3];
+      stress[c][q - first] = row[c / 3][c % 3];
     }
   }
   Index inverted = std::numeric_limits<Index>::max();
@@ -246,8 +258,11 @@ MeshlessForceModel::AddPointForces(Index first, Index last)
     for (Index k = m_KernelOffsets[q]; k < m_KernelOffsets[q + 1]; ++k)
     {
       double *       fI = paddedF + 4 * static_cast<std::size_t>(nodes[k]);
-      const double * g = gradients + 3 * static_cast<std::size_t>(k);
-      StoreLanes(fI, LoadLanes(fI) + (column[0] * g[0] + column[1] * g[1] + column[2] * g[2]));
+      const Lanes    g = LoadGradient(gradients + 3 * static_cast<std::size_t>(k));
+      using Mask = long long __attribute__((vector_size(32)));
+      StoreLanes(fI, LoadLanes(fI) + (column[0] * __builtin_shuffle(g, Mask{ 0, 0, 0, 0 }) +
+                                      column[1] * __builtin_shuffle(g, Mask{ 1, 1, 1, 1 }) +
+                                      column[2] * __builtin_shuffle(g, Mask{ 2, 2, 2, 2 })));
     }
   }
   return -1;
@@ -333,8 +348,8 @@ MeshlessForceModel::ScaledMasses(double timeStep, double safety, bool collapse) 
     norms.resize(end - begin);
     for (Index k = begin; k < end; ++k)
     {
-      const double * g = &m_KernelGradients[3 * static_cast<std::size_t>(k)];
-      norms[k - begin] = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+      const Vector3 g = KernelGradient(k);
+      norms[k - begin] = g.norm();
     }
     masses.AddUnit(&m_KernelNodes[begin], norms.data(), static_cast<int>(end - begin),
                    m_Weight[p] * (collapse ? std::max(modulus, m_Collapse[p]) : modulus));
