@@ -353,8 +353,8 @@ private:
   std::vector<Index>  m_KernelOffsets;
   std::vector<Index>  m_KernelNodes;
   // grad phi in single precision: 16 instead of 28 bytes an entry streamed
-  // per step, for relative errors of 6e-8 (docs/solver.md); sums in double.
-  std::vector<float>  m_KernelGradients; // 3 per entry
+  // per step, for relative errors of 6e-8 (docs/thread-scaling.md); sums in double.
+  std::vector<float>  m_KernelGradients; // 3 per entry, and one float of padding at the end
   Vector3 KernelGradient(Index k) const
   {
     const float * g = &m_KernelGradients[3 * static_cast<std::size_t>(k)];
