@@ -391,6 +391,30 @@ TEST(Failure, TooFewRelaxationStepsIsNotConverged)
   EXPECT_GT(result.estimatedError, settings.tolerance);
   EXPECT_LE(result.steps, settings.maxSteps);
   EXPECT_FALSE(result.message.empty());
+  EXPECT_TRUE(Contains(result.message, "is above the tolerance")) << result.message;
+}
+
+// Stopped within the tolerance but before the convergence test's hold ran
+// out: not converged, and the message does not claim the estimate is too large.
+TEST(Failure, StoppedDuringTheConvergenceHoldSaysSo)
+{
+  Model model = MakeBlockMesh(Vector3(20.0, 20.0, 10.0), { 8, 8, 4 }, GridCells::Hexahedra, MakeMaterial(3000.0, 0.49));
+  model.materials.push_back(MakeMaterial(10.0, 0.1, 1000.0, "csf"));
+  for (Cell & cell : model.cells)
+  {
+    cell.material = CellCentre(model, cell).x() < 7.0 ? 1 : 0;
+  }
+  model.fixedConstraints.push_back({ "zmin", { true, true, true } });
+  Prescribe(model, model.NodeSet("zmax"), [](const Vector3 &) { return Vector3(0.0, 0.0, -1.0); });
+  SolverSettings    settings = TightRelaxation(1e-3, 100000);
+  const SolveResult full = Solver(model, settings).Solve();
+  ASSERT_TRUE(full.converged) << full.message;
+  settings.maxSteps = full.steps - 1; // deterministic: the same path, one step short
+  const SolveResult cut = Solver(model, settings).Solve();
+  EXPECT_FALSE(cut.converged);
+  EXPECT_LT(cut.estimatedError, settings.tolerance);
+  EXPECT_TRUE(Contains(cut.message, "is below the tolerance")) << cut.message;
+  EXPECT_TRUE(Contains(cut.message, "Increase max_steps")) << cut.message;
 }
 
 } // namespace

@@ -231,6 +231,7 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   double             estimatedError = std::numeric_limits<double>::infinity();
   double             rate = 1.0;
   int                satisfied = 0;
+  int                required = window; // steps the estimate must stay below the tolerance
   int                step = 0;
   bool               converged = false;
   double             gravityFactor = 0.0;
@@ -366,7 +367,8 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
         const int    hold = atRest || slowestRate >= 1.0
                               ? window
                               : static_cast<int>(std::min<double>(settings.maxSteps, std::ceil(1.0 / (1.0 - slowestRate))));
-        if (satisfied >= std::max(window, hold))
+        required = std::max(window, hold);
+        if (satisfied >= required)
         {
           converged = true;
           ++step;
@@ -440,6 +442,14 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   if (converged)
   {
     message << "converged: estimated error " << estimatedError << " mm < tolerance " << settings.tolerance << " mm";
+  }
+  else if (estimatedError < settings.tolerance)
+  {
+    message << "NOT CONVERGED: estimated error " << estimatedError << " mm after " << step
+            << " steps is below the tolerance " << settings.tolerance << " mm, but only for the last " << satisfied
+            << " of the " << required
+            << " steps the convergence test requires (the slowest mode's e-folding time: a stopped slow mode "
+               "shows in the increments only after it). Increase max_steps.";
   }
   else
   {
