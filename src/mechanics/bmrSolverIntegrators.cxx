@@ -447,9 +447,11 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   {
     message << "NOT CONVERGED: estimated error " << estimatedError << " mm after " << step
             << " steps is below the tolerance " << settings.tolerance << " mm, but only for the last " << satisfied
-            << " of the " << required
-            << " steps the convergence test requires (the slowest mode's e-folding time: a stopped slow mode "
-               "shows in the increments only after it). Increase max_steps.";
+            << " steps; the convergence test requires " << required << " in a row ("
+            << (required > window ? "the slowest mode's e-folding time: a stopped slow mode shows in the increments only after it"
+                                  : "adapt_interval")
+            << "). Increase max_steps; an estimate that keeps crossing the tolerance points at an oscillation "
+               "the damping does not reach (e.g. in contact).";
   }
   else
   {
