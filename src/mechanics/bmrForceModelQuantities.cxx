@@ -126,23 +126,27 @@ DiagonalMasses::Masses(double factor) const
   // already bound their rows, and scaling them too would make the nodes of
   // hexahedra in a mixed mesh heavier than needed. m = ratio D + B still
   // bounds every Gershgorin row sum.
-  double ratio = 1.0;
+  // A node whose gradients (nearly) vanish has (nearly) no stiffness; the
+  // floor keeps the ratio and its mass finite (the solve then reports what
+  // does not converge).
+  const double diagonalFloor = 1e-12 * *std::max_element(m_Diagonal.begin(), m_Diagonal.end());
+  double       ratio = 1.0;
   for (std::size_t n = 0; n < m_Diagonal.size(); ++n)
   {
     if (m_Diagonal[n] > 0.0)
     {
-      ratio = std::max(ratio, m_RowBounds[n] / m_Diagonal[n]);
+      ratio = std::max(ratio, m_RowBounds[n] / std::max(m_Diagonal[n], diagonalFloor));
     }
   }
   std::vector<double> masses(m_Diagonal.size());
   double              largest = 0.0;
   for (std::size_t n = 0; n < m_Diagonal.size(); ++n)
   {
-    masses[n] = ratio * m_Diagonal[n] + m_EqualShares[n];
+    const double diagonal = m_EqualShares[n] > 0.0 ? m_Diagonal[n] : std::max(m_Diagonal[n], diagonalFloor);
+    masses[n] = ratio * diagonal + m_EqualShares[n];
     largest = std::max(largest, masses[n]);
   }
-  // A node whose gradients all vanish has no stiffness; the floor keeps its
-  // mass finite (the solve then reports what does not converge).
+  // The same floor where no unit adds anything (only hexahedra, or none).
   for (double & mass : masses)
   {
     mass = factor * std::max(mass, 1e-12 * largest);
