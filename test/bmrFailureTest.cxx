@@ -398,13 +398,7 @@ TEST(Failure, TooFewRelaxationStepsIsNotConverged)
 // out: not converged, and the message does not claim the estimate is too large.
 TEST(Failure, StoppedDuringTheConvergenceHoldSaysSo)
 {
-  Model model = MakeBlockMesh(Vector3(20.0, 20.0, 10.0), { 8, 8, 4 }, GridCells::Hexahedra, MakeMaterial(3000.0, 0.49));
-  model.materials.push_back(MakeMaterial(10.0, 0.1, 1000.0, "csf"));
-  for (Cell & cell : model.cells)
-  {
-    cell.material = CellCentre(model, cell).x() < 7.0 ? 1 : 0;
-  }
-  model.fixedConstraints.push_back({ "zmin", { true, true, true } });
+  Model model = BrainMaterialsBlock(GridCells::Hexahedra);
   Prescribe(model, model.NodeSet("zmax"), [](const Vector3 &) { return Vector3(0.0, 0.0, -1.0); });
   SolverSettings    settings = TightRelaxation(1e-3, 100000);
   const SolveResult full = Solver(model, settings).Solve();

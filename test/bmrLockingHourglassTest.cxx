@@ -257,27 +257,9 @@ TEST(Locking, CantileverHexahedraDoNotLock)
 }
 
 // ---------------------------------------------------------------------------
-// ANP tetrahedra across material interfaces: parenchyma (nu 0.49), a tumour
-// twice as stiff and soft compressible CSF (10 Pa, nu 0.1), as in a brain.
-// A 20 x 20 x 10 mm block on 8 x 8 x 4 grid cells: CSF where x < 7 mm,
-// tumour where y > 12 mm, bottom fixed.
+// ANP tetrahedra across material interfaces: BrainMaterialsBlock
+// (bmrTestUtilities.h), parenchyma, a stiffer tumour and soft CSF as in a brain.
 // ---------------------------------------------------------------------------
-Model
-BrainMaterialsBlock(GridCells cells, int refinement = 1, double csfPoissonRatio = 0.1)
-{
-  Model model = MakeBlockMesh(Vector3(20.0, 20.0, 10.0), { 8 * refinement, 8 * refinement, 4 * refinement }, cells,
-                              MakeMaterial(3000.0, 0.49));
-  model.materials.push_back(MakeMaterial(6000.0, 0.49, 1000.0, "tumour"));
-  model.materials.push_back(MakeMaterial(10.0, csfPoissonRatio, 1000.0, "csf"));
-  for (Cell & cell : model.cells)
-  {
-    const Vector3 centre = CellCentre(model, cell);
-    cell.material = centre.x() < 7.0 ? 2 : centre.y() > 12.0 ? 1 : 0;
-  }
-  model.fixedConstraints.push_back({ "zmin", { true, true, true } });
-  return model;
-}
-
 std::vector<Vector3>
 RandomField(std::size_t count, double amplitude, std::uint32_t seed)
 {

@@ -174,6 +174,25 @@ MakeMaterial(double youngsModulus, double poissonRatio, double density = 1000.0,
   return m;
 }
 
+/** Parenchyma (nu 0.49), a tumour twice as stiff and soft compressible CSF
+ *  (10 Pa), as in a brain: a 20 x 20 x 10 mm block on 8 x 8 x 4 grid cells
+ *  (times `refinement`), CSF where x < 7 mm, tumour where y > 12 mm, bottom fixed. */
+inline Model
+BrainMaterialsBlock(GridCells cells, int refinement = 1, double csfPoissonRatio = 0.1)
+{
+  Model model = MakeBlockMesh(Vector3(20.0, 20.0, 10.0), { 8 * refinement, 8 * refinement, 4 * refinement }, cells,
+                              MakeMaterial(3000.0, 0.49));
+  model.materials.push_back(MakeMaterial(6000.0, 0.49, 1000.0, "tumour"));
+  model.materials.push_back(MakeMaterial(10.0, csfPoissonRatio, 1000.0, "csf"));
+  for (Cell & cell : model.cells)
+  {
+    const Vector3 centre = CellCentre(model, cell);
+    cell.material = centre.x() < 7.0 ? 2 : centre.y() > 12.0 ? 1 : 0;
+  }
+  model.fixedConstraints.push_back({ "zmin", { true, true, true } });
+  return model;
+}
+
 /** Symmetry planes of a block from MakeBlockMesh: "xmin" fixed in x, "ymin" in y, "zmin" in z. */
 inline void
 AddSymmetryConstraints(Model & model)
