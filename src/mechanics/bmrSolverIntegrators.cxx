@@ -443,22 +443,24 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   {
     message << "converged: estimated error " << estimatedError << " mm < tolerance " << settings.tolerance << " mm";
   }
-  else if (estimatedError < settings.tolerance)
-  {
-    message << "NOT CONVERGED: estimated error " << estimatedError << " mm after " << step
-            << " steps is below the tolerance " << settings.tolerance << " mm, but only for the last " << satisfied
-            << " steps; the convergence test requires " << required << " in a row ("
-            << (required > window ? "the slowest mode's e-folding time: a stopped slow mode shows in the increments only after it"
-                                  : "adapt_interval")
-            << "). Increase max_steps; an estimate that keeps crossing the tolerance points at an oscillation "
-               "the damping does not reach (e.g. in contact).";
-  }
   else
   {
-    message << "NOT CONVERGED: estimated error " << estimatedError << " mm after " << step
-            << " steps is above the tolerance " << settings.tolerance
-            << " mm. Increase max_steps, loosen the tolerance, or check that the model is constrained "
-               "against rigid-body motion.";
+    message << "NOT CONVERGED: estimated error " << estimatedError << " mm after " << step << " steps is ";
+    if (estimatedError < settings.tolerance)
+    {
+      message << "below the tolerance " << settings.tolerance << " mm, but only for the last " << satisfied
+              << " steps; the convergence test requires " << required << " in a row ("
+              << (required > window ? "the slowest mode's e-folding time: a stopped slow mode shows in the increments only after it"
+                                    : "adapt_interval")
+              << "). Increase max_steps; an estimate that keeps crossing the tolerance points at an oscillation "
+                 "the damping does not reach (e.g. in contact).";
+    }
+    else
+    {
+      message << "above the tolerance " << settings.tolerance
+              << " mm. Increase max_steps, loosen the tolerance, or check that the model is constrained "
+                 "against rigid-body motion.";
+    }
   }
   if (restarts > 0)
   {
