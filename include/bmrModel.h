@@ -116,6 +116,13 @@ struct ContactSurface
   Side                        bodySide = Side::Inside;
   bool                        flipNormals = false;
   std::string                 slaveNodeSet; // empty: all boundary nodes of the mesh
+
+  /** The triangles with their normals (right-hand rule) pointing to the
+   *  surface's outside: a closed surface oriented outward, an open one as
+   *  given (flipNormals reverses it). `closed` (when given): whether every
+   *  edge is shared by exactly two triangles. Throws bmr::Error for a closed
+   *  surface whose triangles are not consistently oriented. */
+  std::vector<std::array<Index, 3>> OutwardTriangles(bool * closed = nullptr) const;
 };
 
 /** Where a rigid tool is at a time: the origin of the tool's frame (mm) and

@@ -14,6 +14,9 @@
 // values, which is the linear element's boundary condition along that edge.
 // Other mid-edge nodes stay free, e.g. on an edge between two constrained
 // surface nodes that cuts through the interior.
+// A rigid contact surface becomes frictionless face-to-face penalty contact:
+// its triangles are the faces of a fixed layer of wedges outside the body
+// (master), the body's boundary faces on the slave nodes are the slave.
 // The static step is geometrically nonlinear (NLGEOM); loads are ramped
 // linearly over the step (the end state of a hyperelastic solid does not depend
 // on the path). Displacements and reaction forces are read back from the .dat
@@ -52,6 +55,14 @@ struct CalculixSettings
   double residualTolerance = 1e-5;
   double correctionTolerance = 1e-4;
 
+  /** Frictionless contact with the model's rigid contact surfaces
+   *  (face-to-face penalty contact): the slope of the linear
+   *  pressure-overclosure law (MPa per mm of overlap). 0: 100 times the
+   *  stiffest material's Young's modulus per mean edge length of the slave
+   *  faces, which keeps the overlap near 1 % of an edge at contact pressures
+   *  of the size of E. */
+  double contactStiffness = 0.0;
+
   /** Equation solver (*STATIC, SOLVER=...): empty for CalculiX's default
    *  (SPOOLES in Debian's build), or "ITERATIVE CHOLESKY", "ITERATIVE SCALING". */
   std::string solver;
@@ -82,6 +93,21 @@ struct CalculixMesh
   std::vector<std::array<Index, 3>>  boundaryTriangles;
   std::vector<std::array<Index, 3>>  boundaryTriangleMidNodes;
 
+  /** Per contact surface of the model: the rigid master, a layer of C3D6
+   *  wedges (all nodes fixed) built outward from the surface's triangles, so
+   *  that each wedge's face S1 is a triangle of the surface facing the body;
+   *  and the slave faces (model cell, CalculiX face number 1...) of the
+   *  body's boundary whose corners all are slave nodes. The wedges' nodes
+   *  follow the mid-edge nodes (from firstRigidNode on). */
+  struct ContactPair
+  {
+    std::vector<std::array<Index, 6>>    masterWedges;
+    std::vector<std::pair<Index, int>>   slaveFaces;
+    double                               slaveMeanEdge = 0.0; // mm
+  };
+  std::vector<ContactPair> contactPairs;
+  Index                    firstRigidNode = 0;
+
   /** Mask over the mesh nodes for a set of model nodes (a mask over model
    *  nodes): the set's nodes and the mid-edge nodes on the edges of boundary
    *  triangles whose three vertices are all in the set. */
@@ -94,8 +120,8 @@ struct CalculixMesh
 CalculixMesh
 MakeCalculixMesh(const Model & model, const CalculixSettings & settings = {});
 
-/** Writes the input deck. Throws bmr::Error for what CalculiX cannot take here
- *  (contact surfaces). */
+/** Writes the input deck. Throws bmr::Error for what the deck cannot express
+ *  (a CSF fluid surface). */
 void
 WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh & mesh, const CalculixSettings & settings = {});
 

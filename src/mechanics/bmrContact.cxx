@@ -80,70 +80,88 @@ struct RigidContact::Tree
   }
 };
 
+namespace
+{
+/** Edge e = 3 t + k of a triangle list (from corner k to corner k + 1), keyed
+ *  by its end points (the smaller first, packed in one key); sorted by key,
+ *  then by number, the edges shared by triangles lie next to each other. */
+struct SurfaceEdge
+{
+  std::uint64_t ends;
+  std::size_t   number;
+  bool          operator<(const SurfaceEdge & other) const
+  {
+    return ends != other.ends ? ends < other.ends : number < other.number;
+  }
+};
+
+std::vector<SurfaceEdge>
+SortedEdges(const std::vector<std::array<Index, 3>> & triangles)
+{
+  std::vector<SurfaceEdge> edges(3 * triangles.size());
+  for (std::size_t e = 0; e < edges.size(); ++e)
+  {
+    const auto & c = triangles[e / 3];
+    const auto   a = static_cast<std::uint32_t>(c[e % 3]), b = static_cast<std::uint32_t>(c[(e % 3 + 1) % 3]);
+    edges[e] = { (std::uint64_t{ std::min(a, b) } << 32) | std::max(a, b), e };
+  }
+  std::sort(edges.begin(), edges.end());
+  return edges;
+}
+} // namespace
+
+std::vector<std::array<Index, 3>>
+ContactSurface::OutwardTriangles(bool * closedOut) const
+{
+  const std::vector<SurfaceEdge> edges = SortedEdges(triangles);
+  const auto fromCorner = [&](const SurfaceEdge & edge) { return triangles[edge.number / 3][edge.number % 3]; };
+  bool closed = true;
+  bool oriented = true;
+  for (std::size_t first = 0, last = 0; first < edges.size(); first = last)
+  {
+    while (last < edges.size() && edges[last].ends == edges[first].ends)
+    {
+      ++last;
+    }
+    closed = closed && last - first == 2;
+    // Consistently oriented: the two triangles run along their shared edge in opposite directions.
+    oriented = oriented && (last - first != 2 || fromCorner(edges[first]) != fromCorner(edges[first + 1]));
+  }
+  if (closed && !oriented)
+  {
+    throw Error("contact surface '" + name + "' is closed but its triangles are not consistently oriented. Repair the surface.");
+  }
+  bool flip = flipNormals;
+  if (closed)
+  {
+    double signedVolume = 0.0;
+    for (const auto & c : triangles)
+    {
+      signedVolume += vertices[c[0]].dot(vertices[c[1]].cross(vertices[c[2]]));
+    }
+    flip = signedVolume < 0.0; // orient outward
+  }
+  std::vector<std::array<Index, 3>> outward = triangles;
+  if (flip)
+  {
+    for (auto & c : outward)
+    {
+      std::swap(c[1], c[2]);
+    }
+  }
+  if (closedOut != nullptr)
+  {
+    *closedOut = closed;
+  }
+  return outward;
+}
+
 RigidContact::RigidContact(const ContactSurface & surface, std::vector<Index> slaveNodes, const std::vector<Vector3> & reference)
   : m_Tree(std::make_unique<Tree>())
   , m_SlaveNodes(std::move(slaveNodes))
 {
   Tree & tree = *m_Tree;
-  tree.corners = surface.triangles;
-
-  // Closed means every edge is shared by exactly two triangles. The edges are
-  // numbered 3 t + k (edge k of the input's triangle t, from corner k to
-  // corner k + 1) and sorted by their end points (the smaller first, packed
-  // in one key), then by number.
-  struct Edge
-  {
-    std::uint64_t ends;
-    std::size_t   number;
-    bool          operator<(const Edge & other) const
-    {
-      return ends != other.ends ? ends < other.ends : number < other.number;
-    }
-  };
-  const std::size_t edgeCount = 3 * surface.triangles.size();
-  std::vector<Edge> edges(edgeCount);
-  for (std::size_t e = 0; e < edgeCount; ++e)
-  {
-    const auto &  c = surface.triangles[e / 3];
-    const auto    a = static_cast<std::uint32_t>(c[e % 3]), b = static_cast<std::uint32_t>(c[(e % 3 + 1) % 3]);
-    edges[e] = { (std::uint64_t{ std::min(a, b) } << 32) | std::max(a, b), e };
-  }
-  std::sort(edges.begin(), edges.end());
-  const auto fromCorner = [&](const Edge & edge) { return surface.triangles[edge.number / 3][edge.number % 3]; };
-  tree.closed = true;
-  bool oriented = true;
-  for (std::size_t first = 0, last = 0; first < edgeCount; first = last)
-  {
-    while (last < edgeCount && edges[last].ends == edges[first].ends)
-    {
-      ++last;
-    }
-    tree.closed = tree.closed && last - first == 2;
-    // Consistently oriented: the two triangles run along their shared edge in opposite directions.
-    oriented = oriented && (last - first != 2 || fromCorner(edges[first]) != fromCorner(edges[first + 1]));
-  }
-  if (tree.closed && !oriented)
-  {
-    throw Error("contact surface '" + surface.name +
-                "' is closed but its triangles are not consistently oriented. Repair the surface.");
-  }
-  bool flip = surface.flipNormals;
-  if (tree.closed)
-  {
-    double signedVolume = 0.0;
-    for (const auto & c : tree.corners)
-    {
-      signedVolume += surface.vertices[c[0]].dot(surface.vertices[c[1]].cross(surface.vertices[c[2]]));
-    }
-    flip = signedVolume < 0.0; // orient outward
-  }
-  if (flip)
-  {
-    for (auto & c : tree.corners)
-    {
-      std::swap(c[1], c[2]);
-    }
-  }
+  tree.corners = surface.OutwardTriangles(&tree.closed);
   tree.sideSign = surface.bodySide == ContactSurface::Side::Inside ? -1.0 : 1.0;
 
   tree.vertexNormals.assign(surface.vertices.size(), Vector3::Zero());
@@ -166,20 +184,19 @@ RigidContact::RigidContact(const ContactSurface & surface, std::vector<Index> sl
       tree.vertexNormals[c[k]] += std::acos(std::clamp(e1.dot(e2), -1.0, 1.0)) * normal;
     }
   }
-  // An edge's pseudo-normal sums the normals of the triangles that share it,
-  // in triangle order. The flip above turned edge k of each triangle into edge 2 - k.
+  // An edge's pseudo-normal sums the normals of the triangles that share it, in triangle order.
+  const std::vector<SurfaceEdge> edges = SortedEdges(tree.corners);
   tree.edgeNormals.resize(tree.corners.size());
-  for (std::size_t first = 0, last = 0; first < edgeCount; first = last)
+  for (std::size_t first = 0, last = 0; first < edges.size(); first = last)
   {
     Vector3 sum = Vector3::Zero();
-    for (last = first; last < edgeCount && edges[last].ends == edges[first].ends; ++last)
+    for (last = first; last < edges.size() && edges[last].ends == edges[first].ends; ++last)
     {
       sum += tree.faceNormals[edges[last].number / 3];
     }
     for (std::size_t e = first; e < last; ++e)
     {
-      const std::size_t k = edges[e].number % 3;
-      tree.edgeNormals[edges[e].number / 3][flip ? 2 - k : k] = sum;
+      tree.edgeNormals[edges[e].number / 3][edges[e].number % 3] = sum;
     }
   }
   tree.vertices = surface.vertices;
