@@ -54,6 +54,14 @@ ExtractIsosurface(const ScalarVolume &       field,
                   const IsosurfaceSettings & settings = IsosurfaceSettings{},
                   std::vector<std::string> * warnings = nullptr);
 
+/** Edge-collapse decimation (CGAL, topology preserving, Lindstrom-Turk
+ *  placement) of a closed, outward-oriented surface to about `targetEdgeLength`
+ *  (mm) mean edge length. The surface comes back as it is when the target is
+ *  at or below its mean edge length, or (with a warning) when the decimation
+ *  would break its topology. */
+ContactSurface
+DecimateSurface(const ContactSurface & surface, double targetEdgeLength, std::vector<std::string> * warnings = nullptr);
+
 struct BrainSurfaceSettings
 {
   /** Gap (mm) between the brain surface and the rigid skull surface: the skull

@@ -180,6 +180,16 @@ struct SyntheticBrainShift
   StageTimer                      timer;
 };
 
+/** The ground truth's first half: its model with the sag prescribed, gravity
+ *  and skull contact (model, gravity, down, tumourMask,
+ *  resectionCavityRadius, timer), not solved: the same scene for another
+ *  solver, e.g. an implicit reference. Throws bmr::Error for bad settings. */
+SyntheticBrainShift
+MakeSyntheticBrainShiftModel(const RegistrationImage *           preoperativeImage,
+                             const RegistrationLabelImage *      brainMask,
+                             const SyntheticBrainShiftSettings & settings,
+                             const StageCallback &               stageCallback = {});
+
 /** Makes the ground truth. The preoperative image and brain mask must share a
  *  grid. Throws bmr::Error when the solve fails or does not converge. */
 SyntheticBrainShift

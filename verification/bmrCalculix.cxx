@@ -92,45 +92,42 @@ MasterWedges(const ContactSurface & surface, std::vector<Vector3> & nodes)
       std::swap(c[1], c[2]); // normals away from the body
     }
   }
-  // Vertex normals away from the body (angle-weighted) and a thickness of
-  // half the mean edge: the wedges only carry the master faces, being fixed.
-  std::vector<Vector3> normals(surface.vertices.size(), Vector3::Zero());
-  double               edgeSum = 0.0;
+  // Each triangle extruded along its own normal, away from the body, by half
+  // the mean edge: right prisms, never inverted (shared top nodes would
+  // invert wedges in concave folds). They only carry the master faces, being fixed.
+  double edgeSum = 0.0;
   for (const auto & c : triangles)
   {
-    const Vector3 p[3] = { surface.vertices[c[0]], surface.vertices[c[1]], surface.vertices[c[2]] };
-    const Vector3 normal = (p[1] - p[0]).cross(p[2] - p[0]).normalized();
     for (int k = 0; k < 3; ++k)
     {
-      const Vector3 e1 = (p[(k + 1) % 3] - p[k]).normalized();
-      const Vector3 e2 = (p[(k + 2) % 3] - p[k]).normalized();
-      normals[c[k]] += std::acos(std::clamp(e1.dot(e2), -1.0, 1.0)) * normal;
-      edgeSum += (p[(k + 1) % 3] - p[k]).norm();
+      edgeSum += (surface.vertices[c[(k + 1) % 3]] - surface.vertices[c[k]]).norm();
     }
   }
   const double thickness = 0.5 * edgeSum / (3.0 * static_cast<double>(std::max<std::size_t>(triangles.size(), 1)));
-  std::vector<Index> bottom(surface.vertices.size(), -1), top(surface.vertices.size(), -1);
+  std::vector<Index> bottom(surface.vertices.size(), -1);
   std::vector<std::array<Index, 6>> wedges;
-  for (const auto & c : triangles)
+  for (std::size_t t = 0; t < triangles.size(); ++t)
   {
+    const auto &  c = triangles[t];
+    const Vector3 normal =
+      (surface.vertices[c[1]] - surface.vertices[c[0]]).cross(surface.vertices[c[2]] - surface.vertices[c[0]]);
+    if (!(normal.norm() > 0.0))
+    {
+      throw Error("CalculiX deck: contact surface '" + surface.name + "' has a degenerate triangle " +
+                  std::to_string(t) + "; clean the surface (remove zero-area triangles).");
+    }
     std::array<Index, 6> wedge{};
     for (int k = 0; k < 3; ++k)
     {
       const auto v = static_cast<std::size_t>(c[k]);
       if (bottom[v] < 0)
       {
-        if (!(normals[v].norm() > 0.0))
-        {
-          throw Error("CalculiX deck: contact surface '" + surface.name + "' has a vertex " + std::to_string(v) +
-                      " without a normal (degenerate triangles); clean the surface.");
-        }
         bottom[v] = static_cast<Index>(nodes.size());
         nodes.push_back(surface.vertices[v]);
-        top[v] = static_cast<Index>(nodes.size());
-        nodes.push_back(surface.vertices[v] + thickness * normals[v].normalized());
       }
       wedge[k] = bottom[v];
-      wedge[k + 3] = top[v];
+      wedge[k + 3] = static_cast<Index>(nodes.size());
+      nodes.push_back(surface.vertices[v] + thickness * normal.normalized());
     }
     wedges.push_back(wedge);
   }

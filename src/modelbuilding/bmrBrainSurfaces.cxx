@@ -261,30 +261,29 @@ EnclosedVolume(const ContactSurface & surface)
   return sixTimesVolume / 6.0;
 }
 
-// Decimation to settings.targetEdgeLength of a closed, outward-oriented surface.
-static void
-DecimateIfAsked(ContactSurface & surface, const IsosurfaceSettings & settings, const std::string & name,
-                std::vector<std::string> * warnings)
+ContactSurface
+DecimateSurface(const ContactSurface & surface, double targetEdgeLength, std::vector<std::string> * warnings)
 {
-  if (settings.targetEdgeLength > 0.0)
+  const double meanEdge = MeanEdgeLength(surface);
+  if (!(targetEdgeLength > meanEdge))
   {
-    const double meanEdge = MeanEdgeLength(surface);
-    if (settings.targetEdgeLength > meanEdge)
-    {
-      // Collapsing edges up to 2/3 of the target gives a mean edge near the target (measured on spheres).
-      ContactSurface decimated = DecimateToEdgeLength(surface, 2.0 / 3.0 * settings.targetEdgeLength);
-      if (IsClosedOrientedSurface(decimated))
-      {
-        surface = std::move(decimated);
-      }
-      else if (warnings)
-      {
-        warnings->push_back(name + ": decimation to a mean edge length of " + std::to_string(settings.targetEdgeLength) +
-                            " mm broke the surface's topology; the undecimated surface (mean edge " +
-                            std::to_string(meanEdge) + " mm) is returned");
-      }
-    }
+    return surface;
   }
+  // Collapsing edges up to 2/3 of the target gives a mean edge near the target (measured on spheres).
+  ContactSurface decimated = DecimateToEdgeLength(surface, 2.0 / 3.0 * targetEdgeLength);
+  if (IsClosedOrientedSurface(decimated))
+  {
+    decimated.flipNormals = surface.flipNormals;
+    decimated.slaveNodeSet = surface.slaveNodeSet;
+    return decimated;
+  }
+  if (warnings)
+  {
+    warnings->push_back("surface '" + surface.name + "': decimation to a mean edge length of " +
+                        std::to_string(targetEdgeLength) + " mm broke the surface's topology; the undecimated surface "
+                        "(mean edge " + std::to_string(meanEdge) + " mm) is kept");
+  }
+  return surface;
 }
 
 ContactSurface
@@ -431,7 +430,10 @@ ExtractIsosurface(const ScalarVolume &       field,
       std::swap(t[1], t[2]);
     }
   }
-  DecimateIfAsked(surface, settings, name, warnings);
+  if (settings.targetEdgeLength > 0.0)
+  {
+    surface = DecimateSurface(surface, settings.targetEdgeLength, warnings);
+  }
   return surface;
 }
 
@@ -454,7 +456,7 @@ ExtractBrainSurfaces(const ScalarVolume &         signedDistance,
   brainSettings.targetEdgeLength = settings.isosurface.targetEdgeLength;
   if (!settings.skull)
   {
-    DecimateIfAsked(surfaces.brain, brainSettings, "isosurface 'brain' at level 0", warnings);
+    surfaces.brain = DecimateSurface(surfaces.brain, brainSettings.targetEdgeLength, warnings);
     return surfaces;
   }
   IsosurfaceSettings skullSettings = settings.isosurface;
@@ -487,7 +489,7 @@ ExtractBrainSurfaces(const ScalarVolume &         signedDistance,
     }
   }
   surfaces.skull = ExtractIsosurface(skullField, settings.skullGap, skullSettings, warnings);
-  DecimateIfAsked(surfaces.brain, brainSettings, "isosurface 'brain' at level 0", warnings);
+  surfaces.brain = DecimateSurface(surfaces.brain, brainSettings.targetEdgeLength, warnings);
   surfaces.skull.bodySide = ContactSurface::Side::Inside;
   return surfaces;
 }

@@ -310,10 +310,10 @@ ParseIntraoperativeContrast(const std::string & name)
 }
 
 SyntheticBrainShift
-MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
-                        const RegistrationLabelImage *      brainMask,
-                        const SyntheticBrainShiftSettings & settings,
-                        const StageCallback &               stageCallback)
+MakeSyntheticBrainShiftModel(const RegistrationImage *           preoperativeImage,
+                             const RegistrationLabelImage *      brainMask,
+                             const SyntheticBrainShiftSettings & settings,
+                             const StageCallback &               stageCallback)
 {
   if (preoperativeImage == nullptr || brainMask == nullptr)
   {
@@ -433,7 +433,25 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
   }
   truth.gravity = settings.gravity * 9810.0 * down;
   model.bodyAcceleration = truth.gravity;
+  return truth;
+}
 
+SyntheticBrainShift
+MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
+                        const RegistrationLabelImage *      brainMask,
+                        const SyntheticBrainShiftSettings & settings,
+                        const StageCallback &               stageCallback)
+{
+  SyntheticBrainShift truth = MakeSyntheticBrainShiftModel(preoperativeImage, brainMask, settings, stageCallback);
+  StageTimer &        timer = truth.timer;
+  const Model &       model = truth.model.model;
+  const Vector3       down = truth.down;
+  Vector3             centroid = Vector3::Zero();
+  for (const Vector3 & node : model.nodes)
+  {
+    centroid += node;
+  }
+  centroid /= static_cast<double>(model.nodes.size());
   SolverSettings solverSettings;
   solverSettings.tolerance = settings.solverTolerance;
   solverSettings.threads = settings.threads;
