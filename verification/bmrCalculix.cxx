@@ -360,20 +360,21 @@ WriteContactPairs(std::ostream & stream, const Model & model, const CalculixMesh
     {
       stream << e << ", S1\n";
     }
-    stream << "*SURFACE, NAME=SLAVEFACES" << id << ", TYPE=ELEMENT\n";
-    for (const auto & [cell, face] : pair.slaveFaces)
+    stream << "*SURFACE, NAME=SLAVE" << id << ", TYPE=NODE\n";
+    for (const Index node : pair.slaveNodes)
     {
-      stream << cell + 1 << ", S" << face << "\n";
+      stream << node + 1 << "\n";
     }
     const double slope =
-      settings.contactStiffness > 0.0 ? settings.contactStiffness : 100.0 * stiffest / pair.slaveMeanEdge;
-    // No *FRICTION card: frictionless. The second value, the tension at large
-    // clearance, is kept negligible (1e-6 of the pressure at 1 mm overlap).
+      settings.contactStiffness > 0.0 ? settings.contactStiffness : 10.0 * stiffest / pair.slaveMeanEdge;
+    // No *FRICTION card: frictionless. The tension at large clearance is kept
+    // negligible (1e-6 of the pressure at 1 mm overlap), and so is the
+    // clearance over which it builds up (1 micrometre).
     stream << "*SURFACE INTERACTION, NAME=FRICTIONLESS" << id << "\n"
            << "*SURFACE BEHAVIOR, PRESSURE-OVERCLOSURE=LINEAR\n"
-           << FormatDouble(slope) << ", " << FormatDouble(1e-6 * slope) << "\n"
-           << "*CONTACT PAIR, INTERACTION=FRICTIONLESS" << id << ", TYPE=SURFACE TO SURFACE\n"
-           << "SLAVEFACES" << id << ", MASTERFACES" << id << "\n";
+           << FormatDouble(slope) << ", " << FormatDouble(1e-6 * slope) << ", 0.001\n"
+           << "*CONTACT PAIR, INTERACTION=FRICTIONLESS" << id << ", TYPE=NODE TO SURFACE\n"
+           << "SLAVE" << id << ", MASTERFACES" << id << "\n";
   }
 }
 
@@ -532,6 +533,38 @@ MakeCalculixMesh(const Model & model, const CalculixSettings & settings)
       }
     }
     pair.slaveMeanEdge = edgeSum / edges;
+    // The slave faces' nodes: their corners and the mid-edge nodes between two of them.
+    std::vector<char> onFace(mesh.nodes.size(), 0);
+    for (const auto & [cell, face] : pair.slaveFaces)
+    {
+      const Cell & c = model.cells[static_cast<std::size_t>(cell)];
+      const bool   tet = c.type == CellType::Tetrahedron;
+      std::vector<Index> corners;
+      for (int k = 0; k < (tet ? 3 : 4); ++k)
+      {
+        corners.push_back(c.nodes[tet ? kTetFaces[face - 1][k] : kHexFaces[face - 1][k]]);
+        onFace[static_cast<std::size_t>(corners.back())] = 1;
+      }
+      for (const Index node : mesh.elements[static_cast<std::size_t>(cell)])
+      {
+        if (node >= mesh.modelNodes)
+        {
+          const auto & parents = mesh.edgeParents[static_cast<std::size_t>(node - mesh.modelNodes)];
+          const auto   isCorner = [&](Index p) { return std::find(corners.begin(), corners.end(), p) != corners.end(); };
+          if (isCorner(parents[0]) && isCorner(parents[1]))
+          {
+            onFace[static_cast<std::size_t>(node)] = 1;
+          }
+        }
+      }
+    }
+    for (std::size_t node = 0; node < onFace.size(); ++node)
+    {
+      if (onFace[node])
+      {
+        pair.slaveNodes.push_back(static_cast<Index>(node));
+      }
+    }
     pair.masterWedges = MasterWedges(surface, mesh.nodes);
     mesh.contactPairs.push_back(std::move(pair));
   }

@@ -14,9 +14,12 @@
 // values, which is the linear element's boundary condition along that edge.
 // Other mid-edge nodes stay free, e.g. on an edge between two constrained
 // surface nodes that cuts through the interior.
-// A rigid contact surface becomes frictionless face-to-face penalty contact:
+// A rigid contact surface becomes frictionless node-to-face penalty contact:
 // its triangles are the faces of a fixed layer of wedges outside the body
-// (master), the body's boundary faces on the slave nodes are the slave.
+// (master); the nodes (mid-edge nodes included) of the body's boundary faces
+// whose corners are all slave nodes are the slave. Face-to-face contact,
+// CalculiX's advice for quadratic elements, did not converge on Colin27
+// (docs/registration.md).
 // The static step is geometrically nonlinear (NLGEOM); loads are ramped
 // linearly over the step (the end state of a hyperelastic solid does not depend
 // on the path). Displacements and reaction forces are read back from the .dat
@@ -55,12 +58,11 @@ struct CalculixSettings
   double residualTolerance = 1e-5;
   double correctionTolerance = 1e-4;
 
-  /** Frictionless contact with the model's rigid contact surfaces
-   *  (face-to-face penalty contact): the slope of the linear
-   *  pressure-overclosure law (MPa per mm of overlap). 0: 100 times the
-   *  stiffest material's Young's modulus per mean edge length of the slave
-   *  faces, which keeps the overlap near 1 % of an edge at contact pressures
-   *  of the size of E. */
+  /** Frictionless contact with the model's rigid contact surfaces (penalty
+   *  contact): the slope of the linear pressure-overclosure law (MPa per mm
+   *  of overlap). 0: 10 times the stiffest material's Young's modulus per
+   *  mean edge length of the slave faces, which keeps the overlap near 10 %
+   *  of an edge at contact pressures of the size of E. */
   double contactStiffness = 0.0;
 
   /** Equation solver (*STATIC, SOLVER=...): empty for CalculiX's default
@@ -97,12 +99,13 @@ struct CalculixMesh
    *  wedges (all nodes fixed) built outward from the surface's triangles, so
    *  that each wedge's face S1 is a triangle of the surface facing the body;
    *  and the slave faces (model cell, CalculiX face number 1...) of the
-   *  body's boundary whose corners all are slave nodes. The wedges' nodes
+   *  body's boundary whose corners all are slave nodes, and their nodes. The wedges' nodes
    *  follow the mid-edge nodes (from firstRigidNode on). */
   struct ContactPair
   {
     std::vector<std::array<Index, 6>>    masterWedges;
     std::vector<std::pair<Index, int>>   slaveFaces;
+    std::vector<Index>                   slaveNodes; // the slave faces' nodes, mid-edge nodes included
     double                               slaveMeanEdge = 0.0; // mm
   };
   std::vector<ContactPair> contactPairs;
