@@ -11,13 +11,9 @@
 //    node (what the element and the contact formulation add, without the mesh).
 // Writes docs/calculix-ground-truth.md and a JSON record.
 //
-// Status (2026-11-27): no report yet. On the 10 mm scene with 12 mm
-// tetrahedra (5,186 + 31,000 mid-edge nodes, 108,690 equations) CalculiX
-// converges the first increment (5 % of the load, 9-12 Newton iterations of
-// about 12 s) and diverges in the second: a correction of 270 mm at a surface
-// node held by two tetrahedra, the contact set jumping from 2,000 to 280,000
-// elements; smaller increments, a 10 times softer penalty and SMALL SLIDING
-// did not change that. docs/registration.md says what to try next.
+// Status (2026-11-27): no report yet: on Colin27 CalculiX's Newton stalls in
+// the skull contact (docs/registration.md, "A truth from CalculiX").
+
 // ITK's headers first: they bring ITK's own Eigen, which must precede the system's.
 #include "bmrSyntheticBrainShift.h"
 #include "itkBiomechanicalImageIO.h"
