@@ -40,14 +40,6 @@ Median(std::vector<double> values)
 }
 
 std::string
-Fixed(double value, int digits)
-{
-  std::ostringstream text;
-  text << std::fixed << std::setprecision(digits) << value;
-  return text.str();
-}
-
-std::string
 Sci(double value, int digits)
 {
   std::ostringstream text;

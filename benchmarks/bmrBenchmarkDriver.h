@@ -3,6 +3,7 @@
 #ifndef bmrBenchmarkDriver_h
 #define bmrBenchmarkDriver_h
 
+#include "bmrBenchmarkSupport.h"
 #include "bmrMeshGenerators.h"
 
 #include <nlohmann/json.hpp>
@@ -63,9 +64,6 @@ Seconds(Clock::time_point start);
 
 double
 Median(std::vector<double> values);
-
-std::string
-Fixed(double value, int digits);
 
 std::string
 Sci(double value, int digits = 2);

@@ -1,11 +1,12 @@
-// Helpers shared by the benchmark drivers: the machine's description and
-// load, and the marked section of docs/benchmarks.md that the image
+// Helpers shared by the benchmark drivers: number formatting, the machine's
+// description and load, and the marked section of docs/benchmarks.md that the image
 // benchmark (bmrImageBenchmark) owns, so that each driver rewrites only its
 // own part of the report.
 #ifndef bmrBenchmarkSupport_h
 #define bmrBenchmarkSupport_h
 
 #include <fstream>
+#include <iomanip>
 #include <sstream>
 #include <string>
 
@@ -20,6 +21,15 @@ ReadTextFile(const std::string & path)
   std::ifstream      stream(path);
   std::ostringstream text;
   text << stream.rdbuf();
+  return text.str();
+}
+
+/** `value` with `digits` digits after the point. */
+inline std::string
+Fixed(double value, int digits)
+{
+  std::ostringstream text;
+  text << std::fixed << std::setprecision(digits) << value;
   return text.str();
 }
 

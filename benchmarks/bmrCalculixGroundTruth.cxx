@@ -19,6 +19,7 @@
 #include "itkBiomechanicalImageIO.h"
 #include "itkDisplacementPointSetToBSplineTransformFilter.h"
 
+#include "bmrBenchmarkSupport.h"
 #include "bmrCalculix.h"
 #include "bmrSolver.h"
 
@@ -29,7 +30,6 @@
 #include <array>
 #include <cmath>
 #include <chrono>
-#include <cstdio>
 #include <ctime>
 #include <fstream>
 #include <iomanip>
@@ -43,6 +43,7 @@ namespace
 
 using bmr::Vector3;
 using json = nlohmann::json;
+using bmr::benchmark::Fixed;
 
 struct Scene
 {
@@ -60,29 +61,6 @@ const std::vector<Scene> kScenes = {
   { "parietal-20mm", 20.0, 0.2, bmr::ImageGridKind::Tetrahedra, 5.0 },
 };
 const Vector3 kParietal(-11.0, 43.0, 84.0);
-
-std::string
-Fixed(double value, int digits)
-{
-  std::ostringstream text;
-  text << std::fixed << std::setprecision(digits) << value;
-  return text.str();
-}
-
-double
-LoadAverage()
-{
-  double load = -1.0;
-  if (FILE * file = std::fopen("/proc/loadavg", "r"))
-  {
-    if (std::fscanf(file, "%lf", &load) != 1)
-    {
-      load = -1.0;
-    }
-    std::fclose(file);
-  }
-  return load;
-}
 
 /** The model with its per-cell materials (fuzzy tissue classes mix them cell
  *  by cell) grouped into bins of relative width `step` in Young's modulus,
@@ -372,7 +350,7 @@ main(int argc, char ** argv)
 
   try
   {
-    const double loadBefore = LoadAverage();
+    const std::string loadBefore = bmr::benchmark::LoadAverage();
     const auto   image = itk::ReadBiomechanicalImage<bmr::RegistrationImage>(imagePath, "preoperative image");
     const auto   mask = bmr::ThresholdMask(itk::ReadBiomechanicalImage<bmr::RegistrationImage>(maskPath, "brain mask").GetPointer());
     json         runs = json::array();
@@ -408,8 +386,9 @@ main(int argc, char ** argv)
     char              date[32];
     std::strftime(date, sizeof(date), "%Y-%m-%d %H:%M", std::localtime(&now));
     std::ostringstream machine;
-    machine << std::thread::hardware_concurrency() << " cores, " << date << ", load average " << Fixed(loadBefore, 1)
-            << " at the start and " << Fixed(LoadAverage(), 1) << " at the end, " << threads << " threads";
+    machine << bmr::benchmark::CpuModel() << ", " << std::thread::hardware_concurrency() << " cores, " << date
+            << ", load average (1, 5, 15 min) " << loadBefore << " at the start and " << bmr::benchmark::LoadAverage()
+            << " at the end, " << threads << " threads";
     if (!previousMachine.empty())
     {
       machine << " (scenes " << (names.empty() ? std::string("all") : names.front()) << "); earlier scenes: " << previousMachine;

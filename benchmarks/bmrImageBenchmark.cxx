@@ -44,6 +44,8 @@
 namespace
 {
 
+using bmr::benchmark::Fixed;
+
 using ImageType = itk::Image<float, 3>;
 using MaskType = itk::Image<unsigned char, 3>;
 using PointSetType = itk::DisplacementPointSetType<3>;
@@ -66,14 +68,6 @@ double
 Seconds(Clock::time_point start)
 {
   return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
-std::string
-Fixed(double value, int digits)
-{
-  std::ostringstream text;
-  text << std::fixed << std::setprecision(digits) << value;
-  return text.str();
 }
 
 template <typename T>

@@ -20,6 +20,19 @@ constexpr int kTetFaces[4][3] = { { 0, 1, 2 }, { 0, 3, 1 }, { 1, 3, 2 }, { 2, 3,
 constexpr int kHexFaces[6][4] = { { 0, 1, 2, 3 }, { 4, 7, 6, 5 }, { 0, 4, 5, 1 },
                                   { 1, 5, 6, 2 }, { 2, 6, 7, 3 }, { 3, 7, 4, 0 } };
 
+/** The corners of face `face` (1, 2, ...: CalculiX's S1, S2, ...) of a cell, in face order. */
+std::vector<Index>
+FaceCorners(const Cell & cell, int face)
+{
+  const bool         tet = cell.type == CellType::Tetrahedron;
+  std::vector<Index> corners;
+  for (int k = 0; k < (tet ? 3 : 4); ++k)
+  {
+    corners.push_back(cell.nodes[tet ? kTetFaces[face - 1][k] : kHexFaces[face - 1][k]]);
+  }
+  return corners;
+}
+
 /** The cells' faces on the body's boundary (met by one cell only) whose
  *  corners are all marked in `slave`: (cell, CalculiX face number). */
 std::vector<std::pair<Index, int>>
@@ -29,19 +42,14 @@ SlaveFaces(const Model & model, const std::vector<char> & slave)
   for (std::size_t c = 0; c < model.cells.size(); ++c)
   {
     const Cell & cell = model.cells[c];
-    const bool   tet = cell.type == CellType::Tetrahedron;
-    for (int f = 0; f < (tet ? 4 : 6); ++f)
+    for (int face = 1; face <= (cell.type == CellType::Tetrahedron ? 4 : 6); ++face)
     {
-      std::vector<Index> key;
-      for (int k = 0; k < (tet ? 3 : 4); ++k)
-      {
-        key.push_back(cell.nodes[tet ? kTetFaces[f][k] : kHexFaces[f][k]]);
-      }
+      std::vector<Index> key = FaceCorners(cell, face);
       std::sort(key.begin(), key.end());
       auto & entry = faces[key];
       if (entry.first++ == 0)
       {
-        entry.second = { static_cast<Index>(c), f + 1 };
+        entry.second = { static_cast<Index>(c), face };
       }
     }
   }
@@ -134,40 +142,25 @@ AddCalculixContactPairs(const Model & model, CalculixMesh & mesh)
       throw Error("CalculiX deck: contact surface '" + surface.name + "' has no slave face (no boundary face of the "
                   "body has all its corners in node set '" + surface.slaveNodeSet + "'); give a slave set of boundary nodes.");
     }
-    double edgeSum = 0.0;
-    int    edges = 0;
-    for (const auto & [cell, face] : pair.slaveFaces)
-    {
-      const Cell & c = model.cells[static_cast<std::size_t>(cell)];
-      const bool   tet = c.type == CellType::Tetrahedron;
-      const int    corners = tet ? 3 : 4;
-      for (int k = 0; k < corners; ++k)
-      {
-        const int a = tet ? kTetFaces[face - 1][k] : kHexFaces[face - 1][k];
-        const int b = tet ? kTetFaces[face - 1][(k + 1) % corners] : kHexFaces[face - 1][(k + 1) % corners];
-        edgeSum += (model.nodes[c.nodes[a]] - model.nodes[c.nodes[b]]).norm();
-        ++edges;
-      }
-    }
-    pair.slaveMeanEdge = edgeSum / edges;
-    // The slave faces' nodes: their corners and the mid-edge nodes between two of them.
+    // The slave faces' mean edge, and their nodes: the corners and the mid-edge nodes between two of them.
+    double            edgeSum = 0.0;
+    int               edges = 0;
     std::vector<char> onFace(mesh.nodes.size(), 0);
     for (const auto & [cell, face] : pair.slaveFaces)
     {
-      const Cell & c = model.cells[static_cast<std::size_t>(cell)];
-      const bool   tet = c.type == CellType::Tetrahedron;
-      std::vector<Index> corners;
-      for (int k = 0; k < (tet ? 3 : 4); ++k)
+      const std::vector<Index> corners = FaceCorners(model.cells[static_cast<std::size_t>(cell)], face);
+      for (std::size_t k = 0; k < corners.size(); ++k)
       {
-        corners.push_back(c.nodes[tet ? kTetFaces[face - 1][k] : kHexFaces[face - 1][k]]);
-        onFace[static_cast<std::size_t>(corners.back())] = 1;
+        edgeSum += (model.nodes[corners[k]] - model.nodes[corners[(k + 1) % corners.size()]]).norm();
+        ++edges;
+        onFace[static_cast<std::size_t>(corners[k])] = 1;
       }
+      const auto isCorner = [&](Index p) { return std::find(corners.begin(), corners.end(), p) != corners.end(); };
       for (const Index node : mesh.elements[static_cast<std::size_t>(cell)])
       {
         if (node >= mesh.modelNodes)
         {
           const auto & parents = mesh.edgeParents[static_cast<std::size_t>(node - mesh.modelNodes)];
-          const auto   isCorner = [&](Index p) { return std::find(corners.begin(), corners.end(), p) != corners.end(); };
           if (isCorner(parents[0]) && isCorner(parents[1]))
           {
             onFace[static_cast<std::size_t>(node)] = 1;
@@ -175,6 +168,7 @@ AddCalculixContactPairs(const Model & model, CalculixMesh & mesh)
         }
       }
     }
+    pair.slaveMeanEdge = edgeSum / edges;
     for (std::size_t node = 0; node < onFace.size(); ++node)
     {
       if (onFace[node])

@@ -181,6 +181,18 @@ FillResectionCavity(RegistrationImage * image, RegistrationLabelImage * brainMas
   }
 }
 
+/** Mean of the model's nodes: where "down" points to from the craniotomy. */
+Vector3
+NodeCentroid(const Model & model)
+{
+  Vector3 centroid = Vector3::Zero();
+  for (const Vector3 & node : model.nodes)
+  {
+    centroid += node;
+  }
+  return centroid / static_cast<double>(model.nodes.size());
+}
+
 } // namespace
 
 RegistrationImage::Pointer
@@ -397,13 +409,7 @@ MakeSyntheticBrainShiftModel(const RegistrationImage *           preoperativeIma
                   "; give a finite-element ground truth and a larger tumour or margin");
     }
   }
-  Vector3 centroid = Vector3::Zero();
-  for (const Vector3 & node : model.nodes)
-  {
-    centroid += node;
-  }
-  centroid /= static_cast<double>(model.nodes.size());
-  const Vector3 down = (centroid - settings.craniotomyCentre).normalized();
+  const Vector3 down = (NodeCentroid(model) - settings.craniotomyCentre).normalized();
   truth.down = down;
 
   // The sag of the exposed surface, and gravity on the rest.
@@ -446,12 +452,7 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
   StageTimer &        timer = truth.timer;
   const Model &       model = truth.model.model;
   const Vector3       down = truth.down;
-  Vector3             centroid = Vector3::Zero();
-  for (const Vector3 & node : model.nodes)
-  {
-    centroid += node;
-  }
-  centroid /= static_cast<double>(model.nodes.size());
+  const Vector3       centroid = NodeCentroid(model);
   SolverSettings solverSettings;
   solverSettings.tolerance = settings.solverTolerance;
   solverSettings.threads = settings.threads;
