@@ -717,5 +717,39 @@ TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
   EXPECT_LT(agreement.rmsError, 0.5 * wallEffect.rmsError);
 }
 
+TEST(CalculixContact, BadContactSurfacesAreNamedErrors)
+{
+  // No ccx needed: the mesh is made before anything runs.
+  IndentationProblem problem;
+  Model              model = MakeIndentationModel(problem, { 4, 4, 2 }, GridCells::Tetrahedra);
+  ContactSurface     walls = WallsAroundBlock(problem.size, 0.2);
+  model.nodeSets["lonely"] = { model.NodeSet("xmin").front() }; // one node: no boundary face
+  walls.slaveNodeSet = "lonely";
+  model.contactSurfaces = { walls };
+  try
+  {
+    MakeCalculixMesh(model);
+    ADD_FAILURE() << "a slave set without a boundary face gave a mesh";
+  }
+  catch (const Error & error)
+  {
+    EXPECT_NE(std::string(error.what()).find("contact surface 'walls' has no slave face"), std::string::npos)
+      << error.what();
+  }
+  walls.slaveNodeSet.clear();
+  walls.vertices.push_back(walls.vertices.front()); // a zero-area triangle
+  walls.triangles.push_back({ 0, 1, static_cast<Index>(walls.vertices.size() - 1) });
+  model.contactSurfaces = { walls };
+  try
+  {
+    MakeCalculixMesh(model);
+    ADD_FAILURE() << "a degenerate master triangle gave a mesh";
+  }
+  catch (const Error & error)
+  {
+    EXPECT_NE(std::string(error.what()).find("has a degenerate triangle"), std::string::npos) << error.what();
+  }
+}
+
 } // namespace
 } // namespace bmr
