@@ -837,8 +837,9 @@ RunSurfaces(const StepOptions & options)
 {
   const LabelVolume   mask = ReadMaskVolume(options.input, "brain mask", nullptr);
   std::vector<std::string> warnings;
-  const double             skullGap = options.surfaceSettings.Resolved().model.skullGap;
-  const BrainSurfaces      surfaces = BrainSurfacesOfMask(mask, skullGap, warnings);
+  const BrainModelSettings model = options.surfaceSettings.Resolved().model;
+  const double             skullGap = model.skullGap;
+  const BrainSurfaces      surfaces = BrainSurfacesOfMask(mask, skullGap, warnings, true, model.skullClosing);
   PrintWarnings(warnings);
   for (const fs::path path : { fs::path(options.output), fs::path(options.skullOutput) })
   {

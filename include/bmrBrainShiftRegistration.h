@@ -104,14 +104,15 @@ struct AtlasSettings
 RegistrationLabelImage::Pointer
 AtlasBrainMask(const RegistrationImage * image, const AtlasSettings & settings = {});
 
-/** Brain surface (level 0) and rigid skull (level skullGap; left empty
- *  without `skull`) of a mask (itk::BrainSurfaceMeshSource); its warnings are
- *  appended to `warnings`. */
+/** Brain surface (level 0) and rigid skull (level skullGap of the mask
+ *  closed by skullClosing mm; left empty without `skull`) of a mask
+ *  (itk::BrainSurfaceMeshSource); its warnings are appended to `warnings`. */
 BrainSurfaces
 BrainSurfacesOfMask(const RegistrationLabelImage * mask, double skullGap, std::vector<std::string> & warnings,
-                    bool skull = true);
+                    bool skull = true, double skullClosing = 0.0);
 BrainSurfaces
-BrainSurfacesOfMask(const LabelVolume & mask, double skullGap, std::vector<std::string> & warnings, bool skull = true);
+BrainSurfacesOfMask(const LabelVolume & mask, double skullGap, std::vector<std::string> & warnings, bool skull = true,
+                    double skullClosing = 0.0);
 
 /** The smooth surface (level 0) of a brain mask alone, without a skull: the
  *  cortex that a surface scan images (BrainSurfacesOfMask without the skull).
@@ -156,6 +157,9 @@ struct BrainModelSettings
   AtlasSettings atlas;
   /** Gap between brain and the rigid skull made from the model (mm). */
   double skullGap = BrainSurfaceSettings{}.skullGap;
+  /** Closing radius of the body before the skull is made (mm; 0: the skull
+   *  follows every fold; bmr::BrainSurfaceSettings::skullClosing). */
+  double skullClosing = BrainSurfaceSettings{}.skullClosing;
   /** Fixed skull base / brain stem band. */
   SkullBaseSettings skullBase;
   /** The craniotomy: a sphere (radius > 0) or a mask on any grid (voxels > 0). */

@@ -70,6 +70,15 @@ struct BrainSurfaceSettings
    *  it touches bone; the CSF layer between brain and skull is about 1-3 mm
    *  thick, so 1.5 mm is the default. */
   double skullGap = 1.5;
+  /** Radius (mm) of a morphological closing of the brain before the skull is
+   *  made from it: the skull does not follow the brain into fissures and
+   *  notches narrower than twice the radius, where it would be a thin rigid
+   *  blade inside the fold (the interhemispheric fissure, the tentorial
+   *  notch), which a mesh coarser than the fold cannot resolve and which
+   *  penalty contact (CalculiX) finds on both sides of a node. 0: the skull
+   *  follows every fold wider than twice the gap. The volume must then extend
+   *  skullGap + skullClosing + 1 voxel beyond the brain. */
+  double skullClosing = 0.0;
   IsosurfaceSettings isosurface;
   /** False: only the brain surface (the skull is left empty), e.g. for the
    *  anatomical surface that a surface scan is matched to. */

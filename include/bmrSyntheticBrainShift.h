@@ -105,6 +105,9 @@ struct SyntheticBrainShiftSettings
     return settings;
   }();
   double solverTolerance = 0.01; // mm
+  /** Closing radius of the ground truth's body before its skull is made (mm;
+   *  BrainModelSettings::skullClosing; 0, as the registration's default). */
+  double skullClosing = 0.0;
 
   /** Materials: Poisson's ratio of parenchyma (and tumour), Young's modulus
    *  of the CSF class (ventricles; 10 Pa by default, "very soft" below). */

@@ -37,7 +37,11 @@ namespace itk
  * GetBrainSurface() and GetSkullSurface() give the same surfaces as
  * bmr::ContactSurface (the skull with bodySide Inside, a ready contact master).
  *
- * Method: the mask's bounding box is padded by ceil(SkullGap / spacing) + 2
+ * With SkullClosing r > 0 the skull is the boundary of the mask closed by a
+ * ball of radius r and then dilated by SkullGap: it does not enter fissures
+ * narrower than 2 (r + SkullGap) (bmr::BrainSurfaceSettings::skullClosing).
+ *
+ * Method: the mask's bounding box is padded by ceil((SkullGap + SkullClosing) / spacing) + 2
  * voxels of background (so the skull is closed where the mask touches the
  * image border); the signed distance (mm, negative inside) is the mean of ITK's
  * SignedMaurerDistanceMapImageFilter of the mask (zero on the brain's boundary
@@ -48,13 +52,13 @@ namespace itk
  * smooths and optionally decimates the two level sets (VTK).
  *
  * Parameters: SkullGap (mm, default 1.5: the CSF layer between brain and
- * skull is about 1-3 mm), SmoothingIterations (default 20), SmoothingPassBand
+ * skull is about 1-3 mm), SkullClosing (mm, default 0), SmoothingIterations (default 20), SmoothingPassBand
  * (default 0.1), TargetEdgeLength (mm, default 0 = no decimation),
  * ComputeSkull (default on; off leaves output 1 empty and saves the skull's
  * exact-distance band and isosurface).
  *
  * Errors (itk::ExceptionObject): no input, an empty mask (no voxel > 0), a
- * negative SkullGap, and the core's errors (bmr::Error messages).
+ * negative SkullGap or SkullClosing, and the core's errors (bmr::Error messages).
  * Warnings of the core (dropped components, skipped decimation) are reported
  * with itkWarningMacro.
  *
@@ -86,6 +90,9 @@ public:
   /** Gap between brain and skull surfaces, mm (default 1.5). */
   itkSetMacro(SkullGap, double);
   itkGetConstMacro(SkullGap, double);
+  /** Radius of the closing of the mask before the skull is made, mm (default 0: none). */
+  itkSetMacro(SkullClosing, double);
+  itkGetConstMacro(SkullClosing, double);
   /** Windowed-sinc smoothing iterations (default 20; 0 = none). */
   itkSetMacro(SmoothingIterations, int);
   itkGetConstMacro(SmoothingIterations, int);
@@ -143,6 +150,7 @@ protected:
 
 private:
   double             m_SkullGap{ 1.5 };
+  double             m_SkullClosing{ 0.0 };
   int                m_SmoothingIterations{ 20 };
   double             m_SmoothingPassBand{ 0.1 };
   double             m_TargetEdgeLength{ 0.0 };

@@ -44,8 +44,12 @@ BrainSurfaceMeshSource<TMaskImage, TOutputMesh>::GenerateData()
   {
     itkExceptionMacro("SkullGap " << m_SkullGap << " mm must be a finite number >= 0 (default 1.5 mm)");
   }
+  if (!(m_SkullClosing >= 0.0) || !std::isfinite(m_SkullClosing))
+  {
+    itkExceptionMacro("SkullClosing " << m_SkullClosing << " mm must be a finite number >= 0 (default 0: no closing)");
+  }
 
-  // The mask's bounding box padded with background: ceil(gap / spacing) + 2
+  // The mask's bounding box padded with background: ceil((gap + closing) / spacing) + 2
   // voxels along each axis, so the dilated (skull) level set closes inside the
   // volume. Cropped to the box, the distance maps and isosurfaces cover about
   // half of Colin27's 181 x 217 x 181 voxels.
@@ -82,7 +86,7 @@ BrainSurfaceMeshSource<TMaskImage, TOutputMesh>::GenerateData()
   Index<3>                               pad;
   for (unsigned int d = 0; d < 3; ++d)
   {
-    pad[d] = static_cast<IndexValueType>(std::ceil(m_SkullGap / mask->GetSpacing()[d])) + 2;
+    pad[d] = static_cast<IndexValueType>(std::ceil((m_SkullGap + m_SkullClosing) / mask->GetSpacing()[d])) + 2;
     paddedRegion.SetIndex(d, 0);
     paddedRegion.SetSize(d, region.GetSize()[d] + 2 * static_cast<SizeValueType>(pad[d]));
     firstIndex[d] -= pad[d];
@@ -145,6 +149,7 @@ BrainSurfaceMeshSource<TMaskImage, TOutputMesh>::GenerateData()
 
   bmr::BrainSurfaceSettings settings;
   settings.skullGap = m_SkullGap;
+  settings.skullClosing = m_SkullClosing;
   settings.isosurface.smoothingIterations = m_SmoothingIterations;
   settings.isosurface.smoothingPassBand = m_SmoothingPassBand;
   settings.isosurface.targetEdgeLength = m_TargetEdgeLength;
@@ -175,6 +180,7 @@ BrainSurfaceMeshSource<TMaskImage, TOutputMesh>::PrintSelf(std::ostream & os, In
 {
   Superclass::PrintSelf(os, indent);
   os << indent << "SkullGap: " << m_SkullGap << " mm" << std::endl;
+  os << indent << "SkullClosing: " << m_SkullClosing << " mm" << std::endl;
   os << indent << "SmoothingIterations: " << m_SmoothingIterations << std::endl;
   os << indent << "SmoothingPassBand: " << m_SmoothingPassBand << std::endl;
   os << indent << "TargetEdgeLength: " << m_TargetEdgeLength << " mm" << std::endl;

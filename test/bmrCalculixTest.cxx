@@ -21,6 +21,7 @@
 #include <array>
 #include <cmath>
 #include <iostream>
+#include <limits>
 #include <map>
 #include <sstream>
 #include <string>
@@ -715,6 +716,51 @@ TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
   EXPECT_LT(agreement.rmsError, 1.1 * elements.rmsError);
   EXPECT_LT(agreement.maxError, 1.2 * elements.maxError);
   EXPECT_LT(agreement.rmsError, 0.5 * wallEffect.rmsError);
+
+  // The continuation bmrCalculixGroundTruth uses on Colin27: a first step
+  // holds the boundary's corner nodes at dynamic relaxation's state, a second
+  // releases them. CalculiX must end at its own equilibrium (the cold
+  // start's), not at the state it started from.
+  CalculixSettings warm = quadratic;
+  warm.startDisplacements = withWalls;
+  const CalculixResult         continued = RunCalculix(walled, warm);
+  const DisplacementComparison warmAgainstCold =
+    CompareDisplacements(walled.nodes, continued.displacements, walled.nodes, reference.displacements);
+  std::cout << "walls, CalculiX started from dynamic relaxation: against the cold start RMS / max "
+            << warmAgainstCold.rmsError << " / " << warmAgainstCold.maxError << " mm (" << continued.lastStepIncrements
+            << " increments, " << continued.lastStepIterations << " Newton iterations after the release, "
+            << continued.iterations << " in all)" << std::endl;
+  EXPECT_LT(warmAgainstCold.maxError, 0.1 * agreement.maxError);
+  EXPECT_GE(continued.lastStepIterations, 1);
+  EXPECT_LT(continued.lastStepIncrements, continued.increments); // two steps
+}
+
+TEST(CalculixDeck, StartStateOfTheWrongSizeOrNotFiniteIsANamedError)
+{
+  // No ccx needed: the deck is written to a string.
+  const Model        model = MakeIndentationModel(IndentationProblem{}, { 2, 2, 2 }, GridCells::Tetrahedra);
+  const CalculixMesh mesh = MakeCalculixMesh(model);
+  CalculixSettings   settings;
+  settings.startDisplacements.assign(model.nodes.size() - 1, Vector3::Zero());
+  std::ostringstream deck;
+  try
+  {
+    WriteCalculixDeck(deck, model, mesh, settings);
+    ADD_FAILURE() << "a start state one node short gave a deck";
+  }
+  catch (const Error & error)
+  {
+    EXPECT_NE(std::string(error.what()).find("startDisplacements has " + std::to_string(model.nodes.size() - 1)),
+              std::string::npos)
+      << error.what();
+  }
+  settings.startDisplacements.assign(model.nodes.size(), Vector3::Zero());
+  settings.startDisplacements.back().x() = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(WriteCalculixDeck(deck, model, mesh, settings), Error);
+  settings.startDisplacements.back().x() = 0.0;
+  std::ostringstream good;
+  WriteCalculixDeck(good, model, mesh, settings);
+  EXPECT_NE(good.str().find("*BOUNDARY, OP=NEW"), std::string::npos); // the release step
 }
 
 TEST(CalculixContact, BadContactSurfacesAreNamedErrors)

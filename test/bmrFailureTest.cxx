@@ -219,6 +219,36 @@ ExpectInversionNamed(GridCells cells, double push)
   }
 }
 
+// A rigid surface that starts inside the body: the first step projects the
+// nodes beyond it onto it, whatever the load ramp, and the upper cells
+// collapse. The error must say so, naming the surface and the deepest node,
+// not only blame the loads.
+TEST(Failure, ContactNodesStartingBeyondTheSurfaceAreNamed)
+{
+  Model model = MakeBlockMesh(Vector3(3, 3, 3), { 3, 3, 3 }, GridCells::Hexahedra, MakeMaterial(3000.0, 0.45));
+  model.fixedConstraints.push_back({ "zmin", { true, true, true } });
+  ContactSurface lid = MakePlane(Vector3(1.5, 1.5, 0.4), Vector3::UnitZ(), 50.0);
+  lid.name = "lid";
+  lid.bodySide = ContactSurface::Side::Inside; // the body is below the plane z = 0.4
+  model.contactSurfaces.push_back(lid);
+  Solver solver(model, TightRelaxation(1e-6, 10000));
+  try
+  {
+    solver.Solve();
+    ADD_FAILURE() << "a surface 2.6 mm inside the body must stop the solve";
+  }
+  catch (const SolveError & e)
+  {
+    const std::string message = e.what();
+    EXPECT_TRUE(Contains(message, "inverted")) << message;
+    // 40 boundary nodes at z = 1, 2, 3 (12 + 12 + 16) are beyond the lid; the top ones by 2.6 mm.
+    EXPECT_TRUE(Contains(message, "40 contact node(s) start beyond contact surface 'lid'")) << message;
+    EXPECT_TRUE(Contains(message, " by 2.6 mm")) << message;
+    const Index deepest = std::stoi(message.substr(message.find("(node ") + 6));
+    EXPECT_NEAR(model.nodes.at(static_cast<std::size_t>(deepest)).z(), 3.0, 1e-12) << message;
+  }
+}
+
 // Tetrahedra, 2.5 mm (through more than two cell layers of 1 mm, less than the
 // body's size): the cells under the moved node invert at the first step.
 TEST(Failure, InversionDuringSolveNamesElementAndStep)

@@ -216,6 +216,50 @@ TEST(BrainSurface, SphereMaskGivesClosedSphereAndSkullAtGap)
   }
 }
 
+TEST(BrainSurface, SkullClosingBridgesAFissureAndKeepsTheGapElsewhere)
+{
+  // A ball with a fissure: the slab |x| < 3 mm cut from its upper half. The
+  // skull at gap 1.5 mm follows the 6 mm fissure as a 3 mm thick blade; a
+  // closing of radius 3 mm (bridging folds narrower than 2 (3 + 1.5) mm)
+  // keeps it above the fissure, and leaves it at the gap where the ball is
+  // convex.
+  const double radius = 25.0, gap = 1.5, halfWidth = 3.0, closing = 3.0;
+  const auto   mask = MakeMask({ 64, 64, 64 }, Vector3::Constant(-31.5), Eigen::Matrix3d::Identity(), [&](const Vector3 & x) {
+    return x.norm() <= radius && !(x.z() > 0.0 && std::abs(x.x()) < halfWidth);
+  });
+  const auto open = RunSource(mask, gap);
+  auto       closed = SurfaceSource::New();
+  closed->SetInput(mask);
+  closed->SetSkullGap(gap);
+  closed->SetSkullClosing(closing);
+  closed->Update();
+  const bmr::ContactSurface & blade = open->GetSkullSurface();
+  const bmr::ContactSurface & bridged = closed->GetSkullSurface();
+  ASSERT_TRUE(bmr::IsClosedOrientedSurface(bridged));
+  EXPECT_EQ(bridged.bodySide, bmr::ContactSurface::Side::Inside);
+
+  // In the fissure, 15 mm up: the blade's faces stand 1.5 mm off; the bridged
+  // skull is near the ball's top, about 10 mm away.
+  const Vector3 inFissure(0.0, 0.0, 15.0);
+  EXPECT_LT(BruteForceDistance(inFissure, blade), 2.0);
+  EXPECT_GT(BruteForceDistance(inFissure, bridged), 8.0);
+  EXPECT_GT(bmr::EnclosedVolume(bridged), bmr::EnclosedVolume(blade));
+  // The lower, convex half: the skull at the gap, with or without closing.
+  bmr::ContactSurface lower;
+  for (const Vector3 & v : bridged.vertices)
+  {
+    if (v.z() < -5.0)
+    {
+      lower.vertices.push_back(v);
+    }
+  }
+  ASSERT_GT(lower.vertices.size(), 100u);
+  ExpectRadiiWithin(lower, Vector3::Zero(), radius + gap, 0.5);
+
+  closed->SetSkullClosing(-1.0);
+  EXPECT_THROW(closed->Update(), itk::ExceptionObject);
+}
+
 TEST(BrainSurface, SmoothingKeepsVolumeAndDecimationReachesEdgeLength)
 {
   // Core only: analytic signed distance of a sphere of radius 25 mm, 1 mm voxels.

@@ -345,7 +345,7 @@ MakeCalculixMesh(const Model & model, const CalculixSettings & settings)
     }
   }
 
-  AddCalculixContactPairs(model, mesh);
+  AddCalculixContactPairs(model, mesh, settings.midEdgeSlaves);
   return mesh;
 }
 
@@ -476,50 +476,105 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
   }
   WriteCalculixContactPairs(stream, model, mesh, settings);
 
-  stream << "*STEP, NLGEOM, INC=" << settings.maximumIncrements << "\n"
-         << "*STATIC" << (settings.solver.empty() ? std::string{} : ", SOLVER=" + settings.solver) << "\n"
-         << FormatDouble(settings.initialIncrement) << ", 1.0, " << FormatDouble(settings.minimumIncrement) << ", 1.0\n"
-         << "*CONTROLS, PARAMETERS=FIELD\n"
-         << FormatDouble(settings.residualTolerance) << ", " << FormatDouble(settings.correctionTolerance)
-         << ", 0, 0, 0.02, 1e-5, 1e-3, 1e-8\n";
-
-  // Per component: the model nodes constrained in it, and the mid-edge nodes
-  // on boundary faces whose vertices all are.
-  std::array<std::vector<char>, 3> meshConstrained;
-  for (int d = 0; d < 3; ++d)
-  {
-    std::vector<char> modelMask(modelNodes, 0);
-    for (std::size_t node = 0; node < modelNodes; ++node)
-    {
-      modelMask[node] = constrained[3 * node + d];
-    }
-    meshConstrained[d] = mesh.MeshNodeMask(modelMask);
-  }
-  stream << "*BOUNDARY\n";
-  for (std::size_t node = 0; node < mesh.nodes.size(); ++node)
-  {
+  // Per component: the mesh nodes constrained (the model nodes constrained in
+  // it, and the mid-edge nodes on boundary faces whose vertices all are) and
+  // their values; with `start` (the continuation's first step) also the
+  // boundary's corner nodes at the start state where the model leaves them free.
+  const auto writeBoundary = [&](const std::vector<char> & held, const std::vector<double> & heldValue, bool replace,
+                                 const std::vector<Vector3> * start) {
+    std::array<std::vector<char>, 3> meshConstrained;
     for (int d = 0; d < 3; ++d)
     {
-      if (!meshConstrained[d][node])
+      std::vector<char> modelMask(modelNodes, 0);
+      for (std::size_t node = 0; node < modelNodes; ++node)
       {
-        continue;
+        modelMask[node] = held[3 * node + d];
       }
-      double v = 0.0;
-      if (static_cast<Index>(node) < mesh.modelNodes)
-      {
-        v = value[3 * node + d];
-      }
-      else
-      {
-        const auto & parents = mesh.edgeParents[node - mesh.modelNodes];
-        v = 0.5 * (value[3 * parents[0] + d] + value[3 * parents[1] + d]);
-      }
-      stream << node + 1 << ", " << d + 1 << ", " << d + 1 << ", " << FormatDouble(v) << "\n";
+      meshConstrained[d] = mesh.MeshNodeMask(modelMask);
     }
-  }
-  for (std::size_t node = static_cast<std::size_t>(mesh.firstRigidNode); node < mesh.nodes.size(); ++node)
+    stream << (replace ? "*BOUNDARY, OP=NEW\n" : "*BOUNDARY\n");
+    for (std::size_t node = 0; node < mesh.nodes.size(); ++node)
+    {
+      for (int d = 0; d < 3; ++d)
+      {
+        if (!meshConstrained[d][node])
+        {
+          continue;
+        }
+        double v = 0.0;
+        if (static_cast<Index>(node) < mesh.modelNodes)
+        {
+          v = heldValue[3 * node + d];
+        }
+        else
+        {
+          const auto & parents = mesh.edgeParents[node - mesh.modelNodes];
+          v = 0.5 * (heldValue[3 * parents[0] + d] + heldValue[3 * parents[1] + d]);
+        }
+        stream << node + 1 << ", " << d + 1 << ", " << d + 1 << ", " << FormatDouble(v) << "\n";
+      }
+    }
+    if (start)
+    {
+      std::vector<char> boundary(modelNodes, 0);
+      for (const auto & triangle : mesh.boundaryTriangles)
+      {
+        for (const Index node : triangle)
+        {
+          boundary[static_cast<std::size_t>(node)] = 1;
+        }
+      }
+      for (std::size_t node = 0; node < modelNodes; ++node)
+      {
+        for (int d = 0; d < 3; ++d)
+        {
+          if (boundary[node] && !held[3 * node + d])
+          {
+            stream << node + 1 << ", " << d + 1 << ", " << d + 1 << ", " << FormatDouble((*start)[node][d]) << "\n";
+          }
+        }
+      }
+    }
+    for (std::size_t node = static_cast<std::size_t>(mesh.firstRigidNode); node < mesh.nodes.size(); ++node)
+    {
+      stream << node + 1 << ", 1, 3, 0\n"; // the rigid masters' wedges
+    }
+  };
+  const auto writeStepHeader = [&]() {
+    stream << "*STEP, NLGEOM, INC=" << settings.maximumIncrements << "\n"
+           << "*STATIC" << (settings.solver.empty() ? std::string{} : ", SOLVER=" + settings.solver) << "\n"
+           << FormatDouble(settings.initialIncrement) << ", 1.0, " << FormatDouble(settings.minimumIncrement) << ", 1.0\n"
+           << "*CONTROLS, PARAMETERS=FIELD\n"
+           << FormatDouble(settings.residualTolerance) << ", " << FormatDouble(settings.correctionTolerance)
+           << ", 0, 0, 0.02, 1e-5, 1e-3, 1e-8\n";
+  };
+
+  const bool continuation = !settings.startDisplacements.empty();
+  writeStepHeader();
+  if (continuation)
   {
-    stream << node + 1 << ", 1, 3, 0\n"; // the rigid masters' wedges
+    if (settings.startDisplacements.size() != modelNodes)
+    {
+      throw Error("CalculiX deck: CalculixSettings::startDisplacements has " +
+                  std::to_string(settings.startDisplacements.size()) + " displacements for a model of " +
+                  std::to_string(modelNodes) + " nodes; give one per model node, or none.");
+    }
+    for (const Vector3 & start : settings.startDisplacements)
+    {
+      if (!start.allFinite())
+      {
+        throw Error("CalculiX deck: CalculixSettings::startDisplacements holds a displacement that is not finite; "
+                    "give finite start displacements.");
+      }
+    }
+    // First step: the boundary's corner nodes held at the start state. Its
+    // mid-edge nodes stay free: on a curved skull the mean of two corners'
+    // positions can lie beyond it.
+    writeBoundary(constrained, value, false, &settings.startDisplacements);
+  }
+  else
+  {
+    writeBoundary(constrained, value, false, nullptr);
   }
 
   if (gravity)
@@ -534,7 +589,22 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
     }
   }
 
-  // FREQUENCY beyond the increment limit: only the end of the step is printed.
+  if (continuation)
+  {
+    // A step that only holds the state: CalculiX starts a step's first
+    // iteration by extrapolating the last increment's motion, and that of the
+    // first step (up to a third of the whole deformation) threw the released
+    // Colin27 surface 50 mm through the skull.
+    stream << "*END STEP\n"
+           << "*STEP, NLGEOM, INC=" << settings.maximumIncrements << "\n"
+           << "*STATIC" << (settings.solver.empty() ? std::string{} : ", SOLVER=" + settings.solver) << "\n"
+           << "1.0, 1.0\n"
+           << "*END STEP\n";
+    // The release: the model's own constraints only; loads carry over.
+    writeStepHeader();
+    writeBoundary(constrained, value, true, nullptr);
+  }
+  // FREQUENCY beyond the increment limit: only the end of the (last) step is printed.
   const int frequency = settings.maximumIncrements + 1;
   stream << "*NODE PRINT, NSET=NALL, FREQUENCY=" << frequency << "\n"
          << "U\n"
@@ -713,10 +783,12 @@ RunCalculix(const Model & model, const CalculixSettings & settings)
   {
     fail("no displacement or reaction force output in " + job + ".dat");
   }
-  if (std::abs(u.time - 1.0) > 1e-6 || std::abs(rf.time - 1.0) > 1e-6)
+  // The .dat gives the total time: each static step runs for 1.
+  const double endTime = settings.startDisplacements.empty() ? 1.0 : 3.0;
+  if (std::abs(u.time - endTime) > 1e-6 || std::abs(rf.time - endTime) > 1e-6)
   {
-    fail("the static step did not converge to its end (last output at step time " + FormatDouble(u.time) +
-         " of 1); try a smaller initial increment or more increments");
+    fail("the static step did not converge to its end (last output at time " + FormatDouble(u.time) + " of " +
+         FormatDouble(endTime) + "); try a smaller initial increment or more increments");
   }
   const std::size_t meshNodes = result.mesh.nodes.size();
   result.meshDisplacements.assign(meshNodes, Vector3::Constant(std::numeric_limits<double>::quiet_NaN()));
@@ -750,14 +822,22 @@ RunCalculix(const Model & model, const CalculixSettings & settings)
   // .sta: STEP INC ATT ITRS TOT-TIME STEP-TIME INC-TIME, one line per converged increment.
   std::istringstream staStream(sta);
   std::string        line;
+  long               lastStep = 0;
   while (std::getline(staStream, line))
   {
     std::istringstream fields(line);
     long               step = 0, increment = 0, attempt = 0, iterations = 0;
     if (fields >> step >> increment >> attempt >> iterations)
     {
+      if (step != lastStep)
+      {
+        lastStep = step;
+        result.lastStepIncrements = result.lastStepIterations = 0;
+      }
       ++result.increments;
       result.iterations += static_cast<int>(iterations);
+      ++result.lastStepIncrements;
+      result.lastStepIterations += static_cast<int>(iterations);
     }
   }
 

@@ -16,14 +16,16 @@
 // surface nodes that cuts through the interior.
 // A rigid contact surface becomes frictionless node-to-face penalty contact:
 // its triangles are the faces of a fixed layer of wedges outside the body
-// (master); the nodes (mid-edge nodes included) of the body's boundary faces
+// (master); the nodes (mid-edge nodes included unless midEdgeSlaves is off) of the body's boundary faces
 // whose corners are all slave nodes are the slave. Face-to-face contact,
 // CalculiX's advice for quadratic elements, did not converge on Colin27
 // (docs/registration.md).
 // The static step is geometrically nonlinear (NLGEOM); loads are ramped
 // linearly over the step (the end state of a hyperelastic solid does not depend
-// on the path). Displacements and reaction forces are read back from the .dat
-// file (*NODE PRINT).
+// on the path). CalculixSettings::startDisplacements adds steps that hold the
+// boundary at a given state and then release it (continuation).
+// Displacements and reaction forces are read back from the .dat file
+// (*NODE PRINT).
 #ifndef bmrCalculix_h
 #define bmrCalculix_h
 
@@ -64,6 +66,25 @@ struct CalculixSettings
    *  mean edge length of the slave faces, which keeps the overlap near 10 %
    *  of an edge at contact pressures of the size of E. */
   double contactStiffness = 0.0;
+  /** true: the slave nodes are every node of the slave faces, mid-edge nodes
+   *  included (the quadratic faces' own contact); false: their corners only,
+   *  the nodes the module's contact holds. On Colin27 a mid-edge node between
+   *  two corners on the skull, in 10 Pa CSF, went in and out of contact
+   *  from one Newton iteration to the next until the increment was cut to
+   *  nothing (docs/registration.md). */
+  bool midEdgeSlaves = true;
+
+  /** Continuation from a given state: per model node, displacements (mm).
+   *  Non-empty: a first step holds the corner nodes of the body's boundary
+   *  triangles at these displacements in the components the model leaves
+   *  free (mid-edge nodes stay free: on a curved contact surface the mean of
+   *  two corners can lie beyond it), under the model's loads, constraints
+   *  and contact; a second step only holds that state (so that the third
+   *  does not start by extrapolating the first's motion); a third releases
+   *  them (OP=NEW), so that the result is CalculiX's own equilibrium,
+   *  reached from near the given state. For contact that Newton does not find from the reference
+   *  state, e.g. a brain settling onto the skull through 10 Pa CSF. */
+  std::vector<Vector3> startDisplacements;
 
   /** Equation solver (*STATIC, SOLVER=...): empty for CalculiX's default
    *  (SPOOLES in Debian's build), or "ITERATIVE CHOLESKY", "ITERATIVE SCALING". */
@@ -105,7 +126,7 @@ struct CalculixMesh
   {
     std::vector<std::array<Index, 6>>    masterWedges;
     std::vector<std::pair<Index, int>>   slaveFaces;
-    std::vector<Index>                   slaveNodes; // the slave faces' nodes, mid-edge nodes included
+    std::vector<Index>                   slaveNodes; // the slave faces' nodes (mid-edge nodes: midEdgeSlaves)
     double                               slaveMeanEdge = 0.0; // mm
   };
   std::vector<ContactPair> contactPairs;
@@ -135,8 +156,10 @@ struct CalculixResult
   std::vector<Vector3> meshReactionForces;  // N, every mesh node (residual-size at free nodes)
   std::vector<Vector3> displacements;       // mm, the model's nodes only
   double               wallSeconds = 0.0;   // the ccx run
-  int                  increments = 0;      // converged increments of the step
-  int                  iterations = 0;      // Newton iterations in all
+  int                  increments = 0;      // converged increments, all steps
+  int                  iterations = 0;      // Newton iterations, all steps
+  int                  lastStepIncrements = 0; // of the last step (the release, with startDisplacements)
+  int                  lastStepIterations = 0;
   std::string          workDirectory;       // kept only with keepFiles
 
   /** Sum of reaction forces (N) over the given model nodes and the mid-edge

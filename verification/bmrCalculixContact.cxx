@@ -125,7 +125,7 @@ MasterWedges(const ContactSurface & surface, std::vector<Vector3> & nodes)
 } // namespace
 
 void
-AddCalculixContactPairs(const Model & model, CalculixMesh & mesh)
+AddCalculixContactPairs(const Model & model, CalculixMesh & mesh, bool midEdgeSlaves)
 {
   mesh.firstRigidNode = static_cast<Index>(mesh.nodes.size());
   for (const ContactSurface & surface : model.contactSurfaces)
@@ -142,7 +142,7 @@ AddCalculixContactPairs(const Model & model, CalculixMesh & mesh)
       throw Error("CalculiX deck: contact surface '" + surface.name + "' has no slave face (no boundary face of the "
                   "body has all its corners in node set '" + surface.slaveNodeSet + "'); give a slave set of boundary nodes.");
     }
-    // The slave faces' mean edge, and their nodes: the corners and the mid-edge nodes between two of them.
+    // The slave faces' mean edge, and their nodes: the corners and (midEdgeSlaves) the mid-edge nodes between two of them.
     double            edgeSum = 0.0;
     int               edges = 0;
     std::vector<char> onFace(mesh.nodes.size(), 0);
@@ -158,7 +158,7 @@ AddCalculixContactPairs(const Model & model, CalculixMesh & mesh)
       const auto isCorner = [&](Index p) { return std::find(corners.begin(), corners.end(), p) != corners.end(); };
       for (const Index node : mesh.elements[static_cast<std::size_t>(cell)])
       {
-        if (node >= mesh.modelNodes)
+        if (midEdgeSlaves && node >= mesh.modelNodes)
         {
           const auto & parents = mesh.edgeParents[static_cast<std::size_t>(node - mesh.modelNodes)];
           if (isCorner(parents[0]) && isCorner(parents[1]))

@@ -18,9 +18,10 @@ FormatDouble(double value);
 /** Appends the model's contact surfaces to the mesh: mesh.contactPairs, their
  *  wedges' nodes after the mesh's nodes (mesh.firstRigidNode). Call once the
  *  cells and mid-edge nodes are in the mesh. Throws bmr::Error for a surface
- *  without slave faces or with a degenerate triangle. */
+ *  without slave faces or with a degenerate triangle. `midEdgeSlaves`:
+ *  CalculixSettings::midEdgeSlaves. */
 void
-AddCalculixContactPairs(const Model & model, CalculixMesh & mesh);
+AddCalculixContactPairs(const Model & model, CalculixMesh & mesh, bool midEdgeSlaves);
 
 /** The masters' wedges, the surfaces and the frictionless node-to-face
  *  penalty interaction (model definition, before the step). */

@@ -233,7 +233,7 @@ BindFilters(py::module_ & module)
 
   module.def(
     "brain_surfaces",
-    [](const py::object & mask, double skullGap, const std::optional<Model> & body, bool skull) {
+    [](const py::object & mask, double skullGap, double skullClosing, const std::optional<Model> & body, bool skull) {
       LabelVolume              volume = LabelVolumeFromImage(mask, "mask");
       std::vector<std::string> warnings;
       BrainSurfaces            surfaces;
@@ -243,14 +243,15 @@ BindFilters(py::module_ & module)
         {
           volume = RasterizeCells(*body, volume.geometry);
         }
-        surfaces = BrainSurfacesOfMask(volume, skullGap, warnings, skull);
+        surfaces = BrainSurfacesOfMask(volume, skullGap, warnings, skull, skullClosing);
       }
       WarnInPython(warnings);
       return py::make_tuple(surfaces.brain, skull ? py::cast(surfaces.skull) : py::none());
     },
     py::arg("mask"), py::kw_only(), py::arg("skull_gap") = BrainSurfaceSettings{}.skullGap,
-    py::arg("body") = py::none(), py::arg("skull") = true,
+    py::arg("skull_closing") = BrainSurfaceSettings{}.skullClosing, py::arg("body") = py::none(), py::arg("skull") = true,
     "(brain, skull): the smoothed brain surface of a mask and a rigid skull skull_gap mm outside it "
+    "(outside the mask closed by skull_closing mm: no blades in the fissures) "
     "(itk::BrainSurfaceMeshSource). With body= (a grid's model, or a point cloud's meshless_body), the "
     "surfaces of the body's cells on the mask's grid instead, as build_brain_model makes them: the "
     "corners of a staircase hexahedral grid stick out of the mask, and the skull must enclose them. "

@@ -67,7 +67,9 @@ struct RigidContact::Tree
       // Corners (0, 1) are edge 0, (1, 2) edge 1, (0, 2) edge 2.
       normal = edgeNormals[t][nonzero[0] == 0 && nonzero[1] == 2 ? 2 : nonzero[0]];
     }
-    const double distance = (x - closest).dot(normal);
+    // The pseudo-normal gives the side only: edge and vertex pseudo-normals
+    // are sums of face normals, not unit vectors.
+    const double distance = (x - closest).dot(normal) < 0.0 ? -(x - closest).norm() : (x - closest).norm();
     if (outwardNormal != nullptr)
     {
       // Below 1e-7 mm the difference of two positions ~100 mm from the origin has no direction left.

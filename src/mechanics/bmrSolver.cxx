@@ -97,6 +97,29 @@ Solver::Impl::Impl(const Model & m, const SolverSettings & s)
       contacts.push_back(std::make_unique<RigidContact>(
         surface, surface.slaveNodeSet.empty() ? boundary : model.NodeSet(surface.slaveNodeSet), model.nodes));
       contactSlaves.insert(contactSlaves.end(), contacts.back()->SlaveNodes().begin(), contacts.back()->SlaveNodes().end());
+      int    count = 0;
+      double deepest = 0.0;
+      Index  deepestNode = -1;
+      for (const Index node : contacts.back()->SlaveNodes())
+      {
+        const double depth = -contacts.back()->SignedDistance(model.nodes[node]);
+        if (depth > 1e-6) // mm
+        {
+          ++count;
+          if (depth > deepest)
+          {
+            deepest = depth;
+            deepestNode = node;
+          }
+        }
+      }
+      if (count > 0)
+      {
+        std::ostringstream words;
+        words << (initialPenetration.empty() ? "" : "; ") << count << " contact node(s) start beyond contact surface '"
+              << surface.name << "' (node " << deepestNode << " by " << deepest << " mm)";
+        initialPenetration += words.str();
+      }
     }
     std::sort(contactSlaves.begin(), contactSlaves.end());
     contactSlaves.erase(std::unique(contactSlaves.begin(), contactSlaves.end()), contactSlaves.end());
@@ -334,6 +357,11 @@ Solver::Impl::CheckForces(Index inverted, int step, bool explicitDynamics, doubl
   }
   std::ostringstream message;
   message << forces->Describe(inverted) << " inverted (J <= 0) at " << StepLabel(step) << ". Likely cause: ";
+  if (!initialPenetration.empty() && step <= 2)
+  {
+    message << initialPenetration << ", and the first step projects them onto it however slowly the loads ramp; "
+            << "make the surface clear the body (a larger skull gap, a finer mesh or surface), or ";
+  }
   if (explicitDynamics && timeStep > criticalTimeStep)
   {
     message << "the time step " << timeStep << " s exceeds the critical time step " << criticalTimeStep

@@ -53,6 +53,9 @@ struct Solver::Impl
   int                                        threads = 1;
   std::unique_ptr<ForceModel>                forces;
   std::vector<std::unique_ptr<RigidContact>> contacts;
+  // Slave nodes that start beyond their contact surface, in words (empty if
+  // none): the first step projects them, however slowly the loads ramp.
+  std::string                                initialPenetration;
   std::vector<std::unique_ptr<ToolContact>>  tools;
   std::vector<ToolLoad>                      toolLoads; // of the last step
   std::vector<std::unique_ptr<ToolStressRegion>> stressRegions; // per tool; null without a region

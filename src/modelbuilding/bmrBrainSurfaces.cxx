@@ -447,6 +447,11 @@ ExtractBrainSurfaces(const ScalarVolume &         signedDistance,
     throw Error("brain surfaces: skullGap " + std::to_string(settings.skullGap) +
                 " mm must be a finite number >= 0 (default 1.5 mm, the CSF layer)");
   }
+  if (!std::isfinite(settings.skullClosing) || settings.skullClosing < 0.0)
+  {
+    throw Error("brain surfaces: skullClosing " + std::to_string(settings.skullClosing) +
+                " mm must be a finite number >= 0 (0: no closing)");
+  }
   BrainSurfaces      surfaces;
   // The skull is refined against the undecimated brain; both are decimated at the end.
   IsosurfaceSettings brainSettings = settings.isosurface;
@@ -468,27 +473,58 @@ ExtractBrainSurfaces(const ScalarVolume &         signedDistance,
   // around the level skullGap get their exact distance to the (smoothed)
   // brain surface; farther voxels keep their values, which are farther than
   // the level either way.
-  ScalarVolume        skullField = signedDistance;
+  ScalarVolume          skullField = signedDistance;
   const ImageGeometry & geometry = signedDistance.geometry;
-  const double        band = settings.skullGap + 2.0 * geometry.spacing.maxCoeff();
+  const double          margin = 2.0 * geometry.spacing.maxCoeff();
+  const double          dilation = settings.skullGap + settings.skullClosing;
   const TriangleSurfaceTree brain(surfaces.brain.vertices, surfaces.brain.triangles, "isosurface 'brain' at level 0");
-  const auto          slices = geometry.size[2];
+  // Exact distances to `tree` for the voxels whose field value lies in
+  // (low, high]; `sign` -1 gives negative distances (inside).
+  const auto exactDistances = [&](ScalarVolume & field, const TriangleSurfaceTree & tree, double low, double high,
+                                  float sign) {
+    const auto slices = geometry.size[2];
 #pragma omp parallel for schedule(dynamic, 1)
-  for (int k = 0; k < slices; ++k)
-  {
-    for (int j = 0; j < geometry.size[1]; ++j)
+    for (int k = 0; k < slices; ++k)
     {
-      for (int i = 0; i < geometry.size[0]; ++i)
+      for (int j = 0; j < geometry.size[1]; ++j)
       {
-        float & value = skullField.At(i, j, k);
-        if (value > 0.0f && value <= band)
+        for (int i = 0; i < geometry.size[0]; ++i)
         {
-          value = static_cast<float>(std::sqrt(brain.Closest(geometry.IndexToPoint(Vector3(i, j, k))).squaredDistance));
+          float & value = field.At(i, j, k);
+          if (value > low && value <= high)
+          {
+            value = sign * static_cast<float>(
+                             std::sqrt(tree.Closest(geometry.IndexToPoint(Vector3(i, j, k))).squaredDistance));
+          }
         }
       }
     }
+  };
+  exactDistances(skullField, brain, 0.0, dilation + margin, 1.0f);
+  if (settings.skullClosing > 0.0)
+  {
+    // Closing = dilation by gap + r, then erosion by r: the level -r of the
+    // signed distance to the dilated surface. Voxels nearer the brain than
+    // gap - margin are more than r + margin inside it; they keep a value
+    // below the level.
+    IsosurfaceSettings dilatedSettings = skullSettings;
+    dilatedSettings.name = "dilated brain";
+    dilatedSettings.targetEdgeLength = 0.0;
+    const ContactSurface      dilated = ExtractIsosurface(skullField, dilation, dilatedSettings, warnings);
+    const TriangleSurfaceTree dilatedTree(dilated.vertices, dilated.triangles, "isosurface 'dilated brain'");
+    ScalarVolume              closed = skullField;
+    for (float & value : closed.values)
+    {
+      value = value <= settings.skullGap - margin ? static_cast<float>(-(settings.skullClosing + margin))
+                                                  : static_cast<float>(value - dilation);
+    }
+    exactDistances(closed, dilatedTree, -(settings.skullClosing + margin), 0.0, -1.0f);
+    surfaces.skull = ExtractIsosurface(closed, -settings.skullClosing, skullSettings, warnings);
   }
-  surfaces.skull = ExtractIsosurface(skullField, settings.skullGap, skullSettings, warnings);
+  else
+  {
+    surfaces.skull = ExtractIsosurface(skullField, settings.skullGap, skullSettings, warnings);
+  }
   surfaces.brain = DecimateSurface(surfaces.brain, brainSettings.targetEdgeLength, warnings);
   surfaces.skull.bodySide = ContactSurface::Side::Inside;
   return surfaces;

@@ -215,11 +215,12 @@ AtlasBrainMask(const RegistrationImage * image, const AtlasSettings & settings)
 
 BrainSurfaces
 BrainSurfacesOfMask(const RegistrationLabelImage * mask, double skullGap, std::vector<std::string> & warnings,
-                    bool skull)
+                    bool skull, double skullClosing)
 {
   auto source = itk::BrainSurfaceMeshSource<RegistrationLabelImage>::New();
   source->SetInput(mask);
   source->SetSkullGap(skullGap);
+  source->SetSkullClosing(skullClosing);
   source->SetComputeSkull(skull);
   UpdateStage(source.GetPointer(), "brain surfaces");
   warnings.insert(warnings.end(), source->GetWarnings().begin(), source->GetWarnings().end());
@@ -227,10 +228,11 @@ BrainSurfacesOfMask(const RegistrationLabelImage * mask, double skullGap, std::v
 }
 
 BrainSurfaces
-BrainSurfacesOfMask(const LabelVolume & mask, double skullGap, std::vector<std::string> & warnings, bool skull)
+BrainSurfacesOfMask(const LabelVolume & mask, double skullGap, std::vector<std::string> & warnings, bool skull,
+                    double skullClosing)
 {
   return BrainSurfacesOfMask(itk::MakeImageFromBiomechanicalVolume<RegistrationLabelImage>(mask).GetPointer(), skullGap,
-                             warnings, skull);
+                             warnings, skull, skullClosing);
 }
 
 ContactSurface
@@ -346,6 +348,7 @@ BuildBrainModel(const RegistrationImage *      image,
     surfaces->SetInput(
       itk::MakeImageFromBiomechanicalVolume<RegistrationLabelImage>(RasterizeCells(body, result.brainMask.geometry)));
     surfaces->SetSkullGap(settings.skullGap);
+    surfaces->SetSkullClosing(settings.skullClosing);
     UpdateStage(surfaces.GetPointer(), "brain surfaces");
   });
   warnings.insert(warnings.end(), surfaces->GetWarnings().begin(), surfaces->GetWarnings().end());

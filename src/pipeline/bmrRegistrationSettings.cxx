@@ -122,6 +122,11 @@ MakeFields()
                        "gap between the brain surface and the rigid skull made from it",
                        [](const Settings & s) { return s.model.skullGap; },
                        [](Settings & s, double v) { s.model.skullGap = v; }));
+  fields.push_back(Row("model", "skull_closing", Kind::Number, "mm", 0.0, false, kInfinity, false,
+                       "radius of a closing of the brain before the skull is made: the skull stays out of fissures "
+                       "narrower than twice (radius + gap), where it would be a thin rigid blade; 0: follows every fold",
+                       [](const Settings & s) { return s.model.skullClosing; },
+                       [](Settings & s, double v) { s.model.skullClosing = v; }));
   fields.push_back(Row("model", "skull_base_height", Kind::Number, "mm", 0.0, false, kInfinity, false,
                        "fixed band above the most inferior surface node: skull base and brain stem",
                        [](const Settings & s) { return s.model.skullBase.height; },

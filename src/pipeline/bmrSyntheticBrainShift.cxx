@@ -368,6 +368,7 @@ MakeSyntheticBrainShiftModel(const RegistrationImage *           preoperativeIma
   modelSettings.craniotomyCentre = settings.craniotomyCentre;
   modelSettings.craniotomyRadius = settings.craniotomyRadius;
   modelSettings.threads = settings.threads;
+  modelSettings.skullClosing = settings.skullClosing;
   Material csf = CsfMaterial();
   csf.youngsModulus = settings.csfYoungsModulus;
   csf.poissonRatio = settings.csfPoissonRatio;

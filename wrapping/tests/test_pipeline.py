@@ -128,6 +128,11 @@ def test_brain_surfaces_of_a_ball():
     np.testing.assert_allclose(skull.enclosed_volume(), 4 / 3 * np.pi * 18**3, rtol=0.05)
     with pytest.raises(bmr.Error):
         bmr.brain_surfaces(bmr.image_from_array(np.zeros((8, 8, 8), np.uint8)))
+    # A ball is convex: closing it changes nothing beyond the smoothing's tolerance.
+    _, closed = bmr.brain_surfaces(mask, skull_gap=3.0, skull_closing=2.0)
+    np.testing.assert_allclose(closed.enclosed_volume(), skull.enclosed_volume(), rtol=0.01)
+    with pytest.raises(bmr.Error, match="SkullClosing"):
+        bmr.brain_surfaces(mask, skull_closing=-1.0)
 
 
 def test_transform_files_round_trip(tmp_path):
