@@ -141,6 +141,9 @@ struct SolveResult
   std::vector<std::string> activeComponents;
   std::vector<ToolHistory> tools; // one per Model::tools entry
   std::string message; // why it stopped
+  /** What the solve did that the model did not ask for, e.g. contact nodes
+   *  that started beyond their surface and were projected onto it. */
+  std::vector<std::string> warnings;
 };
 
 /** Thrown when a solve fails (inverted element, NaN, unbounded energy). */

@@ -757,6 +757,7 @@ TEST(CalculixDeck, StartStateOfTheWrongSizeOrNotFiniteIsANamedError)
   settings.startDisplacements.assign(model.nodes.size(), Vector3::Zero());
   settings.startDisplacements.back().x() = std::numeric_limits<double>::quiet_NaN();
   EXPECT_THROW(WriteCalculixDeck(deck, model, mesh, settings), Error);
+  EXPECT_TRUE(deck.str().empty()) << "a refused start state must leave no half-written deck";
   settings.startDisplacements.back().x() = 0.0;
   std::ostringstream good;
   WriteCalculixDeck(good, model, mesh, settings);

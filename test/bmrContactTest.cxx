@@ -234,6 +234,31 @@ TEST(Contact, PlaneWithBodyOnInsideSide)
   EXPECT_LT(std::hypot(onPlane.x(), onPlane.y()), 1e-4 * std::abs(onPlane.z()));
 }
 
+// A surface 0.05 mm inside the block's top face: the first step projects the
+// top nodes, which the scene did not ask for; the solve converges and says so
+// (how many, how deep), and says nothing when the surface clears the body.
+TEST(Contact, NodesStartingBeyondTheSurfaceAreAWarning)
+{
+  const auto solve = [](double lid) {
+    Model          model = MakeBlockMesh(kSize, kCellsPerAxis, GridCells::Hexahedra, MakeMaterial(3000.0, 0.45));
+    ContactSurface plane = MakePlane(Vector3(2.0, 2.0, lid), Vector3::UnitZ(), 50.0, "lid");
+    plane.bodySide = ContactSurface::Side::Inside;
+    model.contactSurfaces.push_back(plane);
+    model.fixedConstraints.push_back({ "zmin", { true, true, true } });
+    Solver      solver(model, TightRelaxation(1e-6));
+    SolveResult result = solver.Solve();
+    EXPECT_TRUE(result.converged) << result.message;
+    return result;
+  };
+  const SolveResult inside = solve(kSize.z() - 0.05);
+  ASSERT_EQ(inside.warnings.size(), 1u);
+  // The 25 nodes of the top face (4 x 4 cells), all 0.05 mm beyond.
+  EXPECT_NE(inside.warnings[0].find("25 contact node(s) start beyond contact surface 'lid'"), std::string::npos)
+    << inside.warnings[0];
+  EXPECT_NE(inside.warnings[0].find(" by 0.05 mm"), std::string::npos) << inside.warnings[0];
+  EXPECT_TRUE(solve(kSize.z() + 0.05).warnings.empty());
+}
+
 // Contact code runs only when a surface is given, and says so.
 TEST(Contact, ComponentListedOnlyWithSurfaces)
 {

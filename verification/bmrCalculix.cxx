@@ -364,6 +364,25 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
                 "CalculiX deck does not express; remove the fluid surface to compare under full gravity.");
   }
 
+  const bool continuation = !settings.startDisplacements.empty();
+  if (continuation)
+  {
+    if (settings.startDisplacements.size() != model.nodes.size())
+    {
+      throw Error("CalculiX deck: CalculixSettings::startDisplacements has " +
+                  std::to_string(settings.startDisplacements.size()) + " displacements for a model of " +
+                  std::to_string(model.nodes.size()) + " nodes; give one per model node, or none.");
+    }
+    for (const Vector3 & start : settings.startDisplacements)
+    {
+      if (!start.allFinite())
+      {
+        throw Error("CalculiX deck: CalculixSettings::startDisplacements holds a displacement that is not finite; "
+                    "give finite start displacements.");
+      }
+    }
+  }
+
   // Constraint per model node and component: constrained flag and value (mm).
   // Prescribed displacements override fixed constraints on the same component.
   const std::size_t   modelNodes = model.nodes.size();
@@ -480,15 +499,14 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
   // it, and the mid-edge nodes on boundary faces whose vertices all are) and
   // their values; with `start` (the continuation's first step) also the
   // boundary's corner nodes at the start state where the model leaves them free.
-  const auto writeBoundary = [&](const std::vector<char> & held, const std::vector<double> & heldValue, bool replace,
-                                 const std::vector<Vector3> * start) {
+  const auto writeBoundary = [&](bool replace, const std::vector<Vector3> * start) {
     std::array<std::vector<char>, 3> meshConstrained;
     for (int d = 0; d < 3; ++d)
     {
       std::vector<char> modelMask(modelNodes, 0);
       for (std::size_t node = 0; node < modelNodes; ++node)
       {
-        modelMask[node] = held[3 * node + d];
+        modelMask[node] = constrained[3 * node + d];
       }
       meshConstrained[d] = mesh.MeshNodeMask(modelMask);
     }
@@ -504,12 +522,12 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
         double v = 0.0;
         if (static_cast<Index>(node) < mesh.modelNodes)
         {
-          v = heldValue[3 * node + d];
+          v = value[3 * node + d];
         }
         else
         {
           const auto & parents = mesh.edgeParents[node - mesh.modelNodes];
-          v = 0.5 * (heldValue[3 * parents[0] + d] + heldValue[3 * parents[1] + d]);
+          v = 0.5 * (value[3 * parents[0] + d] + value[3 * parents[1] + d]);
         }
         stream << node + 1 << ", " << d + 1 << ", " << d + 1 << ", " << FormatDouble(v) << "\n";
       }
@@ -528,7 +546,7 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
       {
         for (int d = 0; d < 3; ++d)
         {
-          if (boundary[node] && !held[3 * node + d])
+          if (boundary[node] && !constrained[3 * node + d])
           {
             stream << node + 1 << ", " << d + 1 << ", " << d + 1 << ", " << FormatDouble((*start)[node][d]) << "\n";
           }
@@ -549,32 +567,17 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
            << ", 0, 0, 0.02, 1e-5, 1e-3, 1e-8\n";
   };
 
-  const bool continuation = !settings.startDisplacements.empty();
   writeStepHeader();
   if (continuation)
   {
-    if (settings.startDisplacements.size() != modelNodes)
-    {
-      throw Error("CalculiX deck: CalculixSettings::startDisplacements has " +
-                  std::to_string(settings.startDisplacements.size()) + " displacements for a model of " +
-                  std::to_string(modelNodes) + " nodes; give one per model node, or none.");
-    }
-    for (const Vector3 & start : settings.startDisplacements)
-    {
-      if (!start.allFinite())
-      {
-        throw Error("CalculiX deck: CalculixSettings::startDisplacements holds a displacement that is not finite; "
-                    "give finite start displacements.");
-      }
-    }
     // First step: the boundary's corner nodes held at the start state. Its
     // mid-edge nodes stay free: on a curved skull the mean of two corners'
     // positions can lie beyond it.
-    writeBoundary(constrained, value, false, &settings.startDisplacements);
+    writeBoundary(false, &settings.startDisplacements);
   }
   else
   {
-    writeBoundary(constrained, value, false, nullptr);
+    writeBoundary(false, nullptr);
   }
 
   if (gravity)
@@ -602,7 +605,7 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
            << "*END STEP\n";
     // The release: the model's own constraints only; loads carry over.
     writeStepHeader();
-    writeBoundary(constrained, value, true, nullptr);
+    writeBoundary(true, nullptr);
   }
   // FREQUENCY beyond the increment limit: only the end of the (last) step is printed.
   const int frequency = settings.maximumIncrements + 1;

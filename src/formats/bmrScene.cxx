@@ -168,6 +168,7 @@ MakeReportJson(const Scene & scene, const SolveResult & result, const std::strin
   report["contact_nodes"] = result.contactNodes;
   report["max_penetration_mm"] = result.maxPenetration;
   report["active_components"] = result.activeComponents;
+  report["warnings"] = result.warnings;
   report["nodes"] = counts.nodes;
   report["cells"] = counts.cells;
   report["hexahedra"] = counts.hexahedra;
@@ -275,6 +276,10 @@ FormatReportTable(const Scene & scene, const SolveResult & result)
                      FormatNumber(result.maxPenetration) + " mm");
   }
   row("wall time", FormatNumber(result.wallSeconds) + " s");
+  for (const std::string & warning : result.warnings)
+  {
+    row("warning", warning);
+  }
   return table.str();
 }
 

@@ -497,6 +497,11 @@ Solver::Impl::Finish(const std::vector<double> & u, const std::vector<char> & in
   }
   result.criticalTimeStep = criticalTimeStep;
   result.activeComponents = components;
+  if (!initialPenetration.empty())
+  {
+    result.warnings.push_back(initialPenetration + "; the first step projected them onto it (an imposed "
+                                                   "displacement the model does not state)");
+  }
   return result;
 }
 

@@ -629,6 +629,7 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
     UpdateStage(deformation.GetPointer(), "the solve failed");
     return deformation->GetSolveResult();
   });
+  result.warnings.insert(result.warnings.end(), result.solve.warnings.begin(), result.solve.warnings.end());
   if (!result.solve.converged)
   {
     result.warnings.push_back("the solve did not converge: " + result.solve.message +
