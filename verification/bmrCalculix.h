@@ -79,10 +79,8 @@ struct CalculixSettings
    *  triangles at these displacements in the components the model leaves
    *  free (mid-edge nodes stay free: on a curved contact surface the mean of
    *  two corners can lie beyond it), under the model's loads, constraints
-   *  and contact; a second step only holds that state (so that the third
-   *  does not start by extrapolating the first's motion); a third releases
-   *  them (OP=NEW), so that the result is CalculiX's own equilibrium,
-   *  reached from near the given state. For contact that Newton does not find from the reference
+   *  and contact; a second step releases them (OP=NEW), so that the result
+   *  is CalculiX's own equilibrium, reached from near the given state. For contact that Newton does not find from the reference
    *  state, e.g. a brain settling onto the skull through 10 Pa CSF. */
   std::vector<Vector3> startDisplacements;
 

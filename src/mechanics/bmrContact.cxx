@@ -314,19 +314,27 @@ RigidContact::SignedDistance(const Vector3 & point) const
   return m_Tree->sideSign * m_Tree->SignedDistance(m_Rotation.transpose() * (point - m_Translation), closest);
 }
 
-double
-RigidContact::MaxPenetration(const double * u) const
+RigidContact::Penetrations
+RigidContact::FindPenetrations(const double * u, double tolerance) const
 {
-  double deepest = 0.0;
+  Penetrations found;
   for (std::size_t i = 0; i < m_SlaveNodes.size(); ++i)
   {
     const double * un = u + 3 * static_cast<std::size_t>(m_SlaveNodes[i]);
     Vector3        closest;
     const Vector3  x = m_Rotation.transpose() * (m_Reference[i] + Vector3(un[0], un[1], un[2]) - m_Translation);
-    const double   s = m_Tree->sideSign * m_Tree->SignedDistance(x, closest);
-    deepest = std::max(deepest, -s);
+    const double   depth = -m_Tree->sideSign * m_Tree->SignedDistance(x, closest);
+    if (depth > tolerance)
+    {
+      ++found.count;
+      if (depth > found.depth)
+      {
+        found.depth = depth;
+        found.deepestNode = m_SlaveNodes[i];
+      }
+    }
   }
-  return deepest;
+  return found;
 }
 
 } // namespace bmr

@@ -39,8 +39,18 @@ public:
   /** Signed distance (mm) of a point (model frame) to the surface, positive on the body's side. */
   double SignedDistance(const Vector3 & point) const;
 
+  /** Slave nodes beyond the surface by more than `tolerance` (mm) at
+   *  displacements u: how many, the deepest and how deep. */
+  struct Penetrations
+  {
+    int    count = 0;
+    Index  deepestNode = -1;
+    double depth = 0.0; // mm; 0 when none
+  };
+  Penetrations FindPenetrations(const double * u, double tolerance = 0.0) const;
+
   /** Largest penetration (mm) of any slave node at displacements u. */
-  double MaxPenetration(const double * u) const;
+  double MaxPenetration(const double * u) const { return FindPenetrations(u).depth; }
 
   bool IsClosed() const;
   const std::vector<Index> & SlaveNodes() const { return m_SlaveNodes; }

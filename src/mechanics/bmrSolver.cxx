@@ -91,33 +91,20 @@ Solver::Impl::Impl(const Model & m, const SolverSettings & s)
   if (!model.contactSurfaces.empty())
   {
     components.push_back("contact");
-    const std::vector<Index> boundary = model.BoundaryNodes();
+    const std::vector<Index>  boundary = model.BoundaryNodes();
+    const std::vector<double> zero(3 * model.nodes.size(), 0.0);
     for (const ContactSurface & surface : model.contactSurfaces)
     {
       contacts.push_back(std::make_unique<RigidContact>(
         surface, surface.slaveNodeSet.empty() ? boundary : model.NodeSet(surface.slaveNodeSet), model.nodes));
       contactSlaves.insert(contactSlaves.end(), contacts.back()->SlaveNodes().begin(), contacts.back()->SlaveNodes().end());
-      int    count = 0;
-      double deepest = 0.0;
-      Index  deepestNode = -1;
-      for (const Index node : contacts.back()->SlaveNodes())
-      {
-        const double depth = -contacts.back()->SignedDistance(model.nodes[node]);
-        if (depth > 1e-6) // mm
-        {
-          ++count;
-          if (depth > deepest)
-          {
-            deepest = depth;
-            deepestNode = node;
-          }
-        }
-      }
-      if (count > 0)
+      const RigidContact::Penetrations start = contacts.back()->FindPenetrations(zero.data(), 1e-6); // mm
+      if (start.count > 0)
       {
         std::ostringstream words;
-        words << (initialPenetration.empty() ? "" : "; ") << count << " contact node(s) start beyond contact surface '"
-              << surface.name << "' (node " << deepestNode << " by " << deepest << " mm)";
+        words << (initialPenetration.empty() ? "" : "; ") << start.count
+              << " contact node(s) start beyond contact surface '" << surface.name << "' (node " << start.deepestNode
+              << " by " << start.depth << " mm)";
         initialPenetration += words.str();
       }
     }
