@@ -628,6 +628,23 @@ TEST(MeshlessContact, UniaxialCompressionAgainstAPlaneBesideEbciemConstraints)
   // The linear basis's integration error on this block (MeshlessHomogeneousTest).
   EXPECT_LT(error, 0.01 * scale);
   EXPECT_LT(PrescribedMismatch(model, result), 1e-8);
+  // The held symmetry faces too: the contact's corrections of the slaves
+  // beside them must not move their interpolated values (EssentialBoundary::CouplingOf).
+  double heldMismatch = 0.0;
+  for (const FixedConstraint & fixed : model.fixedConstraints)
+  {
+    for (const Index node : model.NodeSet(fixed.nodeSet))
+    {
+      for (int i = 0; i < 3; ++i)
+      {
+        if (fixed.components[i])
+        {
+          heldMismatch = std::max(heldMismatch, std::abs(result.displacements[node][i]));
+        }
+      }
+    }
+  }
+  EXPECT_LT(heldMismatch, 1e-8);
   EXPECT_LT(result.maxPenetration, 1e-6);
   EXPECT_EQ(result.contactNodes, static_cast<int>(model.NodeSet("xmin").size()));
 }

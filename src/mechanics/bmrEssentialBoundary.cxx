@@ -20,7 +20,8 @@ struct EssentialBoundary::Component
 EssentialBoundary::EssentialBoundary(const ShapeFunctionTable & nodeShapes,
                                      const std::vector<Index> & constrainedDofs,
                                      const std::vector<double> & mass)
-  : m_ConstrainedCount(constrainedDofs.size())
+  : m_NodeShapes(nodeShapes)
+  , m_ConstrainedCount(constrainedDofs.size())
 {
   const Index nodeCount = static_cast<Index>(mass.size());
   m_InverseMass.resize(mass.size());
@@ -109,6 +110,48 @@ EssentialBoundary::Impose(double * u, const std::vector<double> & targets) const
       }
     }
   }
+}
+
+const std::array<EssentialBoundary::Coupling, 3> &
+EssentialBoundary::CouplingOf(Index node) const
+{
+  if (m_Couplings.empty())
+  {
+    m_Couplings.resize(m_InverseMass.size());
+  }
+  auto & cached = m_Couplings[static_cast<std::size_t>(node)];
+  if (cached)
+  {
+    return *cached;
+  }
+  cached = std::make_unique<std::array<Coupling, 3>>();
+  const Index     nodeCount = static_cast<Index>(m_InverseMass.size());
+  Eigen::VectorXd weighted = Eigen::VectorXd::Zero(nodeCount); // M^-1 phi_s
+  for (Index k = m_NodeShapes.offsets[node]; k < m_NodeShapes.offsets[node + 1]; ++k)
+  {
+    weighted[m_NodeShapes.nodes[k]] = m_InverseMass[m_NodeShapes.nodes[k]] * m_NodeShapes.values[k];
+  }
+  for (const auto & component : m_Components)
+  {
+    const Eigen::VectorXd overlap = component->phi * weighted; // A_i M^-1 phi_s
+    if (overlap.cwiseAbs().maxCoeff() == 0.0)
+    {
+      continue;
+    }
+    const Eigen::VectorXd multipliers = component->solver.solve(overlap);
+    const Eigen::VectorXd change = component->phi.transpose() * multipliers;
+    Coupling &            coupling = (*cached)[static_cast<std::size_t>(component->axis)];
+    coupling.projected = overlap.dot(multipliers);
+    for (Index n = 0; n < nodeCount; ++n)
+    {
+      if (change[n] != 0.0)
+      {
+        coupling.nodes.push_back(n);
+        coupling.values.push_back(m_InverseMass[n] * change[n]);
+      }
+    }
+  }
+  return *cached;
 }
 
 std::vector<double>

@@ -92,6 +92,7 @@ struct Solver::Impl
   std::vector<double>                contactTargets;
   std::vector<Index>                 activeSlaves;
   std::vector<double>                activeNorms;
+  std::vector<const std::array<EssentialBoundary::Coupling, 3> *> activeCouplings; // EBCIEM's share of a slave's correction, or null
   std::vector<char>                  essentialSupport;
   std::vector<double>                constraintTargets; // EBCIEM, per step
   std::vector<double>                dofTargets;        // per dof, the constrained dofs' targets of the step (fused update)

@@ -196,7 +196,7 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
     }
   };
   scaleMasses(massScale);
-  PrepareEssentialBoundary(mass); // uniform rescaling on restart leaves the projection unchanged
+  PrepareEssentialBoundary(mass);
   std::vector<char>   inContact(model.nodes.size(), 0);
   std::vector<double> curveFactors(curves.size(), 0.0);
   // Without contact, tools or EBCIEM's projection, the constraints are values
@@ -408,6 +408,7 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
         ++rampSlowdowns;
       }
       scaleMasses(kRestartMassFactor);
+      PrepareEssentialBoundary(mass); // its projection does not change, but the contact's use of it must see the masses
       setDamping(lowestEigenvalue / kRestartMassFactor);
       slowestEigenvalue /= kRestartMassFactor;
       u = checkpoint;
