@@ -560,6 +560,35 @@ TEST(MeshlessContact, DynamicRelaxationSettlesWithCloseSlaveNodes)
   EXPECT_NEAR(onPlane.z(), -onTop.z(), 0.02 * std::abs(onTop.z()));
 }
 
+TEST(MeshlessContact, SlavesStartingFarFromThePlaneAreCaught)
+{
+  // The block 2 mm above the plane, its top pushed 3 mm down: the bottom
+  // slaves travel 2 mm before they touch. The contact interpolates a slave
+  // only once the parameters' accumulated largest change, times its
+  // sum |phi|, could carry it across its clearance; a bound too small lets
+  // the slaves through the plane between two interpolations.
+  Model          model = MeshlessBlock(MakeMaterial(3000.0, 0.45));
+  ContactSurface plane = MakePlane(Vector3(5.0, 4.0, -2.0), Vector3(0.0, 0.0, 1.0), 50.0);
+  plane.bodySide = ContactSurface::Side::Outside;
+  plane.slaveNodeSet = "zmin";
+  model.contactSurfaces.push_back(plane);
+  Prescribe(model, model.NodeSet("zmax"), [](const Vector3 &) { return Vector3(0.0, 0.0, -3.0); });
+  Solver            solver(model, TightRelaxation(1e-5, 50000));
+  const SolveResult result = solver.Solve();
+  ASSERT_TRUE(result.converged) << result.message;
+  EXPECT_EQ(result.contactNodes, static_cast<int>(model.NodeSet("zmin").size()));
+  EXPECT_LT(result.maxPenetration, 1e-6);
+  // The whole bottom face pressed flat onto the plane.
+  double lowest = std::numeric_limits<double>::max(), highest = -lowest;
+  for (const Index node : model.NodeSet("zmin"))
+  {
+    lowest = std::min(lowest, model.nodes[node].z() + result.displacements[node].z());
+    highest = std::max(highest, model.nodes[node].z() + result.displacements[node].z());
+  }
+  EXPECT_NEAR(lowest, -2.0, 1e-6);
+  EXPECT_NEAR(highest, -2.0, 1e-6);
+}
+
 TEST(MeshlessContact, SlidingIsUnresisted)
 {
   // The block 0.1 mm above a frictionless plane, its top pressed 0.4 mm down,

@@ -230,7 +230,8 @@ RigidContact::SetPose(const Eigen::Matrix3d & rotation, const Vector3 & translat
 
 void
 RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std::vector<char> & inContact, int threads,
-                      std::vector<Vector3> * corrections, std::vector<Vector3> * normals)
+                      std::vector<Vector3> * corrections, std::vector<Vector3> * normals,
+                      std::vector<double> * clearances)
 {
   const Tree & tree = *m_Tree;
   const auto   count = static_cast<Index>(m_SlaveNodes.size());
@@ -241,6 +242,10 @@ RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std:
   if (normals != nullptr)
   {
     normals->assign(m_SlaveNodes.size(), Vector3::Zero());
+  }
+  if (clearances != nullptr)
+  {
+    clearances->assign(m_SlaveNodes.size(), 0.0);
   }
   // Distances are measured in the surface's own frame, where they do not
   // change when the surface moves rigidly: the query cache stays valid.
@@ -258,8 +263,13 @@ RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std:
     const Vector3 x = toSurface(m_Reference[i] + Vector3(un[0], un[1], un[2]));
     // A node that was at distance d on the allowed side cannot have crossed the
     // surface while it stays within d of that position: no query needed.
-    if ((x - m_LastQueried[i]).norm() < m_SafeDistance[i])
+    const double moved = (x - m_LastQueried[i]).norm();
+    if (moved < m_SafeDistance[i])
     {
+      if (clearances != nullptr)
+      {
+        (*clearances)[static_cast<std::size_t>(i)] = m_SafeDistance[i] - moved;
+      }
       continue;
     }
     Vector3 closest, outward;
@@ -267,6 +277,10 @@ RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std:
     {
       m_LastQueried[i] = x;
       m_SafeDistance[i] = (x - closest).norm();
+      if (clearances != nullptr)
+      {
+        (*clearances)[static_cast<std::size_t>(i)] = m_SafeDistance[i];
+      }
       continue;
     }
     if (normals != nullptr)

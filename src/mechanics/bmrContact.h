@@ -28,9 +28,14 @@ public:
    *  `corrections` (when given): per slave node, the displacement the
    *  projection added (zero for nodes it left alone). `normals` (when given):
    *  per projected slave node, the unit normal of the surface at its closest
-   *  point, towards the body's side (model frame; zero for nodes left alone). */
+   *  point, towards the body's side (model frame; zero for nodes left alone).
+   *  `clearances` (when given): per slave node, a lower bound of its
+   *  distance to the surface on the body's side (0 for nodes projected or
+   *  held in every component): while the pose stays, a node that moves less
+   *  than that cannot cross the surface. */
   void Enforce(double * u, const std::vector<char> & dofConstrained, std::vector<char> & inContact, int threads,
-               std::vector<Vector3> * corrections = nullptr, std::vector<Vector3> * normals = nullptr);
+               std::vector<Vector3> * corrections = nullptr, std::vector<Vector3> * normals = nullptr,
+               std::vector<double> * clearances = nullptr);
 
   /** Places the surface: a point p of the surface's own frame is at
    *  rotation p + translation (a moving tool); identity by default. */

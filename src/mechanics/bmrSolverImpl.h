@@ -94,6 +94,16 @@ struct Solver::Impl
   std::vector<double>                activeNorms;
   std::vector<const std::array<EssentialBoundary::Coupling, 3> *> activeCouplings; // EBCIEM's share of a slave's correction, or null
   std::vector<char>                  essentialSupport;
+  // Which slaves to interpolate: the parameters at the last detection, the
+  // sum of their largest changes since the solve began, per slave that sum
+  // when it was last interpolated and sum_K |phi_K|, and per node its
+  // clearance from the surfaces there (mm).
+  std::vector<double>                parameterSnapshot;
+  double                             parameterMotion = 0.0;
+  std::vector<double>                slaveMotionMark;
+  std::vector<double>                slaveShapeSum;
+  std::vector<double>                slaveClearance;
+  std::vector<double>                surfaceClearances; // per slave of one contact, from RigidContact::Enforce
   std::vector<double>                constraintTargets; // EBCIEM, per step
   std::vector<double>                dofTargets;        // per dof, the constrained dofs' targets of the step (fused update)
 
