@@ -76,6 +76,30 @@ TEST(Failure, DegenerateTetrahedronIsNamed)
   EXPECT_TRUE(Contains(message, "degenerate")) << message;
 }
 
+// Degenerate means flat, not small: CGAL meshes a voxel-scale feature of
+// Colin27 at 5.5 mm with well-shaped tetrahedra 0.1 mm across (volume 1e-5
+// mm^3), which a threshold relative to the whole mesh's size (1e-12 of its
+// 250 mm diagonal cubed) had rejected as "zero volume".
+TEST(Failure, SmallWellShapedTetrahedronIsNotDegenerate)
+{
+  Model model = TwoTetrahedra();
+  const Index first = static_cast<Index>(model.nodes.size());
+  const double edge = 0.04; // mm: volume 1.1e-5 mm^3
+  for (const Vector3 & corner : { Vector3(0, 0, 0), Vector3(edge, 0, 0), Vector3(0, edge, 0), Vector3(0, 0, edge) })
+  {
+    model.nodes.push_back(Vector3(250.0, 0.0, 0.0) + corner);
+  }
+  Cell small = model.cells.front();
+  small.nodes = { first, first + 1, first + 2, first + 3 };
+  model.cells.push_back(small);
+  EXPECT_EQ(ValidationMessage(model), "");
+  // The same cell flattened to a thousandth of a nanometre is degenerate.
+  model.nodes[first + 3] = Vector3(250.0 + edge / 3.0, edge / 3.0, 1e-12);
+  const std::string message = ValidationMessage(model);
+  EXPECT_TRUE(Contains(message, "cell 2")) << message;
+  EXPECT_TRUE(Contains(message, "degenerate")) << message;
+}
+
 TEST(Failure, DegenerateHexahedronIsNamed)
 {
   Model model = MakeBlockMesh(Vector3(3, 1, 1), { 3, 1, 1 }, GridCells::Hexahedra);

@@ -175,8 +175,21 @@ CheckCell(const Model & model, Index cellIndex, double lengthScale)
     throw Error(message.str());
   }
 
-  // A cell is degenerate below a tiny fraction of a cube of the mesh's length scale.
-  const double degenerateVolume = 1e-12 * lengthScale * lengthScale * lengthScale;
+  // A cell is degenerate when it is flat: its volume a tiny fraction of the
+  // cube of its own longest edge. (A fraction of the whole mesh's size instead
+  // rejected well-shaped cells 0.1 mm across that CGAL places at voxel-scale
+  // features of a 5.5 mm mesh of Colin27.) The mesh's length scale only
+  // guards edges that are themselves negligible.
+  double longestEdge = 0.0;
+  for (int a = 0; a < count; ++a)
+  {
+    for (int b = 0; b < a; ++b)
+    {
+      longestEdge = std::max(longestEdge, (model.nodes[cell.nodes[a]] - model.nodes[cell.nodes[b]]).norm());
+    }
+  }
+  const double edge = std::max(longestEdge, 1e-9 * lengthScale);
+  const double degenerateVolume = 1e-9 * edge * edge * edge;
   double       worst = 0.0;
   if (cell.type == CellType::Tetrahedron)
   {
