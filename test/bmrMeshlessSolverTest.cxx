@@ -42,6 +42,17 @@ MeshlessBlock(const Material &            material,
   return model;
 }
 
+/** A rigid plane through `point` with the body on the side `normal` points
+ *  to, in contact with `slaveNodeSet` (empty: every boundary node). */
+void
+AddRigidPlane(Model & model, const Vector3 & point, const Vector3 & normal, const std::string & slaveNodeSet = "")
+{
+  ContactSurface plane = MakePlane(point, normal, 50.0);
+  plane.bodySide = ContactSurface::Side::Outside;
+  plane.slaveNodeSet = slaveNodeSet;
+  model.contactSurfaces.push_back(plane);
+}
+
 /** Adds a cluster of 7 nodes 0.3 mm apart around `centre` (a centre and its 6
  *  neighbours along the axes): nodes much denser than the 1 mm spacing of the
  *  integration points, as CGAL puts them along fine surface features of a
@@ -491,9 +502,7 @@ TEST(MeshlessContact, BlockPressedOntoAPlaneStaysAboveIt)
   // its top is pushed down 1 mm: the plane must carry the top's force and the
   // interpolated positions of the bottom nodes must not cross it.
   Model          model = MeshlessBlock(MakeMaterial(3000.0, 0.45));
-  ContactSurface plane = MakePlane(Vector3(5.0, 4.0, 0.0), Vector3(0.0, 0.0, 1.0), 50.0);
-  plane.bodySide = ContactSurface::Side::Outside;
-  model.contactSurfaces.push_back(plane);
+  AddRigidPlane(model, Vector3(5.0, 4.0, 0.0), Vector3(0.0, 0.0, 1.0));
   LoadCurve ramp;
   ramp.rampTime = 0.5;
   Prescribe(model, model.NodeSet("zmax"), [](const Vector3 &) { return Vector3(0.0, 0.0, -1.0); }, { true, true, true },
@@ -535,10 +544,7 @@ TEST(MeshlessContact, DynamicRelaxationSettlesWithCloseSlaveNodes)
   std::vector<Index>       slaves = model.NodeSet("zmin");
   slaves.insert(slaves.end(), cluster.begin(), cluster.end());
   model.nodeSets["slaves"] = slaves;
-  ContactSurface plane = MakePlane(Vector3(5.0, 4.0, 0.0), Vector3(0.0, 0.0, 1.0), 50.0);
-  plane.bodySide = ContactSurface::Side::Outside;
-  plane.slaveNodeSet = "slaves";
-  model.contactSurfaces.push_back(plane);
+  AddRigidPlane(model, Vector3(5.0, 4.0, 0.0), Vector3(0.0, 0.0, 1.0), "slaves");
   Prescribe(model, model.NodeSet("zmax"), [](const Vector3 &) { return Vector3(0.0, 0.0, -1.0); });
 
   Solver            solver(model, TightRelaxation(1e-4, 20000));
@@ -568,10 +574,7 @@ TEST(MeshlessContact, SlavesStartingFarFromThePlaneAreCaught)
   // sum |phi|, could carry it across its clearance; a bound too small lets
   // the slaves through the plane between two interpolations.
   Model          model = MeshlessBlock(MakeMaterial(3000.0, 0.45));
-  ContactSurface plane = MakePlane(Vector3(5.0, 4.0, -2.0), Vector3(0.0, 0.0, 1.0), 50.0);
-  plane.bodySide = ContactSurface::Side::Outside;
-  plane.slaveNodeSet = "zmin";
-  model.contactSurfaces.push_back(plane);
+  AddRigidPlane(model, Vector3(5.0, 4.0, -2.0), Vector3(0.0, 0.0, 1.0), "zmin");
   Prescribe(model, model.NodeSet("zmax"), [](const Vector3 &) { return Vector3(0.0, 0.0, -3.0); });
   Solver            solver(model, TightRelaxation(1e-5, 50000));
   const SolveResult result = solver.Solve();
@@ -597,10 +600,7 @@ TEST(MeshlessContact, SlidingIsUnresisted)
   // and the plane carries no tangential force.
   auto solve = [](const Vector3 & top) {
     Model          model = MeshlessBlock(MakeMaterial(3000.0, 0.45));
-    ContactSurface plane = MakePlane(Vector3(5.0, 4.0, -0.1), Vector3(0.0, 0.0, 1.0), 50.0);
-    plane.bodySide = ContactSurface::Side::Outside;
-    plane.slaveNodeSet = "zmin";
-    model.contactSurfaces.push_back(plane);
+    AddRigidPlane(model, Vector3(5.0, 4.0, -0.1), Vector3(0.0, 0.0, 1.0), "zmin");
     Prescribe(model, model.NodeSet("zmax"), [&](const Vector3 &) { return top; });
     Solver            solver(model, TightRelaxation(1e-8, 50000));
     const SolveResult result = solver.Solve();
@@ -639,10 +639,7 @@ TEST(MeshlessContact, UniaxialCompressionAgainstAPlaneBesideEbciemConstraints)
   MakeMeshlessFromCells(model, MlsSettings{}, IntegrationSettings{}, 1);
   model.fixedConstraints.push_back({ "ymin", { false, true, false } });
   model.fixedConstraints.push_back({ "zmin", { false, false, true } });
-  ContactSurface plane = MakePlane(Vector3(0.0, 4.0, 3.0), Vector3(1.0, 0.0, 0.0), 50.0);
-  plane.bodySide = ContactSurface::Side::Outside;
-  plane.slaveNodeSet = "xmin";
-  model.contactSurfaces.push_back(plane);
+  AddRigidPlane(model, Vector3(0.0, 4.0, 3.0), Vector3(1.0, 0.0, 0.0), "xmin");
   const Matrix3           F = UniaxialDeformationGradient(0.9, law);
   const DisplacementField exact = HomogeneousField(F);
   Prescribe(model, model.NodeSet("xmax"), exact, { true, false, false });
