@@ -1,8 +1,14 @@
 // Same input, same result, for 1 or N threads: displacements, reaction forces
 // and step counts bitwise identical (forces are assembled in a fixed order).
+#include "bmrForceModel.h"
+#include "bmrMeshless.h"
 #include "bmrTestUtilities.h"
 
 #include <gtest/gtest.h>
+
+#include <algorithm>
+#include <numeric>
+#include <random>
 
 namespace bmr
 {
@@ -84,6 +90,97 @@ TEST(Determinism, MixedWithContactExplicitDynamics)
   ASSERT_EQ(a.cauchyStress.size(), model.cells.size());
   ASSERT_EQ(b.cauchyStress.size(), model.cells.size());
   EXPECT_EQ(std::memcmp(a.cauchyStress.data(), b.cauchyStress.data(), a.cauchyStress.size() * sizeof(Matrix3)), 0);
+}
+
+// ---------------------------------------------------------------------------
+// The meshless kernel renumbers the nodes for itself (MortonNumbering); what
+// it returns must not depend on how the model numbers its nodes.
+// ---------------------------------------------------------------------------
+
+/** The model with node n renumbered newId[n] (positions and cells; the force
+ *  models read nothing else that names nodes). */
+Model
+Renumbered(const Model & model, const std::vector<Index> & newId)
+{
+  Model renumbered = model;
+  for (std::size_t n = 0; n < model.nodes.size(); ++n)
+  {
+    renumbered.nodes[newId[n]] = model.nodes[n];
+  }
+  for (Cell & cell : renumbered.cells)
+  {
+    for (int a = 0; a < NodesPerCell(cell.type); ++a)
+    {
+      cell.nodes[a] = newId[cell.nodes[a]];
+    }
+  }
+  return renumbered;
+}
+
+std::vector<Index>
+ShuffledIds(std::size_t count)
+{
+  std::vector<Index> ids(count);
+  std::iota(ids.begin(), ids.end(), Index{ 0 });
+  std::shuffle(ids.begin(), ids.end(), std::mt19937(7));
+  return ids;
+}
+
+/** Forces, lumped and scaled masses of `a` and `b` (= a renumbered by newId)
+ *  at the same displacements; every value of b must equal a's for the same
+ *  node, to `tolerance` relative to the largest (0: bitwise). */
+void
+ExpectSameNodalQuantities(ForceModel & a, ForceModel & b, const std::vector<Index> & newId, double tolerance)
+{
+  const std::size_t                      count = newId.size();
+  std::mt19937                           random(3);
+  std::uniform_real_distribution<double> displacement(-0.1, 0.1);
+  std::vector<double>                    uA(3 * count), uB(3 * count), fA(3 * count), fB(3 * count);
+  for (std::size_t n = 0; n < count; ++n)
+  {
+    for (int i = 0; i < 3; ++i)
+    {
+      uA[3 * n + i] = uB[3 * newId[n] + i] = displacement(random);
+    }
+  }
+  ASSERT_EQ(a.ComputeInternalForces(uA.data(), fA.data()), -1);
+  ASSERT_EQ(b.ComputeInternalForces(uB.data(), fB.data()), -1);
+  const auto expectSame = [&](const std::vector<double> & valuesA, const std::vector<double> & valuesB, int width,
+                              const char * what) {
+    double largest = 0.0, worst = 0.0;
+    for (std::size_t n = 0; n < count; ++n)
+    {
+      for (int i = 0; i < width; ++i)
+      {
+        largest = std::max(largest, std::abs(valuesA[width * n + i]));
+        worst = std::max(worst, std::abs(valuesA[width * n + i] - valuesB[width * newId[n] + i]));
+      }
+    }
+    EXPECT_GT(largest, 0.0) << what;
+    EXPECT_LE(worst, tolerance * largest) << what << ": largest " << largest;
+  };
+  expectSame(fA, fB, 3, "internal forces");
+  expectSame(a.LumpedMasses(), b.LumpedMasses(), 1, "lumped masses");
+  expectSame(a.ScaledMasses(1.0, 0.8, true), b.ScaledMasses(1.0, 0.8, true), 1, "scaled masses");
+  EXPECT_NEAR(a.ComputeEnergies(uA.data()).strain, b.ComputeEnergies(uB.data()).strain,
+              1e-12 * a.ComputeEnergies(uA.data()).strain);
+}
+
+TEST(Determinism, MeshlessForcesDoNotDependOnTheNodeNumbering)
+{
+  // The MLS tables list each point's neighbours in node order, so the sums
+  // over them run in another order: equal to rounding.
+  Model a = MakeBlockMesh(Vector3(6.0, 5.0, 4.0), { 6, 5, 4 }, GridCells::Hexahedra, MakeMaterial(3000.0, 0.45));
+  DistortInteriorNodes(a, 0.2, 5);
+  MakeMeshlessFromCells(a, {}, {}, 1);
+  const std::vector<Index> newId = ShuffledIds(a.nodes.size());
+  const Model              b = Renumbered(a, newId);
+  const SolverSettings     settings;
+  const auto               table = [](const Model & model) {
+    return MovingLeastSquares::ForModel(model)->Evaluate(model.meshless.integrationPoints, true, 1);
+  };
+  MeshlessForceModel forcesA(a, table(a), settings, 2), forcesB(b, table(b), settings, 2);
+  ExpectSameNodalQuantities(forcesA, forcesB, newId, 1e-12);
 }
 
 } // namespace

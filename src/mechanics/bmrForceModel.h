@@ -11,6 +11,7 @@
 
 #include "bmrMeshless.h"
 #include "bmrModel.h"
+#include "bmrNodeOrder.h"
 #include "bmrSolver.h"
 
 #include <Eigen/Core>
@@ -351,7 +352,8 @@ private:
   std::vector<Index>  m_KernelBlockOffsets;
   std::vector<Index>  m_KernelColourOffsets;
   std::vector<Index>  m_KernelOffsets;
-  std::vector<Index>  m_KernelNodes;
+  MortonNumbering     m_Numbering; // the kernel's numbering of the nodes
+  std::vector<Index>  m_KernelNodes; // slots (m_Numbering), not model nodes
   // grad phi in single precision: 16 instead of 28 bytes an entry streamed
   // per step, for relative errors of 6e-8 (docs/thread-scaling.md); sums in double.
   std::vector<float>  m_KernelGradients; // 3 per entry, and one float of padding at the end

@@ -89,6 +89,7 @@ MeshlessForceModel::MeshlessForceModel(const Model &          model,
   const ColouredSchedule schedule =
     ScheduleWork(table.offsets, table.nodes, m_Positions, BoundingBox(model.nodes), m_NodeCount, kPointsPerBlock);
   m_KernelPoint = schedule.items;
+  m_Numbering = MortonNumbering(model.nodes);
   m_KernelBlockOffsets = schedule.blockOffsets;
   m_KernelColourOffsets = schedule.colourOffsets;
   m_PaddedDisplacements.assign(4 * static_cast<std::size_t>(m_NodeCount), 0.0);
@@ -101,7 +102,7 @@ MeshlessForceModel::MeshlessForceModel(const Model &          model,
   {
     for (Index k = table.offsets[p]; k < table.offsets[p + 1]; ++k)
     {
-      m_KernelNodes.push_back(table.nodes[k]);
+      m_KernelNodes.push_back(m_Numbering.Slot(table.nodes[k]));
       for (int j = 0; j < 3; ++j)
       {
         m_KernelGradients.push_back(static_cast<float>(table.gradients[3 * k + j]));
@@ -126,7 +127,7 @@ MeshlessForceModel::DeformationGradientAt(Index p, const double * u) const
   const Index   q = m_KernelIndexOfPoint[p];
   for (Index k = m_KernelOffsets[q]; k < m_KernelOffsets[q + 1]; ++k)
   {
-    const double * uI = u + 3 * static_cast<std::size_t>(nodes[k]);
+    const double * uI = u + 3 * static_cast<std::size_t>(m_Numbering.Node(nodes[k]));
     const Vector3  g = KernelGradient(k);
     for (int i = 0; i < 3; ++i)
     {
@@ -281,10 +282,11 @@ MeshlessForceModel::ComputeInternalForces(const double * u, double * f)
 #pragma omp parallel num_threads(m_Threads) reduction(min : firstInverted)
   {
 #pragma omp for schedule(static)
-    for (Index n = 0; n < nodeCount; ++n)
+    for (Index slot = 0; slot < nodeCount; ++slot)
     {
-      StoreLanes(paddedU + 4 * static_cast<std::size_t>(n), Lanes{ u[3 * n], u[3 * n + 1], u[3 * n + 2], 0.0 });
-      StoreLanes(paddedF + 4 * static_cast<std::size_t>(n), Lanes{});
+      const double * uN = u + 3 * static_cast<std::size_t>(m_Numbering.Node(slot));
+      StoreLanes(paddedU + 4 * static_cast<std::size_t>(slot), Lanes{ uN[0], uN[1], uN[2], 0.0 });
+      StoreLanes(paddedF + 4 * static_cast<std::size_t>(slot), Lanes{});
     }
     for (std::size_t colour = 0; colour + 1 < m_KernelColourOffsets.size(); ++colour)
     {
@@ -303,11 +305,12 @@ MeshlessForceModel::ComputeInternalForces(const double * u, double * f)
       }
     }
 #pragma omp for schedule(static)
-    for (Index n = 0; n < nodeCount; ++n)
+    for (Index slot = 0; slot < nodeCount; ++slot)
     {
+      double * fN = f + 3 * static_cast<std::size_t>(m_Numbering.Node(slot));
       for (int i = 0; i < 3; ++i)
       {
-        f[3 * n + i] = paddedF[4 * static_cast<std::size_t>(n) + i];
+        fN[i] = paddedF[4 * static_cast<std::size_t>(slot) + i];
       }
     }
   }
@@ -318,7 +321,7 @@ std::vector<double>
 MeshlessForceModel::LumpedMasses() const
 {
   // Each integration point's mass shared equally by its neighbours.
-  std::vector<double> masses(m_NodeCount, 0.0);
+  std::vector<double> masses(m_NodeCount, 0.0); // in slot order
   for (Index p = 0; p < PointCount(); ++p)
   {
     const Index  q = m_KernelIndexOfPoint[p];
@@ -329,7 +332,7 @@ MeshlessForceModel::LumpedMasses() const
       masses[m_KernelNodes[k]] += share;
     }
   }
-  return masses;
+  return m_Numbering.InNodeOrder(masses);
 }
 
 std::vector<double>
@@ -354,7 +357,7 @@ MeshlessForceModel::ScaledMasses(double timeStep, double safety, bool collapse) 
     masses.AddUnit(&m_KernelNodes[begin], norms.data(), static_cast<int>(end - begin),
                    m_Weight[p] * (collapse ? std::max(modulus, m_Collapse[p]) : modulus));
   }
-  return masses.Masses(factor);
+  return m_Numbering.InNodeOrder(masses.Masses(factor));
 }
 
 double

@@ -2,6 +2,7 @@
 // models (bmrForceModel.h: ColouredSchedule): Morton-ordered blocks of work
 // items, coloured so that blocks of one colour share no node.
 #include "bmrForceModel.h"
+#include "bmrNodeOrder.h"
 
 #include <algorithm>
 #include <cstdint>
@@ -22,29 +23,6 @@ BoundingBox(const std::vector<Vector3> & points)
   }
   return box;
 }
-
-namespace
-{
-
-/** Morton (Z-order) code of a point in the frame of `box`, 10 bits per axis. */
-std::uint64_t
-MortonCode(const Vector3 & centre, const Eigen::AlignedBox3d & box)
-{
-  const Vector3 extent = box.sizes().cwiseMax(1e-300);
-  const Vector3 unit = ((centre - box.min()).cwiseQuotient(extent)).cwiseMax(0.0).cwiseMin(1.0);
-  std::uint64_t code = 0;
-  for (int bit = 9; bit >= 0; --bit)
-  {
-    for (int axis = 0; axis < 3; ++axis)
-    {
-      const auto q = static_cast<std::uint64_t>(unit[axis] * 1023.0);
-      code = (code << 1) | ((q >> bit) & 1u);
-    }
-  }
-  return code;
-}
-
-} // namespace
 
 ColouredSchedule
 ScheduleBySlabs(const std::vector<Index> &   offsets,
