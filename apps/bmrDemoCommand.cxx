@@ -666,10 +666,12 @@ RunDemo(DemoOptions options)
     { "craniotomy_radius_mm", options.truth.craniotomyRadius },
     { "target_shift_mm", options.truth.targetShift },
     { "free_rim", options.truth.freeRim },
+    { "skull_closing_mm", options.truth.skullClosing },
     { "shift_mm", truth.shift },
     { "gravity_mm_s2", { truth.gravity.x(), truth.gravity.y(), truth.gravity.z() } },
     { "gravity_g", truth.gravity.norm() / 9810.0 },
     { "solve_steps", truth.solve.steps },
+    { "solve_restarts", truth.solve.restarts },
     { "solve_estimated_error_mm", truth.solve.estimatedError },
     { "fit_max_residual_mm", truth.truthFitMaxResidual },
     { "poisson_ratio", options.truth.poissonRatio },
@@ -755,6 +757,11 @@ AddDemoCommand(CLI::App & app)
     ->capture_default_str();
   demo->add_option("--truth-element-size", options->truth.grid.elementSize, "Ground-truth element size (mm)")
     ->capture_default_str();
+  demo->add_option("--truth-skull-closing", options->truth.skullClosing,
+                   "Radius (mm) of the closing of the ground truth's brain before its skull is made: the skull stays "
+                   "out of fissures narrower than twice (radius + gap); 0: it follows every fold")
+    ->capture_default_str()
+    ->check(CLI::NonNegativeNumber);
   demo->add_option("--noise", options->truth.noise, "Noise of the intraoperative image (fraction of the bright level)")
     ->capture_default_str();
   demo->add_option("--noise-model", options->noiseModel,

@@ -486,6 +486,7 @@ TEST_F(ModelCommandTest, BadInputsExitOneNameTheProblemAndWriteNothing)
     { "demo --bias-field 1.5", "--bias-field" },
     { "demo --intraoperative-contrast flair", "--intraoperative-contrast" },
     { "demo --noise-model poisson", "--noise-model" },
+    { "demo --truth-skull-closing -1", "--truth-skull-closing" },
     { "demo --elastix-parameters " + Quoted(m_Folder / "missing.txt"), "--elastix-parameters" },
     { "model " + head + " --mask " + mask + craniotomy + " --csf-poisson-ratio 0.5", "--csf-poisson-ratio" },
     { "model " + head + " --mask " + mask + craniotomy + " --csf-modulus 0", "--csf-modulus" },
