@@ -53,6 +53,8 @@ struct Solver::Impl
   int                                        threads = 1;
   std::unique_ptr<ForceModel>                forces;
   std::vector<std::unique_ptr<RigidContact>> contacts;
+  // Per contact, each slave's projection in the last step (zero when not projected).
+  std::vector<std::vector<Vector3>>          contactCorrections;
   // Slave nodes that start beyond their contact surface, in words (empty if
   // none): the first step projects them, however slowly the loads ramp.
   std::string                                initialPenetration;
@@ -113,6 +115,9 @@ struct Solver::Impl
   void        ApplyConstraints(double * u, const std::vector<double> & curveFactors);
   void        PrepareEssentialBoundary(const std::vector<double> & mass);
   void        EnforceContact(double * u, std::vector<char> & inContact, const std::vector<double> & inverseMass);
+  /** Dynamic relaxation: removes from each slave projected in the last step
+   *  the velocity along its projection (u - uPrevious; finite elements). */
+  void        ForgetProjectionVelocities(const std::vector<double> & u, std::vector<double> & uPrevious) const;
   /** `time`: seconds in explicit dynamics; in dynamic relaxation the fraction
    *  of each tool's trajectory (a ramp from its first to its last pose). */
   void        EnforceTools(double * u, const double * previous, std::vector<char> & inContact,

@@ -335,6 +335,10 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
       std::swap(uPrevious, u);
       std::swap(u, uNext);
       std::swap(f, fPrevious);
+      if (!fusedUpdate)
+      {
+        ForgetProjectionVelocities(u, uPrevious);
+      }
 
       // Termination (Joldes et al. 2009): distance to the solution estimated as
       // rate / (1 - rate) * ||du||_inf, with the rate the largest of the observed
