@@ -107,11 +107,8 @@ struct SyntheticBrainShiftSettings
   double solverTolerance = 0.01; // mm
   /** Closing radius of the ground truth's body before its skull is made (mm;
    *  BrainModelSettings::skullClosing; 0, as the registration's default: the
-   *  skull follows every fold). With 0 the skull enters the Sylvian fissure
-   *  as a thin rigid sheet, and the frontal 15 mm scene's truth fails there:
-   *  the contact moves a node beside the sheet 2.1 mm in one step and
-   *  inverts a cell however it restarts; with 5 mm it converges
-   *  (docs/validation.md, `biomech demo --truth-skull-closing`). */
+   *  skull follows every fold, e.g. the Sylvian fissure as a thin sheet).
+   *  `biomech demo --truth-skull-closing`. */
   double skullClosing = 0.0;
 
   /** Materials: Poisson's ratio of parenchyma (and tumour), Young's modulus

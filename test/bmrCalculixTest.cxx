@@ -730,7 +730,14 @@ TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
             << warmAgainstCold.rmsError << " / " << warmAgainstCold.maxError << " mm (" << continued.lastStepIncrements
             << " increments, " << continued.lastStepIterations << " Newton iterations after the release, "
             << continued.iterations << " in all)" << std::endl;
-  EXPECT_LT(warmAgainstCold.maxError, 0.1 * agreement.maxError);
+  // It starts agreement.maxError (0.30 mm) from the cold start's solution.
+  // Measured 2026-11-27: it ended there to the .dat's 7 digits; since the
+  // dynamic relaxation's start state changed in the last digits (projected
+  // slaves lose their normal velocity, docs/solver.md) it ends 0.0032 mm RMS
+  // and 0.044 mm at most from it: one node settles its penalty contact
+  // (overlap 0.038 mm) differently. Both are far below the 0.30 mm it started from.
+  EXPECT_LT(warmAgainstCold.rmsError, 0.1 * agreement.rmsError);
+  EXPECT_LT(warmAgainstCold.maxError, 0.2 * agreement.maxError);
   EXPECT_GE(continued.lastStepIterations, 1);
   EXPECT_LT(continued.lastStepIncrements, continued.increments); // two steps
 }
