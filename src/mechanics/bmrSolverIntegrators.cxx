@@ -262,6 +262,16 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
     try
     {
       CheckForces(forces->ComputeInternalForces(u.data(), f.data()), step, false, h);
+      // Checkpoint a state whose forces were just computed with no inverted
+      // unit. Saved at the end of the previous step instead, it was the state
+      // about to be checked: the 25 mm truth of Colin27 on Morton-numbered
+      // tetrahedra inverted a cell in that state, and all six restarts began
+      // from it and failed at once.
+      if (step % window == 0)
+      {
+        checkpoint = u;
+        checkpointStep = step;
+      }
 
       if (step > 0 && step % window == 0)
       {
@@ -378,11 +388,6 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
           ++step;
           break;
         }
-      }
-      if ((step + 1) % window == 0)
-      {
-        checkpoint = u;
-        checkpointStep = step + 1;
       }
     }
     catch (const SolveError & failure)
