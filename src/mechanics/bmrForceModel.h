@@ -93,9 +93,6 @@ ScheduleWork(const std::vector<Index> &   offsets,
              Index                        nodeCount,
              Index                        blockSize);
 
-Eigen::AlignedBox3d
-BoundingBox(const std::vector<Vector3> & points);
-
 /** The collapse barrier's bulk modulus per unit (cell or integration point;
  *  internal units): the larger of the unit's own kappa and the model's, which
  *  is `settingPascal` or, for 0, the volume-weighted median of the units'

@@ -6,6 +6,17 @@
 namespace bmr
 {
 
+Eigen::AlignedBox3d
+BoundingBox(const std::vector<Vector3> & points)
+{
+  Eigen::AlignedBox3d box;
+  for (const Vector3 & x : points)
+  {
+    box.extend(x);
+  }
+  return box;
+}
+
 std::uint64_t
 MortonCode(const Vector3 & point, const Eigen::AlignedBox3d & box)
 {
@@ -27,11 +38,7 @@ MortonNumbering::MortonNumbering(const std::vector<Vector3> & nodes)
   : m_SlotOfNode(nodes.size())
   , m_NodeOfSlot(nodes.size())
 {
-  Eigen::AlignedBox3d box;
-  for (const Vector3 & x : nodes)
-  {
-    box.extend(x);
-  }
+  const Eigen::AlignedBox3d                    box = BoundingBox(nodes);
   std::vector<std::pair<std::uint64_t, Index>> keyed;
   keyed.reserve(nodes.size());
   for (Index n = 0; n < static_cast<Index>(nodes.size()); ++n)

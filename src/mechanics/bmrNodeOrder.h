@@ -12,6 +12,9 @@
 namespace bmr
 {
 
+Eigen::AlignedBox3d
+BoundingBox(const std::vector<Vector3> & points);
+
 /** Morton (Z-order) code of a point in the frame of `box`, 10 bits per axis. */
 std::uint64_t
 MortonCode(const Vector3 & point, const Eigen::AlignedBox3d & box);

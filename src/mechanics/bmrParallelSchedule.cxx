@@ -13,17 +13,6 @@
 namespace bmr
 {
 
-Eigen::AlignedBox3d
-BoundingBox(const std::vector<Vector3> & points)
-{
-  Eigen::AlignedBox3d box;
-  for (const Vector3 & x : points)
-  {
-    box.extend(x);
-  }
-  return box;
-}
-
 ColouredSchedule
 ScheduleBySlabs(const std::vector<Index> &   offsets,
                 const std::vector<Index> &   nodes,
