@@ -55,10 +55,12 @@ Solver::Impl::EnforceContact(double * u, std::vector<char> & inContact, const st
     return;
   }
   std::fill(inContact.begin(), inContact.end(), 0);
-  contactCorrections.resize(contacts.size());
+  // Only dynamic relaxation uses the corrections (ForgetProjectionVelocities).
+  const bool relaxation = settings.integrator == Integrator::DynamicRelaxation;
+  contactCorrections.resize(relaxation ? contacts.size() : 0);
   for (std::size_t k = 0; k < contacts.size(); ++k)
   {
-    contacts[k]->Enforce(u, dofConstrained, inContact, threads, &contactCorrections[k]);
+    contacts[k]->Enforce(u, dofConstrained, inContact, threads, relaxation ? &contactCorrections[k] : nullptr);
   }
 }
 
