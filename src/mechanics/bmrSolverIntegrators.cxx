@@ -29,6 +29,9 @@ constexpr double kSignificantIncrement = 1e-4; // of the body's size
 constexpr double kRoundOffIncrement = 1e-12;   // of the body's size: a state at rest to round-off
 constexpr int    kMaxRestarts = 6;
 constexpr double kRestartMassFactor = 2.0;
+// Restart points kept besides the initial state: a restart that fails again
+// before passing a new one falls back to the one before.
+constexpr std::size_t kRecentRestartPoints = 3;
 
 // Fixed block partition: sums do not depend on the number of threads.
 constexpr Index kReductionBlocks = 64;
@@ -249,12 +252,22 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   auto   rampPosition = [&](int k) { return std::min(1.0, rampOrigin + (k - rampOriginStep) / rampLength); };
   auto   loadFactor = [&](const LoadCurve & curve, int k) { return curve.Factor(rampPosition(k)); };
 
-  // Checkpoint for restarts: stiffening under large deformation can outgrow
-  // the reference-state estimate of the largest eigenvalue. Dynamic relaxation
-  // only seeks the steady state, so it may restart from the last good state at
-  // rest with heavier masses.
-  std::vector<double>         checkpoint(u);
-  int                         checkpointStep = 0;
+  // Restart points: stiffening under large deformation can outgrow the
+  // reference-state estimate of the largest eigenvalue. Dynamic relaxation
+  // only seeks the steady state, so it may restart from a good state at rest
+  // with heavier masses. A state that passed its checks can still be one that
+  // no restart survives (far out of balance, its forces move a node too far
+  // at once however heavy the masses): a restart that fails before reaching
+  // the next restart point drops the point it began from, back to the initial
+  // state, which is kept.
+  struct RestartPoint
+  {
+    std::vector<double> u;
+    int                 step;
+    double              rampPosition;
+  };
+  std::vector<RestartPoint>   restartPoints{ { u, 0, 0.0 } };
+  bool                        passedRestartPoint = true; // since the last restart
   std::unique_ptr<SolveError> firstFailure;
 
   for (step = 0; step < settings.maxSteps; ++step)
@@ -262,17 +275,6 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
     try
     {
       CheckForces(forces->ComputeInternalForces(u.data(), f.data()), step, false, h);
-      // Checkpoint a state whose forces were just computed with no inverted
-      // unit. Saved at the end of the previous step instead, it was the state
-      // about to be checked: the 25 mm truth of Colin27 on Morton-numbered
-      // tetrahedra inverted a cell in that state, and all six restarts began
-      // from it and failed at once.
-      if (step % window == 0)
-      {
-        checkpoint = u;
-        checkpointStep = step;
-      }
-
       if (step > 0 && step % window == 0)
       {
         // Rayleigh quotient of the last increment: tends to the lowest eigenvalue
@@ -342,6 +344,19 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
                 << " steps. Likely cause: stiffening beyond the time-step estimate (lower safety_factor).";
         throw SolveError(message.str(), step, -1);
       }
+      // A restart point is a state whose forces had no inverted unit and whose
+      // increment was bounded. Saved before its forces were checked, it was
+      // the state about to invert in the 25 mm truth of Colin27 on
+      // Morton-numbered tetrahedra, and all six restarts failed at once.
+      if (step > restartPoints.back().step && step % window == 0)
+      {
+        if (restartPoints.size() > kRecentRestartPoints)
+        {
+          restartPoints.erase(restartPoints.begin() + 1);
+        }
+        restartPoints.push_back({ u, step, rampPosition(step) });
+        passedRestartPoint = true;
+      }
       std::swap(uPrevious, u);
       std::swap(u, uNext);
       std::swap(f, fPrevious);
@@ -400,7 +415,7 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
       {
         // The first failure names the cell or node where it started.
         throw SolveError(std::string(firstFailure->what()) + " Restarting " + std::to_string(kMaxRestarts) +
-                           " times from the last good state with heavier masses" +
+                           " times from earlier good states with heavier masses" +
                            (rampSlowdowns > 0 ? " and a load ramp up to " + std::to_string(1 << rampSlowdowns) +
                                                   " times slower"
                                               : std::string()) +
@@ -408,10 +423,16 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
                          firstFailure->Step(), firstFailure->Element());
       }
       ++restarts;
-      if (checkpointStep < rampEndStep)
+      if (!passedRestartPoint && restartPoints.size() > 1)
       {
-        rampOrigin = rampPosition(checkpointStep);
-        rampOriginStep = checkpointStep;
+        restartPoints.pop_back();
+      }
+      passedRestartPoint = false;
+      const RestartPoint & from = restartPoints.back();
+      if (from.step < rampEndStep)
+      {
+        rampOrigin = from.rampPosition;
+        rampOriginStep = from.step;
         rampLength *= 2.0;
         rampEndStep = rampOriginStep + static_cast<int>(std::ceil((1.0 - rampOrigin) * rampLength - 1e-9));
         ++rampSlowdowns;
@@ -420,9 +441,9 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
       PrepareEssentialBoundary(mass); // its projection does not change, but the contact's use of it must see the masses
       setDamping(lowestEigenvalue / kRestartMassFactor);
       slowestEigenvalue /= kRestartMassFactor;
-      u = checkpoint;
-      uPrevious = checkpoint;
-      step = checkpointStep - 1;
+      u = from.u;
+      uPrevious = from.u;
+      step = from.step - 1;
       incrementNorms.clear();
       satisfied = 0;
       continue;
