@@ -24,8 +24,8 @@ MortonCode(const Vector3 & point, const Eigen::AlignedBox3d & box);
  *  meshless cloud of Colin27 at random: about 120 mm between consecutive
  *  nodes at the 90th percentile), and then the nodes of one cell or one
  *  integration point are as many cache lines of u and f, arrays larger than
- *  L2 at 100,000 DOF. The meshless force kernel works in this numbering
- *  (docs/thread-scaling.md). */
+ *  L2 at 100,000 DOF. The meshless force kernel works in this numbering; the
+ *  tetrahedral grids of images are numbered in it (docs/thread-scaling.md). */
 class MortonNumbering
 {
 public:
