@@ -353,8 +353,8 @@ def main():
     parser.add_argument("--biomech", default=BIOMECH, help="the biomech executable")
     parser.add_argument("--scenes", nargs="*",
                         help="only these scenes (the docs are rewritten only with --update-json)")
-    parser.add_argument("--update-json", help="an earlier run's validation.json: replace its rows of --scenes, "
-                        "rewrite the docs from it")
+    parser.add_argument("--update-json", help="an earlier run's validation.json (a full run keeps one in "
+                        "docs/validation.json): replace its rows of --scenes, rewrite the docs from it")
     parser.add_argument("--from-json", help="rewrite the docs from an earlier run's validation.json, run nothing")
     parser.add_argument("--truths", action="store_true",
                         help="only the scenes with a second ground truth (TRUTH_CHECKS): writes "
@@ -415,6 +415,9 @@ def main():
         json.dump({"runs": runs, "machine": machine}, handle, indent=1)
     if not arguments.reduced and (not arguments.scenes or arguments.update_json):
         os.makedirs(arguments.docs, exist_ok=True)
+        # Kept beside the table, so that a later run of some scenes can be merged into it (--update-json).
+        with open(os.path.join(arguments.docs, "validation.json"), "w") as handle:
+            json.dump({"runs": runs, "machine": machine}, handle, indent=1)
         plot(runs, os.path.join(arguments.docs, "validation-error-vs-time.png"))
         with open(os.path.join(arguments.docs, "validation.md"), "w") as handle:
             handle.write(markdown(runs, machine))
