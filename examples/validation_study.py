@@ -18,6 +18,7 @@ import argparse
 import json
 import os
 import platform
+import shutil
 import subprocess
 import sys
 import time
@@ -411,13 +412,13 @@ def main():
         merged.update(rerun)
         runs = sorted(merged.values(), key=lambda entry: order.index(entry["name"]) if entry["name"] in order else 99)
         machine = earlier.get("machine", "") + "; rerun of %s: %s" % (", ".join(sorted(rerun)), machine)
-    with open(os.path.join(arguments.output, "validation.json"), "w") as handle:
+    record = os.path.join(arguments.output, "validation.json")
+    with open(record, "w") as handle:
         json.dump({"runs": runs, "machine": machine}, handle, indent=1)
     if not arguments.reduced and (not arguments.scenes or arguments.update_json):
         os.makedirs(arguments.docs, exist_ok=True)
         # Kept beside the table, so that a later run of some scenes can be merged into it (--update-json).
-        with open(os.path.join(arguments.docs, "validation.json"), "w") as handle:
-            json.dump({"runs": runs, "machine": machine}, handle, indent=1)
+        shutil.copyfile(record, os.path.join(arguments.docs, "validation.json"))
         plot(runs, os.path.join(arguments.docs, "validation-error-vs-time.png"))
         with open(os.path.join(arguments.docs, "validation.md"), "w") as handle:
             handle.write(markdown(runs, machine))
