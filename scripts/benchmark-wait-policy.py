@@ -14,8 +14,10 @@ keeps one of the two cores busy (`yes > /dev/null`). Medians of --rounds.
 """
 
 import argparse
+import ctypes
 import json
 import os
+import signal
 import statistics
 import subprocess
 import sys
@@ -48,8 +50,15 @@ def run(build, kernel, threads, policy):
     return result["ns_per_element_step"], result["dr_seconds"]
 
 
+def die_with_parent():
+    # The busy core's `yes` must not outlive this script, also when it is
+    # killed (SIGKILL runs no `finally`): Linux's PR_SET_PDEATHSIG (1) sends
+    # it SIGKILL when its parent dies.
+    ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL, 0, 0, 0)
+
+
 def measure(build, rounds, busy):
-    hog = subprocess.Popen(["yes"], stdout=subprocess.DEVNULL) if busy else None
+    hog = subprocess.Popen(["yes"], stdout=subprocess.DEVNULL, preexec_fn=die_with_parent) if busy else None
     try:
         time.sleep(1.0 if busy else 0.0)
         rows = {}
@@ -72,6 +81,10 @@ def main():
     parser.add_argument("--build", default="build")
     parser.add_argument("--output", default="docs/wait-policy.md")
     arguments = parser.parse_args()
+    # SIGTERM and SIGHUP (a killed job, a closed terminal) end the script
+    # through its `finally` clauses, which stop the busy core's process.
+    for terminating in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(terminating, lambda number, frame: sys.exit(128 + number))
 
     load_before = os.getloadavg()
     quiet = measure(arguments.build, arguments.rounds, busy=False)

@@ -398,10 +398,11 @@ TEST_F(RegisterCommandTest, MeshlessOnColin27AgreesWithHexahedra)
   EXPECT_NEAR(report["solve"]["max_displacement_mm"].get<double>(), 5.0, 0.5);
   // Dynamic relaxation damped for the current lowest-eigenvalue estimate took
   // 3,832 steps here, damped for the smallest since the loads were applied
-  // 3,410 (docs/solver.md); the meshless model 1,368 and 1,302.
+  // 3,410, with the long-span estimate among them 3,198 (docs/solver.md); the
+  // meshless model 1,368, 1,302 and 1,273.
   const json hexahedraReport = json::parse(bmr::test::ReadText(hexahedra / "registration-report.json"));
   EXPECT_TRUE(hexahedraReport["solve"]["converged"].get<bool>());
-  EXPECT_LE(hexahedraReport["solve"]["steps"].get<int>(), 3600);
+  EXPECT_LE(hexahedraReport["solve"]["steps"].get<int>(), 3300);
 
   // Both backward transforms at the meshless model's nodes (inside the brain).
   const auto meshlessTransform = itk::ReadBiomechanicalTransform((meshless / "transform.h5").string());
