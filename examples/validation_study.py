@@ -221,7 +221,8 @@ def reading(runs, machine=""):
 def busy(machine):
     """A sentence on the machine's load during the run, from the machine line's load averages."""
     import re
-    loads = [float(value) for value in re.findall(r"load average ([0-9.]+)", machine)]
+    loads = [float(value) for pair in re.findall(r"load average ([0-9.]+) at the start and ([0-9.]+)", machine)
+             for value in pair]
     if loads and max(loads) > 1.0:
         return (" This run's machine was busy (load average up to %.1f on 2 cores, other work beside it): its times "
                 "are upper bounds." % max(loads))
