@@ -145,6 +145,7 @@ struct Options
   double      residualTolerance = 0.005;
   bool        warmStart = true;        // CalculiX starts from the ANP solution
   bool        midEdgeSlaves = false;   // CalculixSettings::midEdgeSlaves
+  bool        gradualRelease = true;   // CalculixSettings::gradualRelease
   int         threads = 2;
   std::string workDirectory;           // keep CalculiX's job folders here
 };
@@ -209,6 +210,7 @@ Run(const Scene & scene, const bmr::RegistrationImage * image, const bmr::Regist
   calculix.residualTolerance = options.residualTolerance;
   calculix.correctionTolerance = 2.0 * options.residualTolerance;
   calculix.midEdgeSlaves = options.midEdgeSlaves;
+  calculix.gradualRelease = options.gradualRelease;
   if (warmStart)
   {
     calculix.startDisplacements = anp.displacements;
@@ -258,6 +260,8 @@ Run(const Scene & scene, const bmr::RegistrationImage * image, const bmr::Regist
                            { "residual_tolerance", options.residualTolerance },
                            { "skull_closing_mm", options.skullClosing },
                            { "mid_edge_slaves", options.midEdgeSlaves },
+                           { "gradual_release", warmStart && options.gradualRelease },
+                           { "hold_run_seconds", reference.holdRunSeconds },
                            { "increments", reference.increments },
                            { "iterations", reference.iterations },
                            { "release_increments", warmStart ? reference.lastStepIncrements : 0 },
@@ -384,6 +388,8 @@ main(int argc, char ** argv)
     ->check(CLI::Range(1e-8, 0.1));
   app.add_option("--warm-start", options.warmStart,
                  "start CalculiX from the ANP solution (a first step holds the boundary there, a second releases it)");
+  app.add_option("--gradual-release", options.gradualRelease,
+                 "with --warm-start: release the held boundary gradually (its reaction forces falling to zero) instead of at once");
   app.add_option("--mid-edge-slaves", options.midEdgeSlaves,
                  "mid-edge nodes are contact slaves too (false: the corners, as the module's contact)");
   app.add_option("--threads", options.threads, "threads of both solvers")->check(CLI::PositiveNumber);
@@ -446,7 +452,8 @@ main(int argc, char ** argv)
     command << "bmrCalculixGroundTruth --element-size " << options.elementSize << " --skull-closing "
             << options.skullClosing << " --skull-edge " << options.skullEdge << " --material-bins " << options.materialStep
             << " --initial-increment " << options.initialIncrement << " --residual-tolerance " << options.residualTolerance
-            << " --warm-start " << (options.warmStart ? "true" : "false") << " --mid-edge-slaves "
+            << " --warm-start " << (options.warmStart ? "true" : "false") << " --gradual-release "
+            << (options.gradualRelease ? "true" : "false") << " --mid-edge-slaves "
             << (options.midEdgeSlaves ? "true" : "false") << " --threads " << options.threads;
     std::ofstream(output) << Report(runs, machine.str(), command.str());
     std::cout << json{ { "machine", machine.str() }, { "runs", runs } }.dump(2) << std::endl;

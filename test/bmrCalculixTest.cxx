@@ -740,6 +740,21 @@ TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
   EXPECT_LT(warmAgainstCold.maxError, 0.2 * agreement.maxError);
   EXPECT_GE(continued.lastStepIterations, 1);
   EXPECT_LT(continued.lastStepIncrements, continued.increments); // two steps
+
+  // The gradual release (a hold-only run for the reaction forces, then the
+  // release with them falling to zero) ends at the same equilibrium.
+  warm.gradualRelease = true;
+  const CalculixResult         gradual = RunCalculix(walled, warm);
+  const DisplacementComparison gradualAgainstCold =
+    CompareDisplacements(walled.nodes, gradual.displacements, walled.nodes, reference.displacements);
+  std::cout << "walls, released gradually: against the cold start RMS / max " << gradualAgainstCold.rmsError << " / "
+            << gradualAgainstCold.maxError << " mm (" << gradual.lastStepIncrements << " increments, "
+            << gradual.lastStepIterations << " Newton iterations after the release; the hold alone "
+            << gradual.holdRunSeconds << " s)" << std::endl;
+  EXPECT_LT(gradualAgainstCold.rmsError, 0.1 * agreement.rmsError);
+  EXPECT_LT(gradualAgainstCold.maxError, 0.2 * agreement.maxError);
+  EXPECT_GT(gradual.holdRunSeconds, 0.0);
+  EXPECT_GE(gradual.lastStepIterations, 1);
 }
 
 TEST(CalculixDeck, StartStateOfTheWrongSizeOrNotFiniteIsANamedError)
@@ -769,6 +784,24 @@ TEST(CalculixDeck, StartStateOfTheWrongSizeOrNotFiniteIsANamedError)
   std::ostringstream good;
   WriteCalculixDeck(good, model, mesh, settings);
   EXPECT_NE(good.str().find("*BOUNDARY, OP=NEW"), std::string::npos); // the release step
+  EXPECT_EQ(good.str().find("*CLOAD"), std::string::npos);
+
+  // Release forces: one per mesh node, finite; written as loads of the release step.
+  settings.releaseForces.assign(mesh.nodes.size() - 1, Vector3::Ones());
+  std::ostringstream refused;
+  EXPECT_THROW(WriteCalculixDeck(refused, model, mesh, settings), Error);
+  EXPECT_TRUE(refused.str().empty());
+  settings.releaseForces.assign(mesh.nodes.size(), Vector3::Ones());
+  std::ostringstream gradual;
+  WriteCalculixDeck(gradual, model, mesh, settings);
+  const std::string released = gradual.str();
+  EXPECT_NE(released.find("*AMPLITUDE, NAME=BMRRELEASE"), std::string::npos);
+  EXPECT_GT(released.find("*CLOAD, AMPLITUDE=BMRRELEASE"), released.find("*BOUNDARY, OP=NEW"));
+  settings.holdOnly = true; // the hold alone: no release step
+  std::ostringstream holdOnly;
+  WriteCalculixDeck(holdOnly, model, mesh, settings);
+  EXPECT_EQ(holdOnly.str().find("*BOUNDARY, OP=NEW"), std::string::npos);
+  EXPECT_EQ(holdOnly.str().find("*CLOAD"), std::string::npos);
 }
 
 TEST(CalculixContact, BadContactSurfacesAreNamedErrors)

@@ -382,6 +382,28 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
       }
     }
   }
+  if (!settings.releaseForces.empty() || settings.holdOnly)
+  {
+    if (!continuation)
+    {
+      throw Error("CalculiX deck: CalculixSettings::releaseForces and holdOnly need startDisplacements (the state "
+                  "that is held and released); give them, or leave releaseForces empty and holdOnly false.");
+    }
+    if (!settings.releaseForces.empty() && settings.releaseForces.size() != mesh.nodes.size())
+    {
+      throw Error("CalculiX deck: CalculixSettings::releaseForces has " + std::to_string(settings.releaseForces.size()) +
+                  " forces for a CalculiX mesh of " + std::to_string(mesh.nodes.size()) +
+                  " nodes; give one per mesh node (CalculixResult::meshReactionForces of the hold), or none.");
+    }
+    for (const Vector3 & force : settings.releaseForces)
+    {
+      if (!force.allFinite())
+      {
+        throw Error("CalculiX deck: CalculixSettings::releaseForces holds a force that is not finite; give finite "
+                    "forces.");
+      }
+    }
+  }
 
   // Constraint per model node and component: constrained flag and value (mm).
   // Prescribed displacements override fixed constraints on the same component.
@@ -499,6 +521,17 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
   // it, and the mid-edge nodes on boundary faces whose vertices all are) and
   // their values; with `start` (the continuation's first step) also the
   // boundary's corner nodes at the start state where the model leaves them free.
+  // The continuation holds the corner nodes of the body's boundary in the
+  // components the model leaves free.
+  std::vector<char> boundary(modelNodes, 0);
+  for (const auto & triangle : mesh.boundaryTriangles)
+  {
+    for (const Index node : triangle)
+    {
+      boundary[static_cast<std::size_t>(node)] = 1;
+    }
+  }
+  const auto held = [&](std::size_t node, int d) { return boundary[node] && !constrained[3 * node + d]; };
   const auto writeBoundary = [&](bool replace, const std::vector<Vector3> * start) {
     std::array<std::vector<char>, 3> meshConstrained;
     for (int d = 0; d < 3; ++d)
@@ -534,19 +567,11 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
     }
     if (start)
     {
-      std::vector<char> boundary(modelNodes, 0);
-      for (const auto & triangle : mesh.boundaryTriangles)
-      {
-        for (const Index node : triangle)
-        {
-          boundary[static_cast<std::size_t>(node)] = 1;
-        }
-      }
       for (std::size_t node = 0; node < modelNodes; ++node)
       {
         for (int d = 0; d < 3; ++d)
         {
-          if (boundary[node] && !constrained[3 * node + d])
+          if (held(node, d))
           {
             stream << node + 1 << ", " << d + 1 << ", " << d + 1 << ", " << FormatDouble((*start)[node][d]) << "\n";
           }
@@ -567,6 +592,12 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
            << ", 0, 0, 0.02, 1e-5, 1e-3, 1e-8\n";
   };
 
+  const char * releaseAmplitude = "BMRRELEASE";
+  if (!settings.releaseForces.empty())
+  {
+    // Step time 0 -> 1: the held nodes' forces fall from their hold values to zero.
+    stream << "*AMPLITUDE, NAME=" << releaseAmplitude << "\n0., 1., 1., 0.\n";
+  }
   writeStepHeader();
   if (continuation)
   {
@@ -592,12 +623,26 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
     }
   }
 
-  if (continuation)
+  if (continuation && !settings.holdOnly)
   {
     // The release: the model's own constraints only; loads carry over.
     stream << "*END STEP\n";
     writeStepHeader();
     writeBoundary(true, nullptr);
+    if (!settings.releaseForces.empty())
+    {
+      stream << "*CLOAD, AMPLITUDE=" << releaseAmplitude << "\n";
+      for (std::size_t node = 0; node < modelNodes; ++node)
+      {
+        for (int d = 0; d < 3; ++d)
+        {
+          if (held(node, d) && settings.releaseForces[node][d] != 0.0)
+          {
+            stream << node + 1 << ", " << d + 1 << ", " << FormatDouble(settings.releaseForces[node][d]) << "\n";
+          }
+        }
+      }
+    }
   }
   // FREQUENCY beyond the increment limit: only the end of the (last) step is printed.
   const int frequency = settings.maximumIncrements + 1;
@@ -668,6 +713,23 @@ CalculixResult::TotalReactionForce(const std::vector<Index> & modelNodes) const
 CalculixResult
 RunCalculix(const Model & model, const CalculixSettings & settings)
 {
+  if (settings.gradualRelease && !settings.startDisplacements.empty())
+  {
+    // The hold alone, for its reaction forces; then hold and gradual release.
+    CalculixSettings hold = settings;
+    hold.gradualRelease = false;
+    hold.holdOnly = true;
+    hold.releaseForces.clear();
+    hold.jobName = (settings.jobName.empty() ? std::string("bmr") : settings.jobName) + "-hold";
+    const CalculixResult held = RunCalculix(model, hold);
+    CalculixSettings     release = settings;
+    release.gradualRelease = false;
+    release.holdOnly = false;
+    release.releaseForces = held.meshReactionForces;
+    CalculixResult result = RunCalculix(model, release);
+    result.holdRunSeconds = held.wallSeconds;
+    return result;
+  }
   const std::string executable = FindCalculix(settings.executable);
   if (executable.empty())
   {
@@ -779,7 +841,7 @@ RunCalculix(const Model & model, const CalculixSettings & settings)
     fail("no displacement or reaction force output in " + job + ".dat");
   }
   // The .dat gives the total time: each static step runs for 1.
-  const double endTime = settings.startDisplacements.empty() ? 1.0 : 2.0;
+  const double endTime = settings.startDisplacements.empty() || settings.holdOnly ? 1.0 : 2.0;
   if (std::abs(u.time - endTime) > 1e-6 || std::abs(rf.time - endTime) > 1e-6)
   {
     fail("the static step did not converge to its end (last output at time " + FormatDouble(u.time) + " of " +

@@ -83,6 +83,20 @@ struct CalculixSettings
    *  is CalculiX's own equilibrium, reached from near the given state. For contact that Newton does not find from the reference
    *  state, e.g. a brain settling onto the skull through 10 Pa CSF. */
   std::vector<Vector3> startDisplacements;
+  /** With startDisplacements: release the held nodes gradually. RunCalculix
+   *  then runs the hold step alone first, and then hold and release with the
+   *  hold's reaction forces applied at the held nodes as loads that fall
+   *  linearly to zero over the release step: the release starts in
+   *  equilibrium and Newton follows the body as it lets go, where a release
+   *  at once (false) leaves Newton the whole out-of-balance at the first
+   *  iteration (on Colin27 a first correction of 55 mm, docs/registration.md). */
+  bool gradualRelease = false;
+  /** What gradualRelease sets for each run (or a caller with its own forces):
+   *  stop after the hold step; and per mesh node, forces (N) applied at the
+   *  held components in the release step, falling linearly to zero over it
+   *  (empty: none). */
+  bool                 holdOnly = false;
+  std::vector<Vector3> releaseForces;
 
   /** Equation solver (*STATIC, SOLVER=...): empty for CalculiX's default
    *  (SPOOLES in Debian's build), or "ITERATIVE CHOLESKY", "ITERATIVE SCALING". */
@@ -158,6 +172,7 @@ struct CalculixResult
   int                  iterations = 0;      // Newton iterations, all steps
   int                  lastStepIncrements = 0; // of the last step (the release, with startDisplacements)
   int                  lastStepIterations = 0;
+  double               holdRunSeconds = 0.0;   // gradualRelease: the first run (the hold alone), not in wallSeconds
   std::string          workDirectory;       // kept only with keepFiles
 
   /** Sum of reaction forces (N) over the given model nodes and the mid-edge
