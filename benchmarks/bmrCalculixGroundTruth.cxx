@@ -17,7 +17,7 @@
 //
 // Status (2026-11-27): no report yet: on Colin27 CalculiX's Newton diverges
 // in the skull contact, from a cold start and at the release from the ANP
-// solution (docs/registration.md, "A truth from CalculiX").
+// solution, at once or gradually (docs/registration.md, "A truth from CalculiX").
 
 // ITK's headers first: they bring ITK's own Eigen, which must precede the system's.
 #include "bmrSyntheticBrainShift.h"
@@ -146,6 +146,7 @@ struct Options
   bool        warmStart = true;        // CalculiX starts from the ANP solution
   bool        midEdgeSlaves = false;   // CalculixSettings::midEdgeSlaves
   bool        gradualRelease = true;   // CalculixSettings::gradualRelease
+  double      csfModulus = 10.0;       // Pa, the CSF class of both truths (the study's: 10)
   int         threads = 2;
   std::string workDirectory;           // keep CalculiX's job folders here
 };
@@ -164,6 +165,7 @@ Run(const Scene & scene, const bmr::RegistrationImage * image, const bmr::Regist
   settings.freeRim = scene.freeRim;
   settings.threads = threads;
   settings.skullClosing = options.skullClosing;
+  settings.csfYoungsModulus = options.csfModulus; // Pa, as Material holds it
   settings.grid.kind = scene.truthKind;
   settings.grid.elementSize = scene.truthElementSize;
 
@@ -257,6 +259,7 @@ Run(const Scene & scene, const bmr::RegistrationImage * image, const bmr::Regist
                            { "mesh_nodes", bodyNodes },
                            { "slave_faces", reference.mesh.contactPairs.empty() ? 0 : reference.mesh.contactPairs[0].slaveFaces.size() },
                            { "warm_start", warmStart },
+                           { "csf_modulus_pa", options.csfModulus },
                            { "residual_tolerance", options.residualTolerance },
                            { "skull_closing_mm", options.skullClosing },
                            { "mid_edge_slaves", options.midEdgeSlaves },
@@ -390,6 +393,9 @@ main(int argc, char ** argv)
                  "start CalculiX from the ANP solution (a first step holds the boundary there, a second releases it)");
   app.add_option("--gradual-release", options.gradualRelease,
                  "with --warm-start: release the held boundary gradually (its reaction forces falling to zero) instead of at once");
+  app.add_option("--csf-modulus", options.csfModulus,
+                 "Young's modulus (Pa) of the CSF class in both truths; the study's scene has 10")
+    ->check(CLI::PositiveNumber);
   app.add_option("--mid-edge-slaves", options.midEdgeSlaves,
                  "mid-edge nodes are contact slaves too (false: the corners, as the module's contact)");
   app.add_option("--threads", options.threads, "threads of both solvers")->check(CLI::PositiveNumber);
@@ -453,7 +459,8 @@ main(int argc, char ** argv)
             << options.skullClosing << " --skull-edge " << options.skullEdge << " --material-bins " << options.materialStep
             << " --initial-increment " << options.initialIncrement << " --residual-tolerance " << options.residualTolerance
             << " --warm-start " << (options.warmStart ? "true" : "false") << " --gradual-release "
-            << (options.gradualRelease ? "true" : "false") << " --mid-edge-slaves "
+            << (options.gradualRelease ? "true" : "false") << " --csf-modulus " << options.csfModulus
+            << " --mid-edge-slaves "
             << (options.midEdgeSlaves ? "true" : "false") << " --threads " << options.threads;
     std::ofstream(output) << Report(runs, machine.str(), command.str());
     std::cout << json{ { "machine", machine.str() }, { "runs", runs } }.dump(2) << std::endl;

@@ -334,7 +334,7 @@ def truth_agreement(runs, machine):
               "contact at large shifts).",
               "* Not done: a truth from CalculiX (C3D10). The harness writes the skull contact and can start "
               "CalculiX from the module's solution, but CalculiX's Newton iterations diverge on these scenes, "
-              "also when released from there (docs/registration.md, \"A truth from CalculiX\")."]
+              "also when released from there, at once or gradually (docs/registration.md, \"A truth from CalculiX\")."]
     return "\n".join(lines) + "\n"
 
 
