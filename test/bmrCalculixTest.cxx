@@ -787,10 +787,28 @@ TEST(CalculixDeck, StartStateOfTheWrongSizeOrNotFiniteIsANamedError)
   EXPECT_EQ(good.str().find("*CLOAD"), std::string::npos);
 
   // Release forces: one per mesh node, finite; written as loads of the release step.
+  const auto refusal = [&](const CalculixSettings & bad) {
+    std::ostringstream refused;
+    try
+    {
+      WriteCalculixDeck(refused, model, mesh, bad);
+      ADD_FAILURE() << "bad release settings gave a deck";
+    }
+    catch (const Error & error)
+    {
+      EXPECT_TRUE(refused.str().empty()) << "a refused deck must not be half-written";
+      return std::string(error.what());
+    }
+    return std::string();
+  };
   settings.releaseForces.assign(mesh.nodes.size() - 1, Vector3::Ones());
-  std::ostringstream refused;
-  EXPECT_THROW(WriteCalculixDeck(refused, model, mesh, settings), Error);
-  EXPECT_TRUE(refused.str().empty());
+  EXPECT_NE(refusal(settings).find("releaseForces has " + std::to_string(mesh.nodes.size() - 1)), std::string::npos);
+  settings.releaseForces.assign(mesh.nodes.size(), Vector3::Ones());
+  settings.releaseForces.back().y() = std::numeric_limits<double>::infinity();
+  EXPECT_NE(refusal(settings).find("releaseForces holds a force that is not finite"), std::string::npos);
+  CalculixSettings withoutStart;
+  withoutStart.holdOnly = true;
+  EXPECT_NE(refusal(withoutStart).find("need startDisplacements"), std::string::npos);
   settings.releaseForces.assign(mesh.nodes.size(), Vector3::Ones());
   std::ostringstream gradual;
   WriteCalculixDeck(gradual, model, mesh, settings);

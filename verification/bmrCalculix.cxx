@@ -517,12 +517,8 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
   }
   WriteCalculixContactPairs(stream, model, mesh, settings);
 
-  // Per component: the mesh nodes constrained (the model nodes constrained in
-  // it, and the mid-edge nodes on boundary faces whose vertices all are) and
-  // their values; with `start` (the continuation's first step) also the
-  // boundary's corner nodes at the start state where the model leaves them free.
-  // The continuation holds the corner nodes of the body's boundary in the
-  // components the model leaves free.
+  // What the continuation holds (and its release forces act on): the corner
+  // nodes of the body's boundary, in the components the model leaves free.
   std::vector<char> boundary(modelNodes, 0);
   for (const auto & triangle : mesh.boundaryTriangles)
   {
@@ -532,6 +528,10 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
     }
   }
   const auto held = [&](std::size_t node, int d) { return boundary[node] && !constrained[3 * node + d]; };
+  // Per component: the mesh nodes constrained (the model nodes constrained in
+  // it, and the mid-edge nodes on boundary faces whose vertices all are) and
+  // their values; with `start` (the continuation's first step) also the held
+  // nodes at the start state.
   const auto writeBoundary = [&](bool replace, const std::vector<Vector3> * start) {
     std::array<std::vector<char>, 3> meshConstrained;
     for (int d = 0; d < 3; ++d)

@@ -327,7 +327,9 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
           // within the span while the slow ones moved on, so it is closer to
           // the slowest mode (docs/solver.md: 19 % fewer steps for the
           // meshless Colin27 solve).
-          if (spanStart.step >= rampEndStep && step - spanStart.step >= kLongSpanWindows * window)
+          const bool spanStarted = spanStart.step >= rampEndStep;
+          const bool spanComplete = spanStarted && step - spanStart.step >= kLongSpanWindows * window;
+          if (spanComplete)
           {
             const double spanQuotient = secantRayleighQuotient(u, spanStart.u, f, spanStart.f);
             if (spanQuotient > 0.0)
@@ -336,9 +338,11 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
               setDamping(slowestEigenvalue);
             }
           }
-          if (spanStart.step < rampEndStep || step - spanStart.step >= kLongSpanWindows * window)
+          if (!spanStarted || spanComplete)
           {
-            spanStart = { step, u, f };
+            spanStart.step = step;
+            spanStart.u = u; // copied into the vectors' storage, no allocation after the first span
+            spanStart.f = f;
           }
         }
       }
