@@ -3,6 +3,7 @@
 #include "bmrImageGridBody.h"
 
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Handle_hash_function.h>
 #include <CGAL/Image_3.h>
 #include <CGAL/ImageIO.h>
 #include <CGAL/Labeled_mesh_domain_3.h>
@@ -11,6 +12,8 @@
 #include <CGAL/Mesh_triangulation_3.h>
 #include <CGAL/Random.h>
 #include <CGAL/make_mesh_3.h>
+
+#include <unordered_map>
 
 namespace bmr
 {
@@ -171,7 +174,9 @@ MakeTetrahedralGrid(const Body & body, const ImageGridSettings & settings, std::
   ImageGrid result;
   Model &   model = result.model;
   model.materials.push_back(Parenchyma());
-  std::map<Triangulation::Vertex_handle, Index> nodeOf;
+  // Nodes numbered in the order the cells first meet them (a hash map: a
+  // std::map of the handles took a second for the 4.25 mm meshless cloud).
+  std::unordered_map<Triangulation::Vertex_handle, Index, CGAL::Handle_hash_function> nodeOf;
   for (auto cell = complex.cells_in_complex_begin(); cell != complex.cells_in_complex_end(); ++cell)
   {
     Cell element;
