@@ -186,6 +186,16 @@ TEST(BrainSurface, ClosedOrientedSurfaceCheckRefusesOpenFlippedAndRepeatedTriang
   pinched.triangles.insert(pinched.triangles.end(), { { 0, 4, 5 }, { 0, 6, 4 }, { 0, 5, 6 }, { 4, 6, 5 } });
   EXPECT_TRUE(bmr::IsClosedOrientedSurface(pinched));
 
+  // A degenerate triangle's edge from a vertex to itself is its own reverse,
+  // but its other two edges are not matched.
+  bmr::ContactSurface degenerate = tetrahedron;
+  degenerate.triangles.push_back({ 1, 1, 2 });
+  EXPECT_FALSE(bmr::IsClosedOrientedSurface(degenerate));
+
+  bmr::ContactSurface negative = tetrahedron;
+  negative.triangles[0][0] = -1;
+  EXPECT_FALSE(bmr::IsClosedOrientedSurface(negative));
+
   EXPECT_FALSE(bmr::IsClosedOrientedSurface(bmr::ContactSurface{}));
 }
 

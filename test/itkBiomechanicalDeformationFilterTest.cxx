@@ -26,6 +26,7 @@
 #include "itkFuzzyCMeansClassifierImageFilter.h"
 #include "itkImage.h"
 #include "itkImageRegionIteratorWithIndex.h"
+#include "itkDefaultDynamicMeshTraits.h"
 #include "itkTriangleCell.h"
 
 #include "bmrMaterialMapping.h"
@@ -549,6 +550,72 @@ MeshOf(const ContactSurface & surface)
     mesh->SetCell(t, cell);
   }
   return mesh;
+}
+
+// An itk::Mesh as the core's surface: vertices in the points' order whether
+// the identifiers are dense (vector containers) or not (map containers), and
+// a cell that names a missing point is an error that says so.
+TEST(SurfaceMesh, ContactSurfaceFromMeshNumbersPointsInOrderAndNamesAMissingPoint)
+{
+  ContactSurface tetrahedron; // a tetrahedron's boundary, every face outward
+  tetrahedron.vertices = { Vector3(0, 0, 0), Vector3(1, 0, 0), Vector3(0, 1, 0), Vector3(0, 0, 1) };
+  tetrahedron.triangles = { { 0, 2, 1 }, { 0, 1, 3 }, { 0, 3, 2 }, { 1, 2, 3 } };
+  const ContactSurface dense = itk::MakeContactSurfaceFromMesh(MeshOf(tetrahedron).GetPointer(), "dense mesh");
+  EXPECT_EQ(dense.vertices, tetrahedron.vertices);
+  EXPECT_EQ(dense.triangles, tetrahedron.triangles);
+
+  using SparseMeshType = itk::Mesh<double, 3, itk::DefaultDynamicMeshTraits<double, 3, 3, double, double>>;
+  using SparseTriangle = itk::TriangleCell<SparseMeshType::CellType>;
+  const std::vector<SparseMeshType::PointIdentifier> ids{ 1000, 20, 300, 4 }; // a map container lists them sorted
+  auto sparse = SparseMeshType::New();
+  for (std::size_t v = 0; v < ids.size(); ++v)
+  {
+    SparseMeshType::PointType point;
+    for (unsigned int d = 0; d < 3; ++d)
+    {
+      point[d] = tetrahedron.vertices[v][d];
+    }
+    sparse->SetPoint(ids[v], point);
+  }
+  for (std::size_t t = 0; t < tetrahedron.triangles.size(); ++t)
+  {
+    SparseMeshType::CellAutoPointer cell;
+    cell.TakeOwnership(new SparseTriangle);
+    for (int v = 0; v < 3; ++v)
+    {
+      cell->SetPointId(v, ids[static_cast<std::size_t>(tetrahedron.triangles[t][v])]);
+    }
+    sparse->SetCell(t, cell);
+  }
+  const ContactSurface fromSparse = itk::MakeContactSurfaceFromMesh(sparse.GetPointer(), "sparse mesh");
+  ASSERT_EQ(fromSparse.vertices.size(), 4u);
+  ASSERT_EQ(fromSparse.triangles.size(), tetrahedron.triangles.size());
+  for (std::size_t t = 0; t < tetrahedron.triangles.size(); ++t)
+  {
+    for (int v = 0; v < 3; ++v)
+    {
+      EXPECT_EQ(fromSparse.vertices[static_cast<std::size_t>(fromSparse.triangles[t][v])],
+                tetrahedron.vertices[static_cast<std::size_t>(tetrahedron.triangles[t][v])]);
+    }
+  }
+
+  auto broken = MeshOf(tetrahedron);
+  SurfaceMeshType::CellAutoPointer cell;
+  cell.TakeOwnership(new itk::TriangleCell<SurfaceMeshType::CellType>);
+  cell->SetPointId(0, 0);
+  cell->SetPointId(1, 1);
+  cell->SetPointId(2, 9);
+  broken->SetCell(tetrahedron.triangles.size(), cell);
+  try
+  {
+    itk::MakeContactSurfaceFromMesh(broken.GetPointer(), "broken mesh");
+    FAIL() << "a cell that names a missing point was accepted";
+  }
+  catch (const itk::ExceptionObject & error)
+  {
+    EXPECT_NE(std::string(error.GetDescription()).find("of the broken mesh refers to point 9"), std::string::npos)
+      << error.GetDescription();
+  }
 }
 
 // Loads from measurements as a filter: the core's loads, bitwise, as a point
