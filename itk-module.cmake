@@ -24,6 +24,7 @@ itk_module(BiomechanicalRegistration
     ITKImageFeature
     ITKImageCompose
     ITKIOTransformBase
+    ITKZLIB
   TEST_DEPENDS
     ITKTestKernel
     ITKIONIFTI

@@ -36,10 +36,13 @@
 #include "bmrColin27.h"
 #include "bmrMeshIO.h"
 #include "bmrTemporaryFolderTest.h"
+#include "itkBiomechanicalImageIO.h"
 #include "itkBiomechanicalTransformIO.h"
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -821,6 +824,73 @@ TEST(RegionsFilter, FixedExposedAndContactNodesPartitionTheSurface)
 // ---------------------------------------------------------------------------
 // The whole registration as an ITK pipeline of the module's filters.
 // ---------------------------------------------------------------------------
+
+class ImageFileTest : public TemporaryFolderTest
+{};
+
+/** Images written as .nii.gz are ordinary gzip files that ITK reads back
+ *  exactly (values, origin, spacing, direction), as are other formats; a
+ *  failed write leaves no file behind, not even the uncompressed one. */
+TEST_F(ImageFileTest, WrittenImagesReadBackExactlyAndFailuresLeaveNothing)
+{
+  using ImageType = itk::Image<float, 3>;
+  auto                  image = ImageType::New();
+  ImageType::RegionType region;
+  region.SetSize({ { 7, 5, 4 } });
+  image->SetRegions(region);
+  const double spacing[3] = { 0.9, 1.1, 2.5 };
+  const double origin[3] = { -110.0, 35.5, 1000.0 };
+  image->SetSpacing(spacing);
+  image->SetOrigin(origin);
+  ImageType::DirectionType direction;
+  direction.SetIdentity();
+  direction(0, 0) = direction(1, 1) = std::cos(0.3);
+  direction(0, 1) = -std::sin(0.3);
+  direction(1, 0) = std::sin(0.3);
+  image->SetDirection(direction);
+  image->Allocate();
+  float value = -3.25f;
+  for (itk::ImageRegionIteratorWithIndex<ImageType> it(image, region); !it.IsAtEnd(); ++it, value += 0.37f)
+  {
+    it.Set(value);
+  }
+  for (const std::string name : { "image.nii.gz", "image.nii", "image.mha" })
+  {
+    const auto path = m_Folder / name;
+    itk::WriteBiomechanicalImage(image.GetPointer(), path);
+    const ImageType::Pointer back = itk::ReadBiomechanicalImage<ImageType>(path.string(), name);
+    ASSERT_EQ(back->GetLargestPossibleRegion().GetSize(), region.GetSize()) << name;
+    for (itk::ImageRegionIteratorWithIndex<ImageType> it(image, region); !it.IsAtEnd(); ++it)
+    {
+      ASSERT_EQ(back->GetPixel(it.GetIndex()), it.Get()) << name;
+    }
+    for (unsigned int d = 0; d < 3; ++d)
+    {
+      EXPECT_NEAR(back->GetOrigin()[d], image->GetOrigin()[d], 1e-4) << name;
+      EXPECT_NEAR(back->GetSpacing()[d], image->GetSpacing()[d], 1e-6) << name;
+      for (unsigned int e = 0; e < 3; ++e)
+      {
+        EXPECT_NEAR(back->GetDirection()(d, e), direction(d, e), 1e-6) << name;
+      }
+    }
+  }
+  std::ifstream gz(m_Folder / "image.nii.gz", std::ios::binary);
+  unsigned char magic[2] = { 0, 0 };
+  gz.read(reinterpret_cast<char *>(magic), 2);
+  EXPECT_EQ(magic[0], 0x1f);
+  EXPECT_EQ(magic[1], 0x8b);
+
+  // A write that fails at the end (a folder in the way of the result)
+  // throws, names the image, and leaves only what was there before: neither
+  // the compressed nor the uncompressed temporary file.
+  const auto blocked = m_Folder / "blocked.nii.gz";
+  std::filesystem::create_directories(blocked / "inside");
+  const std::size_t before = std::distance(std::filesystem::directory_iterator(m_Folder), {});
+  const std::string message = ErrorMessage([&] { itk::WriteBiomechanicalImage(image.GetPointer(), blocked); });
+  EXPECT_CONTAINS(message, "blocked.nii.gz");
+  EXPECT_TRUE(std::filesystem::is_directory(blocked / "inside"));
+  EXPECT_EQ(static_cast<std::size_t>(std::distance(std::filesystem::directory_iterator(m_Folder), {})), before);
+}
 
 class BrainShiftPipelineTest : public TemporaryFolderTest
 {};
