@@ -28,6 +28,7 @@ itk_module(BiomechanicalRegistration
   TEST_DEPENDS
     ITKTestKernel
     ITKIONIFTI
+    ITKIONRRD
     ITKIOMeta
     ITKIOPNG
     ITKIOTransformHDF5

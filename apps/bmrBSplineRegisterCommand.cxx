@@ -84,7 +84,7 @@ ReadImageFileInfo(const std::string & path, const std::string & what)
   if (io.IsNull())
   {
     throw Error("cannot read " + what + " '" + path +
-                "': not an image format biomech reads (.nii, .nii.gz, .mha, "
+                "': not an image format biomech reads (.nii, .nii.gz, .nrrd, .mha, "
                 ".mhd, .png)");
   }
   io->SetFileName(path);
@@ -376,7 +376,7 @@ RunBSplineRegister(const BSplineRegisterOptions & options)
   if (itk::ImageIOFactory::CreateImageIO(options.output.c_str(), itk::IOFileModeEnum::WriteMode).IsNull())
   {
     throw Error("cannot write image '" + options.output +
-                "': not an image format biomech writes (.nii, .nii.gz, .mha, "
+                "': not an image format biomech writes (.nii, .nii.gz, .nrrd, .mha, "
                 ".mhd, .png)");
   }
   if (options.iterations.size() > 1 && options.iterations.size() != options.shrinkFactors.size())

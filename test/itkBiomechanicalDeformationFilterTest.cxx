@@ -829,7 +829,8 @@ class ImageFileTest : public TemporaryFolderTest
 {};
 
 /** Images written as .nii.gz are ordinary gzip files that ITK reads back
- *  exactly (values, origin, spacing, direction), as are other formats; a
+ *  exactly (values, origin, spacing, direction), as are .nii, .nrrd (3D
+ *  Slicer's format) and .mha; a
  *  failed write leaves no file behind, not even the uncompressed one. */
 TEST_F(ImageFileTest, WrittenImagesReadBackExactlyAndFailuresLeaveNothing)
 {
@@ -854,7 +855,7 @@ TEST_F(ImageFileTest, WrittenImagesReadBackExactlyAndFailuresLeaveNothing)
   {
     it.Set(value);
   }
-  for (const std::string name : { "image.nii.gz", "image.nii", "image.mha" })
+  for (const std::string name : { "image.nii.gz", "image.nii", "image.nrrd", "image.mha" })
   {
     const auto path = m_Folder / name;
     itk::WriteBiomechanicalImage(image.GetPointer(), path);
