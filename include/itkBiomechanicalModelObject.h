@@ -127,7 +127,7 @@ MakeContactSurfaceFromMesh(const TMesh * mesh, const std::string & what)
   }
   // Point identifiers to vertex numbers: a table where the identifiers are
   // dense (ITK's default vector containers number them 0..n-1), else a map
-  // (a std::map alone took about 0.05 s per Colin27 isosurface).
+  // (a std::map alone took about 0.05 s per Colin27 isosurface, perf of `register`).
   IdentifierType largestId = 0;
   for (auto it = mesh->GetPoints()->Begin(); it != mesh->GetPoints()->End(); ++it)
   {
