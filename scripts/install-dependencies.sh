@@ -8,7 +8,7 @@ packages=(
   build-essential cmake g++ pkg-config
   libinsighttoolkit5-dev libvtk9-dev libcgal-dev libeigen3-dev
   libgtest-dev googletest libbenchmark-dev
-  nlohmann-json3-dev libcli11-dev libnanoflann-dev
+  nlohmann-json3-dev libcli11-dev libnanoflann-dev zlib1g-dev
   calculix-ccx mricron-data insighttoolkit5-examples elastix
   python3 python3-dev python3-numpy python3-matplotlib python3-pytest
   pybind11-dev python3-nbclient python3-nbformat python3-ipykernel
