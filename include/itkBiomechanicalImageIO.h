@@ -135,7 +135,15 @@ WriteBiomechanicalImage(const TImage * image, const std::filesystem::path & path
   const bool        niftiGz = name.size() > 7 && name.compare(name.size() - 7, 7, ".nii.gz") == 0;
   bmr::WriteAtomically(path, "image", [&](const std::string & temporary) {
     const std::string uncompressed = niftiGz ? temporary.substr(0, temporary.size() - 3) : temporary;
-    auto              writer = ImageFileWriter<TImage>::New();
+    // WriteAtomically removes its temporary after a failure; the uncompressed file is ours.
+    const auto removeUncompressed = [&] {
+      std::error_code ignored;
+      if (niftiGz)
+      {
+        std::filesystem::remove(uncompressed, ignored);
+      }
+    };
+    auto writer = ImageFileWriter<TImage>::New();
     writer->SetInput(image);
     writer->SetFileName(uncompressed);
     writer->SetUseCompression(!niftiGz);
@@ -150,17 +158,12 @@ WriteBiomechanicalImage(const TImage * image, const std::filesystem::path & path
     }
     catch (const ExceptionObject & exception)
     {
-      std::error_code ignored;
-      std::filesystem::remove(uncompressed, ignored);
+      removeUncompressed();
       throw bmr::Error("cannot write image '" + path.string() + "': " + PlainDescription(exception.GetDescription()));
     }
     catch (...)
     {
-      std::error_code ignored;
-      if (niftiGz)
-      {
-        std::filesystem::remove(uncompressed, ignored);
-      }
+      removeUncompressed();
       throw;
     }
   });

@@ -830,8 +830,8 @@ class ImageFileTest : public TemporaryFolderTest
 
 /** Images written as .nii.gz are ordinary gzip files that ITK reads back
  *  exactly (values, origin, spacing, direction), as are .nii, .nrrd (3D
- *  Slicer's format) and .mha; a
- *  failed write leaves no file behind, not even the uncompressed one. */
+ *  Slicer's format) and .mha; a failed write leaves no file behind, not even
+ *  the uncompressed one. */
 TEST_F(ImageFileTest, WrittenImagesReadBackExactlyAndFailuresLeaveNothing)
 {
   using ImageType = itk::Image<float, 3>;
