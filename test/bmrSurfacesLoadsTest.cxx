@@ -5,6 +5,7 @@
 // Over 800 lines: surfaces and the loads made from them share their
 // synthetic brains and skulls.
 #include "bmrBrainSurfaces.h"
+#include "bmrClosestPoint.h"
 #include "bmrMeshGenerators.h"
 #include "bmrSurfaceLoads.h"
 #include "bmrTemporaryFolderTest.h"
@@ -21,6 +22,7 @@
 #include <cmath>
 #include <fstream>
 #include <map>
+#include <random>
 #include <set>
 #include <sstream>
 
@@ -268,6 +270,40 @@ TEST(BrainSurface, SkullClosingBridgesAFissureAndKeepsTheGapElsewhere)
 
   closed->SetSkullClosing(-1.0);
   EXPECT_THROW(closed->Update(), itk::ExceptionObject);
+}
+
+TEST(BrainSurface, HintedClosestPointsAreTheClosestWhateverTheHint)
+{
+  // The skull's exact distances start each query from the last one's hit.
+  // On a fissured ball (a fold where the closest triangle jumps between the
+  // walls), every hint, near or far or invalid, must give the brute-force
+  // distance.
+  const double radius = 20.0, halfWidth = 2.5;
+  const auto   mask = MakeMask({ 52, 52, 52 }, Vector3::Constant(-25.5), Eigen::Matrix3d::Identity(), [&](const Vector3 & x) {
+    return x.norm() <= radius && !(x.z() > 0.0 && std::abs(x.x()) < halfWidth);
+  });
+  const bmr::ContactSurface        surface = RunSource(mask, 1.5)->GetBrainSurface();
+  const bmr::TriangleSurfaceTree   tree(surface.vertices, surface.triangles, "fissured ball");
+  std::mt19937                     random(7);
+  std::uniform_real_distribution<> coordinate(-radius - 4.0, radius + 4.0);
+  const bmr::TriangleSurfaceTree::Hit far = tree.Closest(Vector3(0.0, 0.0, -radius - 3.0));
+  int                                 checked = 0;
+  for (int q = 0; q < 400; ++q)
+  {
+    const Vector3 query(coordinate(random), coordinate(random), coordinate(random));
+    const double  expected = BruteForceDistance(query, surface);
+    const auto    near = tree.Closest(query + Vector3(0.7, -0.4, 0.3));
+    for (const bmr::TriangleSurfaceTree::Hit & hint :
+         { near, far, bmr::TriangleSurfaceTree::Hit{ query, -1, 0.0 },
+           bmr::TriangleSurfaceTree::Hit{ query, static_cast<Index>(surface.triangles.size()), 0.0 } })
+    {
+      const auto hit = tree.Closest(query, hint);
+      ASSERT_NEAR(std::sqrt(hit.squaredDistance), expected, 1e-9) << "query " << query.transpose();
+      ASSERT_NEAR((hit.point - query).norm(), expected, 1e-9);
+      ++checked;
+    }
+  }
+  EXPECT_EQ(checked, 1600);
 }
 
 TEST(BrainSurface, SmoothingKeepsVolumeAndDecimationReachesEdgeLength)

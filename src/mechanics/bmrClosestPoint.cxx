@@ -28,6 +28,7 @@ struct TriangleSurfaceTree::Impl
 {
   std::vector<Triangle> triangles;  // the tree's primitives point into this
   std::vector<Index>    inputIndex; // input triangle of each primitive
+  std::vector<Index>    primitiveOf; // primitive of each input triangle (-1: left out)
   AabbTree              tree;
 };
 
@@ -53,11 +54,13 @@ TriangleSurfaceTree::TriangleSurfaceTree(const std::vector<Vector3> &           
         throw Error(surfaceName + ": vertex " + std::to_string(v) + " is not finite; fix the surface file");
       }
     }
-    if ((p[1] - p[0]).cross(p[2] - p[0]).norm() > 0.0)
+    const bool kept = (p[1] - p[0]).cross(p[2] - p[0]).norm() > 0.0;
+    if (kept)
     {
       impl->triangles.emplace_back(ToPoint(p[0]), ToPoint(p[1]), ToPoint(p[2]));
       impl->inputIndex.push_back(static_cast<Index>(t));
     }
+    impl->primitiveOf.push_back(kept ? static_cast<Index>(impl->triangles.size()) - 1 : -1);
   }
   if (impl->triangles.empty())
   {
@@ -74,15 +77,35 @@ TriangleSurfaceTree::TriangleSurfaceTree(const std::vector<Vector3> &           
 
 TriangleSurfaceTree::~TriangleSurfaceTree() = default;
 
+template <typename TreeHit>
 TriangleSurfaceTree::Hit
-TriangleSurfaceTree::Closest(const Vector3 & query) const
+TriangleSurfaceTree::ToHit(const Vector3 & query, const TreeHit & hit) const
 {
   const Point  q = ToPoint(query);
-  const auto   hit = m_Impl->tree.closest_point_and_primitive(q);
   const auto   primitive = static_cast<std::size_t>(hit.second - m_Impl->triangles.begin());
   // The kernel's squared distance, as AABB_tree::squared_distance computes it.
   const double squaredDistance = AabbTraits().squared_distance_object()(q, hit.first);
   return { Vector3(hit.first.x(), hit.first.y(), hit.first.z()), m_Impl->inputIndex[primitive], squaredDistance };
+}
+
+TriangleSurfaceTree::Hit
+TriangleSurfaceTree::Closest(const Vector3 & query) const
+{
+  return ToHit(query, m_Impl->tree.closest_point_and_primitive(ToPoint(query)));
+}
+
+TriangleSurfaceTree::Hit
+TriangleSurfaceTree::Closest(const Vector3 & query, const Hit & hint) const
+{
+  const Index primitive = hint.triangle >= 0 && static_cast<std::size_t>(hint.triangle) < m_Impl->primitiveOf.size()
+                            ? m_Impl->primitiveOf[hint.triangle]
+                            : -1;
+  if (primitive < 0)
+  {
+    return Closest(query);
+  }
+  const AabbTree::Point_and_primitive_id start(ToPoint(hint.point), m_Impl->triangles.begin() + primitive);
+  return ToHit(query, m_Impl->tree.closest_point_and_primitive(ToPoint(query), start));
 }
 
 } // namespace bmr

@@ -41,8 +41,17 @@ public:
    *  queries: every search structure is built by the constructor. */
   Hit Closest(const Vector3 & query) const;
 
+  /** The same closest point, searched from a hit of a nearby earlier query
+   *  (CGAL's hint): its distance bounds the search from the start, so a
+   *  query near the hint's visits a few boxes instead of first searching the
+   *  tree's k-d tree of sample points. Where two triangles are equally close
+   *  the triangle may differ from Closest(query)'s; the distance does not. */
+  Hit Closest(const Vector3 & query, const Hit & hint) const;
+
 private:
   struct Impl;
+  template <typename TreeHit>
+  Hit ToHit(const Vector3 & query, const TreeHit & hit) const;
   std::unique_ptr<const Impl> m_Impl;
 };
 

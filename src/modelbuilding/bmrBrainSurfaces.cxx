@@ -524,15 +524,24 @@ ExtractBrainSurfaces(const ScalarVolume &         signedDistance,
 #pragma omp parallel for schedule(dynamic, 1)
     for (int k = 0; k < slices; ++k)
     {
+      // Each query starts from the last one's closest point, a voxel or a
+      // row away, when the last query was the neighbouring voxel: its distance
+      // bounds the search from the start (Colin27's skull band in `register`,
+      // 2 threads: about 0.51 -> 0.44 s; from the last query of the row
+      // instead, often across the brain: 1.34 s).
       for (int j = 0; j < geometry.size[1]; ++j)
       {
+        TriangleSurfaceTree::Hit last{ Vector3::Zero(), -1, 0.0 };
+        int                      lastI = -2;
         for (int i = 0; i < geometry.size[0]; ++i)
         {
           float & value = field.At(i, j, k);
           if (value > low && value <= high)
           {
-            value = sign * static_cast<float>(
-                             std::sqrt(tree.Closest(geometry.IndexToPoint(Vector3(i, j, k))).squaredDistance));
+            const Vector3 query = geometry.IndexToPoint(Vector3(i, j, k));
+            last = lastI == i - 1 ? tree.Closest(query, last) : tree.Closest(query);
+            lastI = i;
+            value = sign * static_cast<float>(std::sqrt(last.squaredDistance));
           }
         }
       }
