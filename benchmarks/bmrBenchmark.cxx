@@ -17,7 +17,7 @@
 // child modes also serve to reproduce or profile one case:
 //   bmrBenchmark --child brain hex|tet|mtled THREADS SPACING STEPS REPEATS
 //   bmrBenchmark --child indentation hex|tet DIVISIONS THREADS TOLERANCE POISSON [HOURGLASS]
-//   bmrBenchmark --child implicit anp|c3d4|c3d10|c3d10-quarter BODY_SPACING SUBDIVISIONS THREADS [INITIAL_INCREMENT]
+//   bmrBenchmark --child implicit anp|c3d4|c3d10|c3d10-quarter BODY_SPACING SUBDIVISIONS THREADS [INITIAL_INCREMENT [ANP_TOLERANCE]]
 //                                        (the brain-like case beside CalculiX)
 //   bmrBenchmark --child triad THREADS   (memory bandwidth: STREAM's triad)
 //
@@ -227,10 +227,10 @@ Child(int argc, char ** argv)
     std::cout << "BMR_RESULT " << out.dump() << std::endl;
     return 0;
   }
-  if (kind == "implicit" && (argc == 7 || argc == 8))
+  if (kind == "implicit" && argc >= 7 && argc <= 9)
   {
     const Json result = RunImplicitCase(argv[3], std::stod(argv[4]), std::stoi(argv[5]), std::stoi(argv[6]),
-                                        argc == 8 ? std::stod(argv[7]) : 1.0);
+                                        argc >= 8 ? std::stod(argv[7]) : 1.0, argc == 9 ? std::stod(argv[8]) : 0.0);
     std::cout << "BMR_RESULT " << result.dump() << std::endl;
     return 0;
   }
@@ -266,7 +266,7 @@ Child(int argc, char ** argv)
   }
   std::cerr << "bmrBenchmark --child brain hex|tet|mtled THREADS SPACING STEPS REPEATS\n"
                "bmrBenchmark --child indentation hex|tet DIVISIONS THREADS TOLERANCE POISSON [HOURGLASS]\n"
-               "bmrBenchmark --child implicit anp|c3d4|c3d10|c3d10-quarter BODY_SPACING SUBDIVISIONS THREADS [INITIAL_INCREMENT]\n"
+               "bmrBenchmark --child implicit anp|c3d4|c3d10|c3d10-quarter BODY_SPACING SUBDIVISIONS THREADS [INITIAL_INCREMENT [ANP_TOLERANCE]]\n"
                "bmrBenchmark --child triad THREADS\n";
   return 2;
 }
@@ -364,7 +364,7 @@ main(int argc, char ** argv)
                      "             [--calculix-threads 1] [--wait-quiet 300] [--reference-cache DIR] [--rounds 3]\n"
                      "bmrBenchmark --child brain hex|tet|mtled THREADS SPACING STEPS REPEATS\n"
                      "bmrBenchmark --child indentation hex|tet DIVISIONS THREADS TOLERANCE POISSON [HOURGLASS]\n"
-                     "bmrBenchmark --child implicit anp|c3d4|c3d10|c3d10-quarter BODY_SPACING SUBDIVISIONS THREADS [INITIAL_INCREMENT]\n"
+                     "bmrBenchmark --child implicit anp|c3d4|c3d10|c3d10-quarter BODY_SPACING SUBDIVISIONS THREADS [INITIAL_INCREMENT [ANP_TOLERANCE]]\n"
                      "bmrBenchmark --child triad THREADS\n";
         return 0;
       }

@@ -142,7 +142,8 @@ IndentationSection(const Options & options, std::ostream & md);
  *  (the CalculiX reference on the quarter model). Returns the time, the peak
  *  memory and the nodes' positions and displacements. */
 Json
-RunImplicitCase(const std::string & kind, double bodySpacing, int subdivisions, int threads, double initialIncrement);
+RunImplicitCase(const std::string & kind, double bodySpacing, int subdivisions, int threads, double initialIncrement,
+                double anpTolerance);
 
 /** Runs the CalculiX reference and the brain-like cases (children of `self`),
  *  writes their section to `md` and the target's row to `summary`. */

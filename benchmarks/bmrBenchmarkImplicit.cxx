@@ -30,6 +30,9 @@ namespace
 {
 
 constexpr double kTolerance = 0.01; // mm, dynamic relaxation (as the brain-sized cases)
+// Looser dynamic-relaxation tolerances, for the time to a solution as accurate
+// as CalculiX's: the DR error need not be far below the discretization's.
+constexpr double kLooserTolerances[] = { 0.03, 0.1 };
 // CalculiX's defaults for the timed solves (the reference keeps the harness's tight 1e-5 / 1e-4).
 constexpr double kCalculixResidualTolerance = 0.005;
 constexpr double kCalculixCorrectionTolerance = 0.01;
@@ -61,7 +64,8 @@ VectorsOf(const Json & flat)
 } // namespace
 
 Json
-RunImplicitCase(const std::string & kind, double bodySpacing, int subdivisions, int threads, double initialIncrement)
+RunImplicitCase(const std::string & kind, double bodySpacing, int subdivisions, int threads, double initialIncrement,
+                double anpTolerance)
 {
   const bool       quarter = kind == "c3d10-quarter";
   const bool       quadratic = quarter || kind == "c3d10";
@@ -76,7 +80,7 @@ RunImplicitCase(const std::string & kind, double bodySpacing, int subdivisions, 
   {
     bmr::SolverSettings settings;
     settings.integrator = bmr::Integrator::DynamicRelaxation;
-    settings.tolerance = kTolerance;
+    settings.tolerance = anpTolerance > 0.0 ? anpTolerance : kTolerance;
     settings.threads = threads;
     const auto             start = Clock::now();
     bmr::Solver            solver(model, settings);
@@ -88,6 +92,7 @@ RunImplicitCase(const std::string & kind, double bodySpacing, int subdivisions, 
     out["steps"] = result.steps;
     out["converged"] = result.converged;
     out["estimated_error"] = result.estimatedError;
+    out["tolerance"] = settings.tolerance;
     out["displacements"] = FlatVectors(result.displacements);
     out["peak_mib"] = PeakMemoryMiB(RUSAGE_SELF);
     return out;
@@ -127,11 +132,11 @@ constexpr double kReferenceIncrement = 0.25;
 constexpr double kTargetImplicitSpeedUp = 20.0; // ANP against CalculiX C3D4 on the same mesh, at least as accurate
 
 std::string
-SolverLabel(const std::string & kind)
+SolverLabel(const std::string & kind, double tolerance = kTolerance)
 {
   if (kind == "anp")
   {
-    return "ANP tetrahedra (TLED, dynamic relaxation)";
+    return "ANP tetrahedra (TLED, dynamic relaxation to " + Fixed(tolerance, 2) + " mm)";
   }
   if (kind == "c3d4")
   {
@@ -174,6 +179,7 @@ Reference(const std::string & self, const std::string & cache, double bodySpacin
 struct ImplicitRow
 {
   std::string         kind;
+  double              tolerance = kTolerance; // ANP's dynamic relaxation (mm)
   int                 subdivisions = 1;
   Json                result;  // the last round's
   std::vector<double> seconds; // every round's
@@ -228,23 +234,33 @@ ImplicitSection(const Options & options, const std::string & self, std::ostream 
   for (const int subdivisions : compared)
   {
     // CalculiX's quadratic elements on the coarsest mesh only: the full model at the finer one costs hours.
-    std::vector<std::string> kinds{ "anp", "c3d4" };
+    std::vector<std::pair<std::string, double>> kinds{ { "anp", kTolerance } };
+    for (const double tolerance : kLooserTolerances)
+    {
+      kinds.emplace_back("anp", tolerance);
+    }
+    kinds.emplace_back("c3d4", 0.0);
     if (subdivisions == 1)
     {
-      kinds.push_back("c3d10");
+      kinds.emplace_back("c3d10", 0.0);
     }
-    for (const std::string & kind : kinds)
+    for (const auto & [kind, tolerance] : kinds)
     {
       ImplicitRow row;
       row.kind = kind;
+      row.tolerance = kind == "anp" ? tolerance : 0.0;
       row.subdivisions = subdivisions;
       const int rounds = kind == "c3d10" ? 1 : options.rounds;
       for (int round = 0; round < rounds; ++round)
       {
         std::ostringstream arguments;
         arguments << "implicit " << kind << " " << bodySpacing << " " << subdivisions << " " << threads << " 1.0";
-        Log("brain-like case: " + SolverLabel(kind) + ", h = " + Fixed(bodySpacing / subdivisions, 2) + " mm, round " +
-            std::to_string(round + 1) + "...");
+        if (kind == "anp")
+        {
+          arguments << " " << tolerance;
+        }
+        Log("brain-like case: " + SolverLabel(kind, tolerance) + ", h = " + Fixed(bodySpacing / subdivisions, 2) +
+            " mm, round " + std::to_string(round + 1) + "...");
         row.result = RunChild(self, arguments.str());
         row.seconds.push_back(row.result["seconds"].get<double>());
         Log("  " + Fixed(row.seconds.back(), 2) + " s");
@@ -262,7 +278,9 @@ ImplicitSection(const Options & options, const std::string & self, std::ostream 
      << "nodes within " << problem.craniotomyRadius << " mm of the top sag by " << problem.depth
      << " (1 - (r / " << problem.craniotomyRadius << ")^2) mm (all components prescribed); neo-Hookean E = "
      << problem.material.youngsModulus << " Pa, nu = " << problem.material.poissonRatio << ". "
-     << "ANP: adaptive dynamic relaxation to an estimated error of " << kTolerance << " mm; time = setup + solve. "
+     << "ANP: adaptive dynamic relaxation to an estimated error of " << kTolerance << " mm, and of "
+     << Fixed(kLooserTolerances[0], 2) << " and " << Fixed(kLooserTolerances[1], 2)
+     << " mm for the time to a solution as accurate as CalculiX's; time = setup + solve. "
      << "CalculiX " << ccx << ": static step, NLGEOM, the whole load as the first increment (CalculiX cuts it back "
      << "when Newton diverges), its default convergence criteria (residual " << kCalculixResidualTolerance
      << " of the mean force, correction " << kCalculixCorrectionTolerance << "), SPOOLES; time = the ccx process "
@@ -288,7 +306,7 @@ ImplicitSection(const Options & options, const std::string & self, std::ostream 
   {
     const Json & r = row.result;
     const auto   range = std::minmax_element(row.seconds.begin(), row.seconds.end());
-    md << "| " << SolverLabel(row.kind) << " | " << Fixed(bodySpacing / row.subdivisions, 1) << " | "
+    md << "| " << SolverLabel(row.kind, row.tolerance) << " | " << Fixed(bodySpacing / row.subdivisions, 1) << " | "
        << r["nodes"].get<int>() << " | " << r["elements"].get<int>() << " | " << r["dof"].get<int>() << " | "
        << Fixed(Median(row.seconds), 2) << " | " << Fixed(*range.first, 2) << ".." << Fixed(*range.second, 2) << " | "
        << (row.kind == "anp" ? std::to_string(r["steps"].get<int>()) +
@@ -301,15 +319,29 @@ ImplicitSection(const Options & options, const std::string & self, std::ostream 
 
   // The conclusion, computed: ANP against C3D4 on each mesh; the target on the finest.
   md << "\n";
+  // ANP rows are found at the default tolerance.
   const auto find = [&](const std::string & kind, int subdivisions) -> const ImplicitRow * {
     for (const ImplicitRow & row : rows)
     {
-      if (row.kind == kind && row.subdivisions == subdivisions)
+      if (row.kind == kind && row.subdivisions == subdivisions && (kind != "anp" || row.tolerance == kTolerance))
       {
         return &row;
       }
     }
     return nullptr;
+  };
+  // The fastest ANP solve on a mesh that is at least as accurate as C3D4 there (any tolerance), or null.
+  const auto fastestAsAccurate = [&](const ImplicitRow & c3d4) -> const ImplicitRow * {
+    const ImplicitRow * fastest = nullptr;
+    for (const ImplicitRow & row : rows)
+    {
+      if (row.kind == "anp" && row.subdivisions == c3d4.subdivisions && row.rmsError <= c3d4.rmsError &&
+          row.maxError <= c3d4.maxError && (!fastest || Median(row.seconds) < Median(fastest->seconds)))
+      {
+        fastest = &row;
+      }
+    }
+    return fastest;
   };
   for (const int subdivisions : compared)
   {
@@ -323,18 +355,32 @@ ImplicitSection(const Options & options, const std::string & self, std::ostream 
        << " times its peak memory, and " << (asAccurate ? "at least as accurate" : "**less accurate**") << " (RMS "
        << Fixed(anp->rmsError, 3) << " against " << Fixed(c3d4->rmsError, 3) << " mm, max " << Fixed(anp->maxError, 3)
        << " against " << Fixed(c3d4->maxError, 3) << " mm).";
+    // Time to solution at equal or better accuracy: the fastest ANP solve on
+    // this mesh (any of the tolerances) at least as accurate as C3D4.
+    const ImplicitRow * fastest = fastestAsAccurate(*c3d4);
+    const double        fastestSpeedUp = fastest ? Median(c3d4->seconds) / Median(fastest->seconds) : 0.0;
+    if (fastest && fastest != anp)
+    {
+      md << " The fastest ANP solve on this mesh at least as accurate, to " << Fixed(fastest->tolerance, 2)
+         << " mm (RMS " << Fixed(fastest->rmsError, 3) << " mm, max " << Fixed(fastest->maxError, 3) << " mm, "
+         << Fixed(Median(fastest->seconds), 2) << " s), is " << Fixed(fastestSpeedUp, 1) << " times as fast.";
+    }
     if (subdivisions == compared.back())
     {
-      const bool met = speedUp >= kTargetImplicitSpeedUp && asAccurate;
-      md << " Target (at least " << kTargetImplicitSpeedUp << " times as fast, at least as accurate): "
-         << (met ? "**met**" : "**missed**") << (met || !asAccurate ? "" : " by a factor " + Fixed(kTargetImplicitSpeedUp / speedUp, 2))
-         << ".";
-      summary.push_back("| Brain-like case (" + std::to_string(anp->result["dof"].get<int>()) +
-                        " DOF), ANP tetrahedra against CalculiX C3D4 on the same mesh, " + std::to_string(threads) +
-                        " threads each | >= " + Fixed(kTargetImplicitSpeedUp, 0) + "x faster, at least as accurate | " +
-                        Fixed(speedUp, 1) + "x (" + Fixed(Median(anp->seconds), 2) + " s against " +
-                        Fixed(Median(c3d4->seconds), 2) + " s); RMS error " + Fixed(anp->rmsError, 3) + " against " +
-                        Fixed(c3d4->rmsError, 3) + " mm | " + (met ? "met" : "**MISSED**") + " |");
+      const bool met = fastest && fastestSpeedUp >= kTargetImplicitSpeedUp;
+      md << " Target (at least " << kTargetImplicitSpeedUp << " times as fast at equal or better accuracy): "
+         << (met ? "**met**" : "**missed**")
+         << (met || !fastest ? "" : " by a factor " + Fixed(kTargetImplicitSpeedUp / fastestSpeedUp, 2)) << ".";
+      summary.push_back(
+        "| Brain-like case (" + std::to_string(anp->result["dof"].get<int>()) +
+        " DOF), ANP tetrahedra against CalculiX C3D4 on the same mesh, " + std::to_string(threads) +
+        " threads each | >= " + Fixed(kTargetImplicitSpeedUp, 0) + "x faster, at least as accurate | " +
+        (fastest ? Fixed(fastestSpeedUp, 1) + "x to " + Fixed(fastest->tolerance, 2) + " mm (" +
+                     Fixed(Median(fastest->seconds), 2) + " s against " + Fixed(Median(c3d4->seconds), 2) +
+                     " s; RMS error " + Fixed(fastest->rmsError, 3) + " against " + Fixed(c3d4->rmsError, 3) +
+                     " mm); " + Fixed(speedUp, 1) + "x to " + Fixed(kTolerance, 2) + " mm"
+                 : std::string("no ANP solve as accurate")) +
+        " | " + (met ? "met" : "**MISSED**") + " |");
     }
     md << "\n";
   }
