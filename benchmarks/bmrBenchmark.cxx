@@ -17,7 +17,7 @@
 // child modes also serve to reproduce or profile one case:
 //   bmrBenchmark --child brain hex|tet|mtled THREADS SPACING STEPS REPEATS
 //   bmrBenchmark --child indentation hex|tet DIVISIONS THREADS TOLERANCE POISSON [HOURGLASS]
-//   bmrBenchmark --child implicit anp|c3d4|c3d10|c3d10-quarter BODY_SPACING SUBDIVISIONS THREADS [INITIAL_INCREMENT [ANP_TOLERANCE]]
+//   bmrBenchmark --child implicit anp|mtled|c3d4|c3d10|c3d10-quarter BODY_SPACING SUBDIVISIONS THREADS [INITIAL_INCREMENT [TOLERANCE]]
 //                                        (the brain-like case beside CalculiX)
 //   bmrBenchmark --child triad THREADS   (memory bandwidth: STREAM's triad)
 //
@@ -266,7 +266,7 @@ Child(int argc, char ** argv)
   }
   std::cerr << "bmrBenchmark --child brain hex|tet|mtled THREADS SPACING STEPS REPEATS\n"
                "bmrBenchmark --child indentation hex|tet DIVISIONS THREADS TOLERANCE POISSON [HOURGLASS]\n"
-               "bmrBenchmark --child implicit anp|c3d4|c3d10|c3d10-quarter BODY_SPACING SUBDIVISIONS THREADS [INITIAL_INCREMENT [ANP_TOLERANCE]]\n"
+               "bmrBenchmark --child implicit anp|mtled|c3d4|c3d10|c3d10-quarter BODY_SPACING SUBDIVISIONS THREADS [INITIAL_INCREMENT [TOLERANCE]]\n"
                "bmrBenchmark --child triad THREADS\n";
   return 2;
 }
@@ -364,7 +364,7 @@ main(int argc, char ** argv)
                      "             [--calculix-threads 1] [--wait-quiet 300] [--reference-cache DIR] [--rounds 3]\n"
                      "bmrBenchmark --child brain hex|tet|mtled THREADS SPACING STEPS REPEATS\n"
                      "bmrBenchmark --child indentation hex|tet DIVISIONS THREADS TOLERANCE POISSON [HOURGLASS]\n"
-                     "bmrBenchmark --child implicit anp|c3d4|c3d10|c3d10-quarter BODY_SPACING SUBDIVISIONS THREADS [INITIAL_INCREMENT [ANP_TOLERANCE]]\n"
+                     "bmrBenchmark --child implicit anp|mtled|c3d4|c3d10|c3d10-quarter BODY_SPACING SUBDIVISIONS THREADS [INITIAL_INCREMENT [TOLERANCE]]\n"
                      "bmrBenchmark --child triad THREADS\n";
         return 0;
       }

@@ -143,7 +143,7 @@ IndentationSection(const Options & options, std::ostream & md);
  *  memory and the nodes' positions and displacements. */
 Json
 RunImplicitCase(const std::string & kind, double bodySpacing, int subdivisions, int threads, double initialIncrement,
-                double anpTolerance);
+                double relaxationTolerance);
 
 /** Runs the CalculiX reference and the brain-like cases (children of `self`),
  *  writes their section to `md` and the target's row to `summary`. */

@@ -7,6 +7,7 @@
 #include "bmrBenchmarkDriver.h"
 #include "bmrCalculix.h"
 #include "bmrMeshGenerators.h"
+#include "bmrMeshless.h"
 #include "bmrModel.h"
 #include "bmrSolver.h"
 
@@ -65,26 +66,34 @@ VectorsOf(const Json & flat)
 
 Json
 RunImplicitCase(const std::string & kind, double bodySpacing, int subdivisions, int threads, double initialIncrement,
-                double anpTolerance)
+                double relaxationTolerance)
 {
   const bool       quarter = kind == "c3d10-quarter";
   const bool       quadratic = quarter || kind == "c3d10";
-  const bmr::Model model = bmr::MakeBrainSagModel(bmr::BrainSagProblem{}, bodySpacing, subdivisions, quarter);
+  bmr::Model       model = bmr::MakeBrainSagModel(bmr::BrainSagProblem{}, bodySpacing, subdivisions, quarter);
   Json             out;
+  double           integrationSeconds = 0.0;
+  if (kind == "mtled")
+  {
+    // The tetrahedra's nodes and body made meshless (the default settings).
+    const auto start = Clock::now();
+    bmr::MakeMeshlessFromCells(model, bmr::MlsSettings{}, bmr::IntegrationSettings{}, threads);
+    integrationSeconds = Seconds(start);
+  }
   out["kind"] = kind;
   out["nodes"] = model.nodes.size();
-  out["elements"] = model.cells.size();
+  out["elements"] = kind == "mtled" ? model.meshless.integrationPoints.size() : model.cells.size();
   out["threads"] = threads;
   out["positions"] = FlatVectors(model.nodes);
-  if (kind == "anp")
+  if (kind == "anp" || kind == "mtled")
   {
     bmr::SolverSettings settings;
     settings.integrator = bmr::Integrator::DynamicRelaxation;
-    settings.tolerance = anpTolerance > 0.0 ? anpTolerance : kTolerance;
+    settings.tolerance = relaxationTolerance > 0.0 ? relaxationTolerance : kTolerance;
     settings.threads = threads;
     const auto             start = Clock::now();
     bmr::Solver            solver(model, settings);
-    const double           setup = Seconds(start);
+    const double           setup = integrationSeconds + Seconds(start);
     const bmr::SolveResult result = solver.Solve();
     out["dof"] = 3 * model.nodes.size();
     out["seconds"] = setup + result.wallSeconds;
@@ -99,7 +108,7 @@ RunImplicitCase(const std::string & kind, double bodySpacing, int subdivisions, 
   }
   if (kind != "c3d4" && !quadratic)
   {
-    throw bmr::Error("bmrBenchmark: implicit case '" + kind + "' is none of anp, c3d4, c3d10, c3d10-quarter");
+    throw bmr::Error("bmrBenchmark: implicit case '" + kind + "' is none of anp, mtled, c3d4, c3d10, c3d10-quarter");
   }
   bmr::CalculixSettings settings;
   settings.quadratic = quadratic;
@@ -137,6 +146,10 @@ SolverLabel(const std::string & kind, double tolerance = kTolerance)
   if (kind == "anp")
   {
     return "ANP tetrahedra (TLED, dynamic relaxation to " + Fixed(tolerance, 2) + " mm)";
+  }
+  if (kind == "mtled")
+  {
+    return "meshless MTLED on the same nodes (elements: integration points; to " + Fixed(tolerance, 2) + " mm)";
   }
   if (kind == "c3d4")
   {
@@ -239,6 +252,7 @@ ImplicitSection(const Options & options, const std::string & self, std::ostream 
     {
       kinds.emplace_back("anp", tolerance);
     }
+    kinds.emplace_back("mtled", kTolerance);
     kinds.emplace_back("c3d4", 0.0);
     if (subdivisions == 1)
     {
@@ -248,14 +262,14 @@ ImplicitSection(const Options & options, const std::string & self, std::ostream 
     {
       ImplicitRow row;
       row.kind = kind;
-      row.tolerance = kind == "anp" ? tolerance : 0.0;
+      row.tolerance = tolerance;
       row.subdivisions = subdivisions;
       const int rounds = kind == "c3d10" ? 1 : options.rounds;
       for (int round = 0; round < rounds; ++round)
       {
         std::ostringstream arguments;
         arguments << "implicit " << kind << " " << bodySpacing << " " << subdivisions << " " << threads << " 1.0";
-        if (kind == "anp")
+        if (tolerance > 0.0)
         {
           arguments << " " << tolerance;
         }
@@ -280,7 +294,9 @@ ImplicitSection(const Options & options, const std::string & self, std::ostream 
      << problem.material.youngsModulus << " Pa, nu = " << problem.material.poissonRatio << ". "
      << "ANP: adaptive dynamic relaxation to an estimated error of " << kTolerance << " mm, and of "
      << Fixed(kLooserTolerances[0], 2) << " and " << Fixed(kLooserTolerances[1], 2)
-     << " mm for the time to a solution as accurate as CalculiX's; time = setup + solve. "
+     << " mm for the time to a solution as accurate as CalculiX's; time = setup + solve. Meshless (MTLED): the "
+     << "tetrahedra's nodes and body made meshless with the default settings (as the brain-sized meshless case), "
+     << "the same dynamic relaxation to " << kTolerance << " mm; its setup includes MakeMeshlessFromCells. "
      << "CalculiX " << ccx << ": static step, NLGEOM, the whole load as the first increment (CalculiX cuts it back "
      << "when Newton diverges), its default convergence criteria (residual " << kCalculixResidualTolerance
      << " of the mean force, correction " << kCalculixCorrectionTolerance << "), SPOOLES; time = the ccx process "
@@ -309,7 +325,7 @@ ImplicitSection(const Options & options, const std::string & self, std::ostream 
     md << "| " << SolverLabel(row.kind, row.tolerance) << " | " << Fixed(bodySpacing / row.subdivisions, 1) << " | "
        << r["nodes"].get<int>() << " | " << r["elements"].get<int>() << " | " << r["dof"].get<int>() << " | "
        << Fixed(Median(row.seconds), 2) << " | " << Fixed(*range.first, 2) << ".." << Fixed(*range.second, 2) << " | "
-       << (row.kind == "anp" ? std::to_string(r["steps"].get<int>()) +
+       << (row.kind == "anp" || row.kind == "mtled" ? std::to_string(r["steps"].get<int>()) +
                                  (r["converged"].get<bool>() ? "" : " (**not converged**)")
                              : std::to_string(r["iterations"].get<int>()) + " (" +
                                  std::to_string(r["increments"].get<int>()) + " increments)")
@@ -415,6 +431,17 @@ ImplicitSection(const Options & options, const std::string & self, std::ostream 
   {
     md << "\nNo ANP solve here is at least as accurate as C3D4's most accurate one.\n";
   }
+  for (const int subdivisions : compared)
+  {
+    const ImplicitRow * meshless = find("mtled", subdivisions);
+    const ImplicitRow * anp = find("anp", subdivisions);
+    md << "\nMeshless on the " << Fixed(bodySpacing / subdivisions, 1) << " mm mesh's nodes: RMS "
+       << Fixed(meshless->rmsError, 3) << " mm, max " << Fixed(meshless->maxError, 3) << " mm in "
+       << Fixed(Median(meshless->seconds), 2) << " s (" << meshless->result["elements"].get<int>()
+       << " integration points), against ANP's " << Fixed(anp->rmsError, 3) << " / " << Fixed(anp->maxError, 3)
+       << " mm in " << Fixed(Median(anp->seconds), 2) << " s.";
+  }
+  md << "\n";
   if (const ImplicitRow * c3d10 = find("c3d10", 1))
   {
     const ImplicitRow * anp = find("anp", compared.back());
