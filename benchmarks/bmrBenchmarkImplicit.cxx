@@ -33,7 +33,7 @@ namespace
 constexpr double kTolerance = 0.01; // mm, dynamic relaxation (as the brain-sized cases)
 // Looser dynamic-relaxation tolerances, for the time to a solution as accurate
 // as CalculiX's: the DR error need not be far below the discretization's.
-constexpr double kLooserTolerances[] = { 0.03, 0.1 };
+constexpr double kLooserTolerances[] = { 0.03, 0.1, 0.3 };
 // CalculiX's defaults for the timed solves (the reference keeps the harness's tight 1e-5 / 1e-4).
 constexpr double kCalculixResidualTolerance = 0.005;
 constexpr double kCalculixCorrectionTolerance = 0.01;
@@ -292,9 +292,13 @@ ImplicitSection(const Options & options, const std::string & self, std::ostream 
      << "nodes within " << problem.craniotomyRadius << " mm of the top sag by " << problem.depth
      << " (1 - (r / " << problem.craniotomyRadius << ")^2) mm (all components prescribed); neo-Hookean E = "
      << problem.material.youngsModulus << " Pa, nu = " << problem.material.poissonRatio << ". "
-     << "ANP: adaptive dynamic relaxation to an estimated error of " << kTolerance << " mm, and of "
-     << Fixed(kLooserTolerances[0], 2) << " and " << Fixed(kLooserTolerances[1], 2)
-     << " mm for the time to a solution as accurate as CalculiX's; time = setup + solve. Meshless (MTLED): the "
+     << "ANP: adaptive dynamic relaxation to an estimated error of " << kTolerance << " mm, and of";
+  for (const double tolerance : kLooserTolerances)
+  {
+    md << (tolerance == kLooserTolerances[0] ? " " : ", ") << Fixed(tolerance, 2);
+  }
+  md << " mm for the time to a solution as accurate as CalculiX's (the cheapest of them at least as accurate as "
+     << "C3D4, in RMS and maximum error, is what the target compares); time = setup + solve. Meshless (MTLED): the "
      << "tetrahedra's nodes and body made meshless with the default settings (as the brain-sized meshless case), "
      << "the same dynamic relaxation to " << kTolerance << " mm; its setup includes MakeMeshlessFromCells. "
      << "CalculiX " << ccx << ": static step, NLGEOM, the whole load as the first increment (CalculiX cuts it back "
@@ -425,7 +429,7 @@ ImplicitSection(const Options & options, const std::string & self, std::ostream 
        << " s) is matched by ANP on the " << Fixed(bodySpacing / cheapestAnp->subdivisions, 1) << " mm mesh (RMS "
        << Fixed(cheapestAnp->rmsError, 3) << " mm, max " << Fixed(cheapestAnp->maxError, 3) << " against "
        << Fixed(bestC3d4->maxError, 3) << " mm) in " << Fixed(Median(cheapestAnp->seconds), 2) << " s, "
-       << Fixed(Median(bestC3d4->seconds) / Median(cheapestAnp->seconds), 0) << " times as fast.\n";
+       << Fixed(Median(bestC3d4->seconds) / Median(cheapestAnp->seconds), 1) << " times as fast.\n";
   }
   else
   {
