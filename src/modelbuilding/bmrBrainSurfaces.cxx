@@ -524,11 +524,11 @@ ExtractBrainSurfaces(const ScalarVolume &         signedDistance,
 #pragma omp parallel for schedule(dynamic, 1)
     for (int k = 0; k < slices; ++k)
     {
-      // Each query starts from the last one's closest point, a voxel or a
-      // row away, when the last query was the neighbouring voxel: its distance
-      // bounds the search from the start (Colin27's skull band in `register`,
-      // 2 threads: about 0.51 -> 0.44 s; from the last query of the row
-      // instead, often across the brain: 1.34 s).
+      // A query whose neighbour in the row (i - 1) was queried starts from
+      // that neighbour's closest point: its distance bounds the search from
+      // the start (Colin27's skull band in `register`, 2 threads: about
+      // 0.51 -> 0.44 s; from the row's last query wherever it was, often
+      // across the brain: 1.34 s).
       for (int j = 0; j < geometry.size[1]; ++j)
       {
         TriangleSurfaceTree::Hit last{ Vector3::Zero(), -1, 0.0 };
