@@ -345,7 +345,7 @@ BrainSection(const Options & options, const std::string & self, std::ostream & m
      << "counted (internal forces, hourglass control or nodal pressure averaging, integration, constraints), "
      << "divided by elements x steps (meshless: integration points x steps, on the hexahedral model's nodes and body "
      << "made meshless with the default settings: linear MLS, dilatation 1.6, 2 x 2 x 2 Gauss points per background "
-     << "cell of the median nodal spacing, EBCIEM). Each round times " << brain.front()["throughput_repeats"].get<int>()
+     << "cell of the median nodal spacing and per coarse interior block of 2 x 2 x 2 cells, EBCIEM). Each round times " << brain.front()["throughput_repeats"].get<int>()
      << " runs of " << brain.front()["throughput_steps"].get<int>() << " steps and keeps their median; the table "
      << "gives the median over " << brain.front()["rounds"].get<int>() << " rounds and the range of the rounds.\n\n"
      << "| Elements (meshless: integration points) | Count | Threads | ns / element-step (median) | rounds min..max | element-steps / s | Other load (cores, max) | Target |\n"
@@ -503,7 +503,7 @@ BrainSection(const Options & options, const std::string & self, std::ostream & m
       md << "\n### Meshless (MTLED): precomputation, tables and total time\n\n"
          << "The hexahedral brain-sized model's nodes (" << r["nodes"].get<int>() << ") and body made meshless with "
          << "the defaults (linear MLS, dilatation 1.6, 2 x 2 x 2 Gauss points per background cell of the median nodal "
-         << "spacing, EBCIEM), then the same dynamic relaxation to 0.01 mm. Precomputation: \"integration points\" is "
+         << "spacing and per coarse interior block of 2 x 2 x 2 cells (docs/solver.md), EBCIEM), then the same dynamic relaxation to 0.01 mm. Precomputation: \"integration points\" is "
          << "bmr::MakeMeshlessFromCells (background grid, inside test, materials); \"solver construction\" is the "
          << "bmr::Solver constructor (k-d tree neighbour search, MLS shape functions and derivatives at the integration "
          << "points and the nodes, force model, the force kernel's schedule). Shape-function table memory is what the solve "

@@ -410,7 +410,7 @@ IndentationSection(const Options & options, std::ostream & md)
        << "TLED: dynamic relaxation to an estimated error of " << Sci(options.indentationTolerance, 0) << " mm, "
        << threads << " threads, on n x n x n/2 grids (hexahedra, or 6 ANP tetrahedra per grid cell). Meshless (MTLED): "
        << "the hexahedral grid's nodes with the default settings (linear MLS, dilatation 1.6, 2 x 2 x 2 Gauss points per "
-       << "background cell, EBCIEM), n <= " << kMeshlessIndentationMaxDivisions << "; its \"Elements\" are integration "
+       << "background cell and per coarse interior block, EBCIEM), n <= " << kMeshlessIndentationMaxDivisions << "; its \"Elements\" are integration "
        << "points and its setup includes MakeMeshlessFromCells and the Solver construction.\n\n"
        << "Reference: CalculiX " << ccx << " (" << CalculixVersion(ccx) << "; static, NLGEOM, Newton to a residual of 1e-5 of the mean force), "
        << "C3D10 quadratic tetrahedra (6 per grid cell) on the quarter model x, y >= 10 mm with symmetry "

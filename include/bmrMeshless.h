@@ -126,6 +126,21 @@ struct IntegrationSettings
   bool   adaptive = false;
   double adaptiveTolerance = 1e-2;
   int    maxSubdivisionLevels = 3;
+  /** Coarse interior blocks: each block of 2 x 2 x 2 background cells that
+   *  lies, with the ring of cells around it, inside the body and in one
+   *  material, and whose coarse
+   *  rule integrates the gradients of the shape functions within
+   *  `interiorTolerance` of its cells' rule (max over nodes of |difference| x
+   *  cell edge / block volume) is integrated as one cell of twice the edge
+   *  with `interiorPointsPerDirection` points per direction. Cells near the
+   *  boundary or a material interface, and blocks of irregular clouds, keep
+   *  `pointsPerDirection`. 0: no coarse blocks. Ignored with adaptive
+   *  integration. On regular clouds the default 2 halves the points (about
+   *  one per node inside) at the same accuracy against CalculiX C3D10 (see
+   *  docs/solver.md); a regular cloud's blocks measure 0.023, a cloud jittered
+   *  by 25 % of its spacing 0.04 to 0.07. */
+  int    interiorPointsPerDirection = 2;
+  double interiorTolerance = 0.03;
 };
 
 struct IntegrationPoints

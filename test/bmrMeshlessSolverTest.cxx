@@ -351,6 +351,41 @@ TEST(MeshlessExtremeCases, JitteredNodesStillReproduceUniaxialCompression)
   EXPECT_LT(error, 0.02 * scale);
 }
 
+// The same block with regular nodes: its interior is integrated by coarse
+// blocks (the default), which must keep a homogeneous deformation as exact as
+// every cell's own points do.
+TEST(MeshlessExtremeCases, CoarseInteriorBlocksStillReproduceUniaxialCompression)
+{
+  const Material          material = MakeMaterial(3000.0, 0.45);
+  const NeoHookean        law(material);
+  const DisplacementField exact = HomogeneousField(UniaxialDeformationGradient(0.8, law));
+  std::array<double, 4>      errors{};
+  std::array<std::size_t, 4> counts{};
+  for (int interior : { 0, 2, 3 })
+  {
+    Model               model = MakeBlockMesh(kBlockSize, { 10, 8, 6 }, GridCells::Hexahedra, material);
+    IntegrationSettings integration;
+    integration.cellSize = 1.0; // the nodal spacing (the median of the local spacings is larger)
+    integration.interiorPointsPerDirection = interior;
+    integration.interiorTolerance = 1.0;
+    MakeMeshlessFromCells(model, {}, integration, 1);
+    AddSymmetryConstraints(model);
+    Prescribe(model, model.NodeSet("xmax"), exact, { true, false, false });
+    Solver            solver(model, TightRelaxation(1e-6));
+    const SolveResult result = solver.Solve();
+    ASSERT_TRUE(result.converged) << result.message;
+    errors[interior] = MaxNodalError(model, result.displacements, exact) / MaxFieldNorm(model, exact);
+    counts[interior] = model.meshless.integrationPoints.size();
+  }
+  std::cout << "uniaxial compression, relative error: fine " << errors[0] << ", coarse interior 2 " << errors[2] << ", 3 " << errors[3] << std::endl;
+  RecordProperty("relativeDisplacementErrorFine", Sci(errors[0]));
+  RecordProperty("relativeDisplacementErrorCoarseInterior2", Sci(errors[2]));
+  RecordProperty("relativeDisplacementErrorCoarseInterior3", Sci(errors[3]));
+  EXPECT_EQ(counts[0], 8u * 480u);
+  EXPECT_EQ(counts[2], counts[0] - 6u * 56u) << "the 6 blocks one cell inside are coarse";
+  EXPECT_LT(errors[2], 0.02);
+}
+
 // ---------------------------------------------------------------------------
 // Failures are reported, never returned as results.
 // ---------------------------------------------------------------------------
@@ -856,6 +891,28 @@ TEST_F(MeshlessSceneTest, DiscretizationMeshlessBuildsIntegrationPoints)
   EXPECT_CONTAINS(report, "\"discretization\": \"meshless\"");
   EXPECT_CONTAINS(report, "\"integration_points\": 480");
   EXPECT_CONTAINS(FormatReportTable(scene, result), "meshless: 120 nodes");
+}
+
+TEST_F(MeshlessSceneTest, CoarseInteriorBlocksAreAnIntegrationOption)
+{
+  auto scene = [&](const std::string & integration) {
+    const std::string text = R"({
+      "mesh": {"generate": "block", "size": [10, 8, 6], "divisions": [10, 8, 6]},
+      "materials": [{"youngs_modulus": 3000, "poisson_ratio": 0.45}],
+      "discretization": "meshless",
+      "meshless": {"integration": )" + integration + R"(},
+      "fixed": [{"node_set": "zmin"}]
+    })";
+    return ParseScene(text, (m_Folder / "meshless.json").string());
+  };
+  // Default: the 6 blocks of 2 x 2 x 2 cells one cell inside are coarse (8 points instead of 64).
+  EXPECT_EQ(scene(R"({"cell_size": 1})").model.meshless.integrationPoints.size(), 8u * 480u - 6u * 56u);
+  EXPECT_EQ(scene(R"({"cell_size": 1, "interior_points_per_direction": 0})").model.meshless.integrationPoints.size(), 8u * 480u);
+  EXPECT_EQ(scene(R"({"cell_size": 1, "interior_points_per_direction": 3, "interior_tolerance": 1})")
+              .model.meshless.integrationPoints.size(),
+            8u * 480u - 6u * (64u - 27u));
+  const std::string bad = ErrorMessage([&] { scene(R"({"interior_points_per_direction": 4})"); });
+  EXPECT_CONTAINS(bad, "interior_points_per_direction");
 }
 
 TEST_F(MeshlessSceneTest, ExampleSceneMatchesTheFiniteElementExample)

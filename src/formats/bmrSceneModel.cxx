@@ -501,7 +501,8 @@ SceneParser::ParseDiscretization()
     }
     if (const auto value = options->Optional("integration"))
     {
-      value->AllowOnly({ "cell_size", "points_per_direction", "adaptive", "adaptive_tolerance", "max_levels" });
+      value->AllowOnly({ "cell_size", "points_per_direction", "adaptive", "adaptive_tolerance", "max_levels",
+                         "interior_points_per_direction", "interior_tolerance" });
       if (const auto item = value->Optional("cell_size"))
       {
         integration.cellSize = item->NonNegativeNumber();
@@ -521,6 +522,14 @@ SceneParser::ParseDiscretization()
       if (const auto item = value->Optional("max_levels"))
       {
         integration.maxSubdivisionLevels = item->IntegerInRange(0, 6);
+      }
+      if (const auto item = value->Optional("interior_points_per_direction"))
+      {
+        integration.interiorPointsPerDirection = item->IntegerInRange(0, 3);
+      }
+      if (const auto item = value->Optional("interior_tolerance"))
+      {
+        integration.interiorTolerance = item->NonNegativeNumber();
       }
     }
   }

@@ -87,10 +87,24 @@ ValidateSettings(const IntegrationSettings & settings)
             << " (each level multiplies the points of a cell by 8).";
     throw Error(message.str());
   }
+  if (settings.interiorPointsPerDirection < 0 || settings.interiorPointsPerDirection > 3)
+  {
+    message << "interiorPointsPerDirection is " << settings.interiorPointsPerDirection
+            << "; use 0 (no coarse interior blocks), 1, 2 or 3.";
+    throw Error(message.str());
+  }
+  if (!(settings.interiorTolerance >= 0.0) || !std::isfinite(settings.interiorTolerance))
+  {
+    message << "interiorTolerance is " << settings.interiorTolerance
+            << "; it must be finite and non-negative (e.g. 0.03; 0 keeps every block fine).";
+    throw Error(message.str());
+  }
 }
 
-/** A cube of the background grid or one of its descendants. `path` holds the
- *  child numbers from the background cell down, 3 bits per level, most
+/** A cube of the background grid or one of its descendants, or a coarse
+ *  interior block. `background` numbers the root it descends from (a
+ *  background cell, or a block of 2 x 2 x 2 with coarse interior blocks on);
+ *  `path` holds the child numbers from that root down, 3 bits per level, most
  *  significant first, so that sorting leaves by it gives depth-first order. */
 struct IntegrationCell
 {
@@ -99,6 +113,7 @@ struct IntegrationCell
   Vector3  size = Vector3::Zero(); // edges along x, y, z
   int      level = 0;
   uint32_t path = 0;
+  bool     coarse = false; // an interior block of 2 x 2 x 2 background cells
 };
 
 /** Result of an accepted cell: its Gauss points inside the body. */
@@ -115,6 +130,7 @@ struct AcceptedCell
 struct Scratch
 {
   std::vector<double>       difference;
+  std::vector<Vector3>      gradient; // I_coarse - I_fine of grad phi, coarse interior blocks
   std::vector<std::uint8_t> seen;
   std::vector<Index>        touched;
 };
@@ -144,6 +160,8 @@ public:
     , m_ShapeFunctions(shapeFunctions)
     , m_Settings(settings)
     , m_Rule(MakeGaussRule(settings.pointsPerDirection))
+    , m_InteriorRule(MakeGaussRule(std::max(1, settings.interiorPointsPerDirection)))
+    , m_BlockWidth(settings.interiorPointsPerDirection > 0 && !settings.adaptive ? 2 : 1)
     , m_PointsPerCell(settings.pointsPerDirection * settings.pointsPerDirection * settings.pointsPerDirection)
   {
     const Eigen::AlignedBox3d box = body.Bounds();
@@ -168,24 +186,59 @@ public:
               << " cells. Use a larger cellSize (0: the median nodal spacing).";
       throw Error(message.str());
     }
-    m_BackgroundCount = static_cast<Index>(total);
+    for (int a = 0; a < 3; ++a)
+    {
+      m_Blocks[a] = (static_cast<Index>(m_Dimensions[a]) + m_BlockWidth - 1) / m_BlockWidth;
+    }
+    m_BackgroundCount = m_Blocks[0] * m_Blocks[1] * m_Blocks[2];
   }
 
+  /** Roots of the integration: background cells, or blocks of 2 x 2 x 2 of
+   *  them with coarse interior blocks on. */
   Index BackgroundCount() const { return m_BackgroundCount; }
 
-  /** Background cells in grid order, x fastest, then y, then z. */
-  IntegrationCell BackgroundCell(Index index) const
+  /** Cells of the background grid. */
+  double CellCount() const { return m_Dimensions[0] * m_Dimensions[1] * m_Dimensions[2]; }
+
+  /** First background cell (i, j, k) of a root. */
+  Eigen::Array3i FirstCell(Index root) const
   {
-    const Index nx = static_cast<Index>(m_Dimensions[0]);
-    const Index ny = static_cast<Index>(m_Dimensions[1]);
-    const Index i = index % nx;
-    const Index j = (index / nx) % ny;
-    const Index k = index / (nx * ny);
+    return m_BlockWidth * Eigen::Array3i(static_cast<int>(root % m_Blocks[0]),
+                                         static_cast<int>((root / m_Blocks[0]) % m_Blocks[1]),
+                                         static_cast<int>(root / (m_Blocks[0] * m_Blocks[1])));
+  }
+
+  /** A block as one coarse cell. */
+  IntegrationCell CoarseCell(Index root) const
+  {
     IntegrationCell cell;
-    cell.background = index;
-    cell.corner = m_Origin + m_CellSize.cwiseProduct(Vector3(i, j, k));
-    cell.size = m_CellSize;
+    cell.background = root;
+    cell.corner = m_Origin + m_CellSize.cwiseProduct(FirstCell(root).cast<double>().matrix());
+    cell.size = 2.0 * m_CellSize;
+    cell.coarse = true;
     return cell;
+  }
+
+  /** The background cells of a root that lie in the grid, in grid order (x
+   *  fastest, then y, then z). */
+  void FineCells(Index root, std::vector<IntegrationCell> & cells) const
+  {
+    const Eigen::Array3i first = FirstCell(root);
+    for (int child = 0; child < m_BlockWidth * m_BlockWidth * m_BlockWidth; ++child)
+    {
+      const Eigen::Array3i index = first + Eigen::Array3i(child & 1, (child >> 1) & 1, (child >> 2) & 1);
+      if ((index.cast<double>() >= Eigen::Array3d(m_Dimensions.data())).any())
+      {
+        continue;
+      }
+      IntegrationCell cell;
+      cell.background = root;
+      cell.corner = m_Origin + m_CellSize.cwiseProduct(index.cast<double>().matrix());
+      cell.size = m_CellSize;
+      // Non-adaptive with blocks on: the cells of a block sort in child order.
+      cell.path = m_BlockWidth == 2 ? static_cast<uint32_t>(child) << (3 * (kMaxSubdivisionLevels - 1)) : 0;
+      cells.push_back(cell);
+    }
   }
 
   /** The 8 children, x fastest. */
@@ -202,20 +255,145 @@ public:
   /** Gauss points of the cell that lie inside the body (x fastest). */
   void InsidePoints(const IntegrationCell & cell, std::vector<CellPoint> & points) const
   {
-    const int    n = static_cast<int>(m_Rule.abscissae.size());
-    const double volume = cell.size.prod();
+    const GaussRule & rule = cell.coarse ? m_InteriorRule : m_Rule;
+    const int         n = static_cast<int>(rule.abscissae.size());
+    const double      volume = cell.size.prod();
     for (int k = 0; k < n; ++k)
       for (int j = 0; j < n; ++j)
         for (int i = 0; i < n; ++i)
         {
           const Vector3 x =
-            cell.corner + cell.size.cwiseProduct(Vector3(m_Rule.abscissae[i], m_Rule.abscissae[j], m_Rule.abscissae[k]));
+            cell.corner + cell.size.cwiseProduct(Vector3(rule.abscissae[i], rule.abscissae[j], rule.abscissae[k]));
           const Index material = m_Body.MaterialAt(x);
           if (material >= 0)
           {
-            points.push_back({ x, m_Rule.weights[i] * m_Rule.weights[j] * m_Rule.weights[k] * volume, material });
+            points.push_back({ x, rule.weights[i] * rule.weights[j] * rule.weights[k] * volume, material });
           }
         }
+  }
+
+  /** Whether the root's block of 2 x 2 x 2 background cells is interior
+   *  (its cells' inside points are left in `points`): all inside the grid,
+   *  its cells' Gauss points (at their usual density) inside and in one
+   *  material, and the ring of cells around it (their centres, and the
+   *  corners of the grown block) in that material too. Near the boundary a
+   *  coarse cell would be cut; near a material interface its few points
+   *  would stand for the whole block in the supports of nodes that also
+   *  reach the other material (a coarse block beside a 1 Pa cavity left a
+   *  soft mode that dynamic relaxation did not converge). */
+  bool Interior(Index root, std::vector<CellPoint> & points) const
+  {
+    const Eigen::Array3i first = FirstCell(root);
+    if (((first + 2).cast<double>() > Eigen::Array3d(m_Dimensions.data())).any())
+    {
+      return false;
+    }
+    points.clear();
+    std::vector<IntegrationCell> cells;
+    FineCells(root, cells);
+    for (const IntegrationCell & cell : cells)
+    {
+      InsidePoints(cell, points);
+    }
+    if (static_cast<Index>(points.size()) != 8 * m_PointsPerCell)
+    {
+      return false;
+    }
+    const Index material = points.front().material;
+    if (!std::all_of(points.begin(), points.end(), [&](const CellPoint & p) { return p.material == material; }))
+    {
+      return false;
+    }
+    const Vector3 corner = m_Origin + m_CellSize.cwiseProduct(first.cast<double>().matrix());
+    for (int c = 0; c < 8; ++c)
+    {
+      const Vector3 u(c & 1, (c >> 1) & 1, (c >> 2) & 1);
+      if (m_Body.MaterialAt(corner - m_CellSize + 4.0 * m_CellSize.cwiseProduct(u)) != material)
+      {
+        return false;
+      }
+    }
+    for (int k = -1; k <= 2; ++k)
+      for (int j = -1; j <= 2; ++j)
+        for (int i = -1; i <= 2; ++i)
+        {
+          const bool ring = i < 0 || i > 1 || j < 0 || j > 1 || k < 0 || k > 1;
+          if (ring && m_Body.MaterialAt(corner + m_CellSize.cwiseProduct(Vector3(i + 0.5, j + 0.5, k + 0.5))) != material)
+          {
+            return false;
+          }
+        }
+    return true;
+  }
+
+  /** The interior blocks among roots [first, last) whose coarse rule
+   *  integrates the gradients of the shape functions as their cells' rule
+   *  does: max over nodes |sum_coarse w grad phi_I - sum_fine w grad phi_I|
+   *  at most interiorTolerance x the block's volume / its cell edge. These
+   *  integrals are what a homogeneous deformation needs exact (integration
+   *  consistency); they fail on irregular clouds, where the shape functions
+   *  vary within a cell. */
+  std::vector<char> CoarseBlocks(Index first, Index last, Scratch & scratch) const
+  {
+    std::vector<char> coarse(static_cast<std::size_t>(last - first), 0);
+    if (m_BlockWidth != 2)
+    {
+      return coarse;
+    }
+    std::vector<CellPoint>             points;
+    std::vector<CellPoint>             fine;
+    std::vector<std::array<Index, 3>> ranges; // root offset, coarse points' begin, fine points' begin (end: next begin)
+    for (Index b = first; b < last; ++b)
+    {
+      if (!Interior(b, fine))
+      {
+        continue;
+      }
+      const Index begin = static_cast<Index>(points.size());
+      InsidePoints(CoarseCell(b), points);
+      ranges.push_back({ b - first, begin, static_cast<Index>(points.size()) });
+      points.insert(points.end(), fine.begin(), fine.end());
+    }
+    if (ranges.empty())
+    {
+      return coarse;
+    }
+    std::vector<Vector3> positions(points.size());
+    for (std::size_t p = 0; p < points.size(); ++p)
+    {
+      positions[p] = points[p].position;
+    }
+    const ShapeFunctionTable table = m_ShapeFunctions.Evaluate(positions, true, 1, "integration point");
+    const double             edge = m_CellSize.minCoeff();
+    for (std::size_t r = 0; r < ranges.size(); ++r)
+    {
+      const Index end = r + 1 < ranges.size() ? ranges[r + 1][1] : static_cast<Index>(points.size());
+      for (Index p = ranges[r][1]; p < end; ++p)
+      {
+        const double sign = p < ranges[r][2] ? 1.0 : -1.0;
+        for (Index e = table.offsets[p]; e < table.offsets[p + 1]; ++e)
+        {
+          const Index node = table.nodes[e];
+          if (!scratch.seen[node])
+          {
+            scratch.seen[node] = 1;
+            scratch.touched.push_back(node);
+            scratch.gradient[node].setZero();
+          }
+          scratch.gradient[node] += sign * points[p].weight * Vector3(&table.gradients[3 * e]);
+        }
+      }
+      double difference = 0.0;
+      for (Index node : scratch.touched)
+      {
+        difference = std::max(difference, scratch.gradient[node].norm());
+        scratch.seen[node] = 0;
+      }
+      scratch.touched.clear();
+      const double measure = difference * edge / (8.0 * m_CellSize.prod());
+      coarse[ranges[r][0]] = measure <= m_Settings.interiorTolerance ? 1 : 0;
+    }
+    return coarse;
   }
 
   /** How many corners of the cell, shrunk by 1% about its centre, the body
@@ -235,10 +413,22 @@ public:
    *  depth-first order. */
   std::vector<AcceptedCell> Process(Index first, Index last, Scratch & scratch) const
   {
-    std::vector<Active> active;
+    const std::vector<char>      coarse = CoarseBlocks(first, last, scratch);
+    std::vector<Active>          active;
+    std::vector<IntegrationCell> cells;
     for (Index b = first; b < last; ++b)
     {
-      active.push_back({ BackgroundCell(b) });
+      if (coarse[b - first])
+      {
+        active.push_back({ CoarseCell(b) });
+        continue;
+      }
+      cells.clear();
+      FineCells(b, cells);
+      for (const IntegrationCell & cell : cells)
+      {
+        active.push_back({ cell });
+      }
     }
     std::vector<AcceptedCell> accepted;
     ProcessLevel(active, nullptr, scratch, accepted);
@@ -255,7 +445,7 @@ public:
   Index BatchSize() const
   {
     const int n = m_Settings.pointsPerDirection;
-    const int perCell = (m_Settings.adaptive ? 9 : 1) * n * n * n;
+    const int perCell = (m_Settings.adaptive ? 9 : 1) * n * n * n * m_BlockWidth * m_BlockWidth * m_BlockWidth;
     return std::clamp<Index>(m_BackgroundCount / 64, 1, std::max<Index>(4, kPointsPerEvaluation / perCell));
   }
 
@@ -414,10 +604,13 @@ private:
   const MovingLeastSquares &  m_ShapeFunctions;
   const IntegrationSettings & m_Settings;
   GaussRule                   m_Rule;
+  GaussRule                   m_InteriorRule;
+  int                         m_BlockWidth; // background cells per block edge: 2 with coarse interior blocks
   Vector3                     m_CellSize;
   Index                       m_PointsPerCell;
   Vector3                     m_Origin = Vector3::Zero();
   std::array<double, 3>       m_Dimensions{ 1.0, 1.0, 1.0 };
+  std::array<Index, 3>        m_Blocks{ 1, 1, 1 };
   Index                       m_BackgroundCount = 0;
 };
 
@@ -469,9 +662,10 @@ MakeIntegrationPoints(const BodyRegion &          body,
 #pragma omp parallel num_threads(ThreadCount(threads))
   {
     Scratch scratch;
-    if (settings.adaptive)
+    if (settings.adaptive || settings.interiorPointsPerDirection > 0)
     {
       scratch.difference.assign(nodeCount, 0.0);
+      scratch.gradient.assign(nodeCount, Vector3::Zero());
       scratch.seen.assign(nodeCount, 0);
     }
 #pragma omp for schedule(dynamic, 1)
@@ -531,7 +725,7 @@ MakeIntegrationPoints(const BodyRegion &          body,
   if (result.positions.empty())
   {
     std::ostringstream message;
-    message << "MakeIntegrationPoints: no Gauss point of the " << grid.BackgroundCount()
+    message << "MakeIntegrationPoints: no Gauss point of the " << grid.CellCount()
             << " background cells (cell size " << cellSize
             << " mm) lies inside the body. Use a smaller cellSize or more pointsPerDirection.";
     throw Error(message.str());

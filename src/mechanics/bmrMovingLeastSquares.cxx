@@ -113,7 +113,9 @@ struct SupportResultSet
 // integration spacing; the support is the dilatation times the larger of the
 // two spacings. With 2 x 2 x 2 Gauss points per background cell of the nodal
 // spacing, the 4th nearest point is closer than the nodal spacing everywhere
-// (box corners included), so regular clouds keep their supports.
+// (box corners included), and in coarse interior blocks of twice that edge
+// it is at most the nodal spacing away (at a block's centre), so regular
+// clouds keep their supports.
 constexpr int kSpacingIntegrationPoints = 4;
 
 std::vector<double>
