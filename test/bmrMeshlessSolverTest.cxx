@@ -352,8 +352,10 @@ TEST(MeshlessExtremeCases, JitteredNodesStillReproduceUniaxialCompression)
 }
 
 // The same block with regular nodes: its interior is integrated by coarse
-// blocks (the default), which must keep a homogeneous deformation as exact as
-// every cell's own points do.
+// blocks (the default; tolerance 1 so that every interior block is coarse).
+// A homogeneous deformation must stay within the 2 % the jittered cloud is
+// allowed (measured: every cell's own points 0.10 %, coarse blocks 0.94 %,
+// 3 x 3 x 3 points per block 0.40 %; docs/solver.md).
 TEST(MeshlessExtremeCases, CoarseInteriorBlocksStillReproduceUniaxialCompression)
 {
   const Material          material = MakeMaterial(3000.0, 0.45);
