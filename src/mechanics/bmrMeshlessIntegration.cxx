@@ -197,6 +197,9 @@ public:
    *  them with coarse interior blocks on. */
   Index BackgroundCount() const { return m_BackgroundCount; }
 
+  /** Whether roots are blocks of 2 x 2 x 2 cells that may be coarse. */
+  bool CoarseBlocksOn() const { return m_BlockWidth == 2; }
+
   /** Cells of the background grid. */
   double CellCount() const { return m_Dimensions[0] * m_Dimensions[1] * m_Dimensions[2]; }
 
@@ -336,7 +339,7 @@ public:
   std::vector<char> CoarseBlocks(Index first, Index last, Scratch & scratch) const
   {
     std::vector<char> coarse(static_cast<std::size_t>(last - first), 0);
-    if (m_BlockWidth != 2)
+    if (!CoarseBlocksOn())
     {
       return coarse;
     }
@@ -662,11 +665,17 @@ MakeIntegrationPoints(const BodyRegion &          body,
 #pragma omp parallel num_threads(ThreadCount(threads))
   {
     Scratch scratch;
-    if (settings.adaptive || settings.interiorPointsPerDirection > 0)
+    if (settings.adaptive || grid.CoarseBlocksOn())
+    {
+      scratch.seen.assign(nodeCount, 0);
+    }
+    if (settings.adaptive)
     {
       scratch.difference.assign(nodeCount, 0.0);
+    }
+    if (grid.CoarseBlocksOn())
+    {
       scratch.gradient.assign(nodeCount, Vector3::Zero());
-      scratch.seen.assign(nodeCount, 0);
     }
 #pragma omp for schedule(dynamic, 1)
     for (Index batch = 0; batch < batchCount; ++batch)
