@@ -29,9 +29,19 @@ struct RigidContact::Tree
   // Signed distance of x to the surface (positive outside), the closest point
   // and (when asked) the unit outward normal there: the direction from the
   // closest point to x, or the pseudo-normal where x is on the surface.
-  double SignedDistance(const Vector3 & x, Vector3 & closest, Vector3 * outwardNormal = nullptr) const
+  // `lastHit` (when given and set) is the closest point of an earlier query
+  // near x: its distance bounds the search from the start (a node sliding on
+  // the surface visits a few boxes instead of the whole descent); it
+  // receives this query's.
+  double SignedDistance(const Vector3 & x, Vector3 & closest, Vector3 * outwardNormal = nullptr,
+                        TriangleSurfaceTree::Hit * lastHit = nullptr) const
   {
-    const auto   hit = surface->Closest(x);
+    const TriangleSurfaceTree::Hit hit =
+      lastHit != nullptr && lastHit->triangle >= 0 ? surface->Closest(x, *lastHit) : surface->Closest(x);
+    if (lastHit != nullptr)
+    {
+      *lastHit = hit;
+    }
     const auto   t = static_cast<std::size_t>(hit.triangle);
     const auto & c = corners[t];
     closest = hit.point;
@@ -211,6 +221,7 @@ RigidContact::RigidContact(const ContactSurface & surface, std::vector<Index> sl
   }
   m_LastQueried = m_Reference;
   m_SafeDistance.assign(m_SlaveNodes.size(), 0.0);
+  m_LastHit.assign(m_SlaveNodes.size(), TriangleSurfaceTree::Hit{ Vector3::Zero(), -1, 0.0 });
 }
 
 RigidContact::~RigidContact() = default;
@@ -273,7 +284,7 @@ RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std:
       continue;
     }
     Vector3 closest, outward;
-    if (tree.sideSign * tree.SignedDistance(x, closest, &outward) >= 0.0)
+    if (tree.sideSign * tree.SignedDistance(x, closest, &outward, &m_LastHit[i]) >= 0.0)
     {
       m_LastQueried[i] = x;
       m_SafeDistance[i] = (x - closest).norm();

@@ -4,6 +4,7 @@
 #ifndef bmrContact_h
 #define bmrContact_h
 
+#include "bmrClosestPoint.h"
 #include "bmrModel.h"
 
 #include <memory>
@@ -69,6 +70,7 @@ private:
   Vector3                m_Translation = Vector3::Zero();
   std::vector<Vector3>   m_LastQueried;   // position at the last exact query, in the surface's frame
   std::vector<double>    m_SafeDistance;  // distance to the surface at that query (allowed side), else 0
+  std::vector<TriangleSurfaceTree::Hit> m_LastHit; // closest point of the last query (surface frame; triangle -1: none yet)
 };
 
 } // namespace bmr
