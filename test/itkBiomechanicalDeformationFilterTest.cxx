@@ -43,6 +43,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -989,6 +990,11 @@ TEST_F(BrainShiftPipelineTest, FiltersComposedByHandMatchTheRegisterCommand)
     }
   }
   EXPECT_LE(positionDifference, 1e-9);
+  // Contact's in/out decisions amplify last-bit differences between the
+  // program's and the library's copies of inline code (docs/solver.md).
+  std::ostringstream difference;
+  difference << displacementDifference;
+  RecordProperty("displacement_difference_mm", difference.str());
   EXPECT_LE(displacementDifference, 1e-9);
   EXPECT_GT(largest, 3.0); // the measured sag peaks at 5 mm
 
