@@ -32,8 +32,12 @@ namespace
 
 constexpr double kTolerance = 0.01; // mm, dynamic relaxation (as the brain-sized cases)
 // Looser dynamic-relaxation tolerances, for the time to a solution as accurate
-// as CalculiX's: the DR error need not be far below the discretization's.
-constexpr double kLooserTolerances[] = { 0.03, 0.1, 0.3 };
+// as CalculiX's: the DR error need not be far below the discretization's. The
+// tolerance bounds the estimated largest nodal error; the RMS error grows far
+// slower (4 mm mesh, 2026-11-28: 0.075 / 0.146 / 0.227 mm RMS at 0.01 / 0.3 /
+// 1.0 mm), and which of them is as accurate as C3D4 is decided against the
+// reference, not the estimate.
+constexpr double kLooserTolerances[] = { 0.03, 0.1, 0.3, 0.5, 1.0 };
 // CalculiX's defaults for the timed solves (the reference keeps the harness's tight 1e-5 / 1e-4).
 constexpr double kCalculixResidualTolerance = 0.005;
 constexpr double kCalculixCorrectionTolerance = 0.01;
