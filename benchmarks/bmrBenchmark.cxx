@@ -160,10 +160,19 @@ Driver(const Options & options, const std::string & self)
   }
   report << md.str();
   std::cout << report.str();
-  // The image benchmark's section (bmrImageBenchmark) is kept as it is.
-  const std::string imageSection = bmr::benchmark::ImageSection(ReadTextFile(options.output));
-  WriteCreatingFolder(options.output, imageSection.empty() ? report.str()
-                                                       : bmr::benchmark::WithImageSection(report.str(), imageSection));
+  // The sections other programs write on the page (bmrImageBenchmark,
+  // scripts/benchmark-simulation.py) are kept as they are, so that this
+  // program can be rerun alone.
+  const std::string previous = ReadTextFile(options.output);
+  const std::string imageSection = bmr::benchmark::ImageSection(previous);
+  std::string       page = imageSection.empty() ? report.str() : bmr::benchmark::WithImageSection(report.str(), imageSection);
+  const std::string simulationSection = bmr::benchmark::MarkedSection(
+    previous, bmr::benchmark::SimulationSectionBegin, bmr::benchmark::SimulationSectionEnd);
+  if (!simulationSection.empty())
+  {
+    page += "\n" + simulationSection;
+  }
+  WriteCreatingFolder(options.output, page);
   Log("wrote " + options.output);
   return 0;
 }

@@ -62,17 +62,28 @@ LoadAverage()
 constexpr const char * ImageSectionBegin = "<!-- image-benchmark: written by bmrImageBenchmark -->";
 constexpr const char * ImageSectionEnd = "<!-- image-benchmark: end -->";
 
-/** The image benchmark's section of `report` (markers included), or "" when it has none. */
+/** Markers of the surgical-simulation section (scripts/benchmark-simulation.py). */
+constexpr const char * SimulationSectionBegin = "<!-- simulation-benchmark:begin -->";
+constexpr const char * SimulationSectionEnd = "<!-- simulation-benchmark:end -->";
+
+/** The section of `report` between two markers (included), or "" when it has none. */
 inline std::string
-ImageSection(const std::string & report)
+MarkedSection(const std::string & report, const char * beginMarker, const char * endMarker)
 {
-  const auto begin = report.find(ImageSectionBegin);
-  const auto end = report.find(ImageSectionEnd);
+  const auto begin = report.find(beginMarker);
+  const auto end = report.find(endMarker);
   if (begin == std::string::npos || end == std::string::npos || end < begin)
   {
     return "";
   }
-  return report.substr(begin, end + std::string(ImageSectionEnd).size() - begin) + "\n";
+  return report.substr(begin, end + std::string(endMarker).size() - begin) + "\n";
+}
+
+/** The image benchmark's section of `report` (markers included), or "" when it has none. */
+inline std::string
+ImageSection(const std::string & report)
+{
+  return MarkedSection(report, ImageSectionBegin, ImageSectionEnd);
 }
 
 /** `report` with its image section replaced by `section` (appended when it has none). */
