@@ -43,7 +43,6 @@
 
 #include <cmath>
 #include <fstream>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -992,9 +991,7 @@ TEST_F(BrainShiftPipelineTest, FiltersComposedByHandMatchTheRegisterCommand)
   EXPECT_LE(positionDifference, 1e-9);
   // Contact's in/out decisions amplify last-bit differences between the
   // program's and the library's copies of inline code (docs/solver.md).
-  std::ostringstream difference;
-  difference << displacementDifference;
-  RecordProperty("displacement_difference_mm", difference.str());
+  RecordProperty("displacement_difference_mm", Sci(displacementDifference));
   EXPECT_LE(displacementDifference, 1e-9);
   EXPECT_GT(largest, 3.0); // the measured sag peaks at 5 mm
 
