@@ -147,6 +147,8 @@ struct Options
   bool        midEdgeSlaves = false;   // CalculixSettings::midEdgeSlaves
   bool        gradualRelease = true;   // CalculixSettings::gradualRelease
   double      csfModulus = 10.0;       // Pa, the CSF class of both truths (the study's: 10)
+  double      stabilisationStiffness = 0.0; // N/mm, CalculixSettings::stabilisationStiffness (0: off)
+  int         stabilisationSteps = 10;
   int         threads = 2;
   std::string workDirectory;           // keep CalculiX's job folders here
 };
@@ -213,6 +215,8 @@ Run(const Scene & scene, const bmr::RegistrationImage * image, const bmr::Regist
   calculix.correctionTolerance = 2.0 * options.residualTolerance;
   calculix.midEdgeSlaves = options.midEdgeSlaves;
   calculix.gradualRelease = options.gradualRelease;
+  calculix.stabilisationStiffness = options.stabilisationStiffness;
+  calculix.stabilisationSteps = options.stabilisationSteps;
   if (warmStart)
   {
     calculix.startDisplacements = anp.displacements;
@@ -264,6 +268,9 @@ Run(const Scene & scene, const bmr::RegistrationImage * image, const bmr::Regist
                            { "skull_closing_mm", options.skullClosing },
                            { "mid_edge_slaves", options.midEdgeSlaves },
                            { "gradual_release", warmStart && options.gradualRelease },
+                           { "stabilisation_stiffness_n_per_mm", options.stabilisationStiffness },
+                           { "stabilisation_steps", options.stabilisationStiffness > 0.0 ? options.stabilisationSteps : 0 },
+                           { "stabilisation_forces_n", reference.stabilisationForces },
                            { "hold_run_seconds", reference.holdRunSeconds },
                            { "increments", reference.increments },
                            { "iterations", reference.iterations },
@@ -396,6 +403,12 @@ main(int argc, char ** argv)
   app.add_option("--csf-modulus", options.csfModulus,
                  "Young's modulus (Pa) of the CSF class in both truths; the study's scene has 10")
     ->check(CLI::PositiveNumber);
+  app.add_option("--stabilisation-stiffness", options.stabilisationStiffness,
+                 "N/mm: CalculiX's boundary nodes tied by springs to anchors that follow them step by step (a "
+                 "proximal-point iteration to CalculiX's own equilibrium; needs --warm-start false); 0: off")
+    ->check(CLI::NonNegativeNumber);
+  app.add_option("--stabilisation-steps", options.stabilisationSteps, "proximal steps after the loading step")
+    ->check(CLI::PositiveNumber);
   app.add_option("--mid-edge-slaves", options.midEdgeSlaves,
                  "mid-edge nodes are contact slaves too (false: the corners, as the module's contact)");
   app.add_option("--threads", options.threads, "threads of both solvers")->check(CLI::PositiveNumber);
@@ -404,6 +417,13 @@ main(int argc, char ** argv)
     ->check(CLI::ExistingFile);
   app.add_option("--keep", options.workDirectory, "keep CalculiX's job folders under this folder");
   CLI11_PARSE(app, argc, argv);
+  if (options.stabilisationStiffness > 0.0 && options.warmStart)
+  {
+    std::cerr << "bmrCalculixGroundTruth: --stabilisation-stiffness is a cold start of its own; give --warm-start false "
+                 "with it"
+              << std::endl;
+    return 2;
+  }
 
   try
   {
@@ -460,7 +480,8 @@ main(int argc, char ** argv)
             << " --initial-increment " << options.initialIncrement << " --residual-tolerance " << options.residualTolerance
             << " --warm-start " << (options.warmStart ? "true" : "false") << " --gradual-release "
             << (options.gradualRelease ? "true" : "false") << " --csf-modulus " << options.csfModulus
-            << " --mid-edge-slaves "
+            << " --stabilisation-stiffness " << options.stabilisationStiffness << " --stabilisation-steps "
+            << options.stabilisationSteps << " --mid-edge-slaves "
             << (options.midEdgeSlaves ? "true" : "false") << " --threads " << options.threads;
     std::ofstream(output) << Report(runs, machine.str(), command.str());
     std::cout << json{ { "machine", machine.str() }, { "runs", runs } }.dump(2) << std::endl;

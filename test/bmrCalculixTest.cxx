@@ -755,6 +755,51 @@ TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
   EXPECT_LT(gradualAgainstCold.maxError, 0.2 * agreement.maxError);
   EXPECT_GT(gradual.holdRunSeconds, 0.0);
   EXPECT_GE(gradual.lastStepIterations, 1);
+
+  // The proximal stabilisation bmrCalculixGroundTruth uses on Colin27: the
+  // boundary's nodes tied by springs to anchors, at the reference state in
+  // the first step, then where each step before ended. It ends at the cold
+  // start's equilibrium, and the springs carry less at every step.
+  CalculixSettings stabilised = quadratic;
+  stabilised.stabilisationStiffness = 2e-4; // N/mm: the slowest mode here contracts by about 0.6 a step
+  stabilised.stabilisationSteps = 8;
+  const CalculixResult         proximal = RunCalculix(walled, stabilised);
+  const DisplacementComparison proximalAgainstCold =
+    CompareDisplacements(walled.nodes, proximal.displacements, walled.nodes, reference.displacements);
+  std::cout << "walls, stabilised (" << stabilised.stabilisationSteps << " proximal steps, k "
+            << stabilised.stabilisationStiffness << " N/mm): against the cold start RMS / max "
+            << proximalAgainstCold.rmsError << " / " << proximalAgainstCold.maxError << " mm; largest spring force per step";
+  for (const double force : proximal.stabilisationForces)
+  {
+    std::cout << " " << force;
+  }
+  std::cout << " N" << std::endl;
+  ASSERT_EQ(proximal.stabilisationForces.size(), static_cast<std::size_t>(stabilised.stabilisationSteps + 1));
+  for (std::size_t step = 1; step < proximal.stabilisationForces.size(); ++step)
+  {
+    EXPECT_LT(proximal.stabilisationForces[step], proximal.stabilisationForces[step - 1]) << "step " << step;
+  }
+  EXPECT_LT(proximal.stabilisationForces.back(), 0.01 * proximal.stabilisationForces.front());
+  EXPECT_LT(proximalAgainstCold.rmsError, 0.1 * agreement.rmsError);
+  EXPECT_LT(proximalAgainstCold.maxError, 0.2 * agreement.maxError);
+}
+
+/** The error of a deck that must be refused, checking that nothing was written. */
+std::string
+DeckRefusal(const Model & model, const CalculixMesh & mesh, const CalculixSettings & bad)
+{
+  std::ostringstream refused;
+  try
+  {
+    WriteCalculixDeck(refused, model, mesh, bad);
+    ADD_FAILURE() << "bad settings gave a deck";
+  }
+  catch (const Error & error)
+  {
+    EXPECT_TRUE(refused.str().empty()) << "a refused deck must not be half-written";
+    return std::string(error.what());
+  }
+  return std::string();
 }
 
 TEST(CalculixDeck, StartStateOfTheWrongSizeOrNotFiniteIsANamedError)
@@ -787,20 +832,7 @@ TEST(CalculixDeck, StartStateOfTheWrongSizeOrNotFiniteIsANamedError)
   EXPECT_EQ(good.str().find("*CLOAD"), std::string::npos);
 
   // Release forces: one per mesh node, finite; written as loads of the release step.
-  const auto refusal = [&](const CalculixSettings & bad) {
-    std::ostringstream refused;
-    try
-    {
-      WriteCalculixDeck(refused, model, mesh, bad);
-      ADD_FAILURE() << "bad release settings gave a deck";
-    }
-    catch (const Error & error)
-    {
-      EXPECT_TRUE(refused.str().empty()) << "a refused deck must not be half-written";
-      return std::string(error.what());
-    }
-    return std::string();
-  };
+  const auto refusal = [&](const CalculixSettings & bad) { return DeckRefusal(model, mesh, bad); };
   settings.releaseForces.assign(mesh.nodes.size() - 1, Vector3::Ones());
   EXPECT_NE(refusal(settings).find("releaseForces has " + std::to_string(mesh.nodes.size() - 1)), std::string::npos);
   settings.releaseForces.assign(mesh.nodes.size(), Vector3::Ones());
@@ -820,6 +852,53 @@ TEST(CalculixDeck, StartStateOfTheWrongSizeOrNotFiniteIsANamedError)
   WriteCalculixDeck(holdOnly, model, mesh, settings);
   EXPECT_EQ(holdOnly.str().find("*BOUNDARY, OP=NEW"), std::string::npos);
   EXPECT_EQ(holdOnly.str().find("*CLOAD"), std::string::npos);
+}
+
+TEST(CalculixDeck, StabilisationWritesSpringsAnchorsAndProximalSteps)
+{
+  // No ccx needed: the deck is written to a string.
+  const Model        model = MakeIndentationModel(IndentationProblem{}, { 2, 2, 2 }, GridCells::Tetrahedra);
+  const CalculixMesh mesh = MakeCalculixMesh(model);
+  CalculixSettings   settings;
+  settings.stabilisationStiffness = 1e-3;
+  settings.stabilisationSteps = 3;
+  std::ostringstream deck;
+  WriteCalculixDeck(deck, model, mesh, settings);
+  const std::string text = deck.str();
+  const auto        count = [&](const std::string & what) {
+    std::size_t n = 0;
+    for (std::size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1))
+    {
+      ++n;
+    }
+    return n;
+  };
+  EXPECT_EQ(count("*STEP"), 4u);             // loading, then three proximal steps
+  EXPECT_EQ(count("*BOUNDARY, OP=NEW"), 3u); // each proximal step replaces the anchors' hold
+  EXPECT_EQ(count("*BOUNDARY, FIXED"), 3u);
+  EXPECT_EQ(count("*ELEMENT, TYPE=SPRING2"), 6u); // two anchor sets x three components
+  EXPECT_NE(text.find("*NSET, NSET=BMRANCHORA"), std::string::npos);
+  // The steps freeze the two anchor sets in turn: B (free while A held the
+  // loading step), then A, then B.
+  const std::size_t first = text.find("*BOUNDARY, FIXED");
+  const std::size_t second = text.find("*BOUNDARY, FIXED", first + 1);
+  ASSERT_NE(second, std::string::npos);
+  // The first fixed line names an anchor of set B: anchors alternate A, B per node.
+  const std::size_t firstAnchor = std::stoul(text.substr(first + std::string("*BOUNDARY, FIXED\n").size()));
+  const std::size_t secondAnchor = std::stoul(text.substr(second + std::string("*BOUNDARY, FIXED\n").size()));
+  EXPECT_EQ(firstAnchor, secondAnchor + 1);
+  EXPECT_EQ((firstAnchor - mesh.nodes.size()) % 2, 0u); // 1-based: B anchors are mesh nodes + 2, 4, ...
+
+  const auto refusal = [&](const CalculixSettings & bad) { return DeckRefusal(model, mesh, bad); };
+  CalculixSettings noSteps = settings;
+  noSteps.stabilisationSteps = 0;
+  EXPECT_NE(refusal(noSteps).find("at least one step"), std::string::npos);
+  CalculixSettings negative = settings;
+  negative.stabilisationStiffness = -1.0;
+  EXPECT_NE(refusal(negative).find("stabilisationStiffness -1"), std::string::npos);
+  CalculixSettings both = settings;
+  both.startDisplacements.assign(model.nodes.size(), Vector3::Zero());
+  EXPECT_NE(refusal(both).find("give one of them"), std::string::npos);
 }
 
 TEST(CalculixContact, BadContactSurfacesAreNamedErrors)

@@ -131,24 +131,20 @@ struct DatBlock
   std::vector<std::pair<long, Vector3>> rows;
 };
 
-/** The last block of *NODE PRINT output whose header contains `header`. */
-DatBlock
-LastDatBlock(const std::string & text, const std::string & header)
+/** The blocks of *NODE PRINT output whose header contains `header`, in the
+ *  order written (a block's rows end at the first line that is not a row). */
+std::vector<DatBlock>
+DatBlocks(const std::string & text, const std::string & header)
 {
-  DatBlock           last;
-  std::istringstream stream(text);
-  std::string        line;
-  bool               inBlock = false;
-  DatBlock           current;
+  std::vector<DatBlock> blocks;
+  std::istringstream    stream(text);
+  std::string           line;
+  bool                  inBlock = false;
   while (std::getline(stream, line))
   {
     if (line.find(header) != std::string::npos)
     {
-      if (inBlock)
-      {
-        last = current;
-      }
-      current = DatBlock{};
+      blocks.emplace_back();
       inBlock = true;
       const std::size_t at = line.rfind("time");
       if (at != std::string::npos)
@@ -156,7 +152,7 @@ LastDatBlock(const std::string & text, const std::string & header)
         std::istringstream timeStream(line.substr(at + 4));
         std::string        token;
         timeStream >> token;
-        ParseNumber(token, current.time);
+        ParseNumber(token, blocks.back().time);
       }
       continue;
     }
@@ -171,37 +167,34 @@ LastDatBlock(const std::string & text, const std::string & header)
     {
       ++count;
     }
-    if (count == 0)
-    {
-      if (!current.rows.empty())
-      {
-        last = current;
-        inBlock = false;
-      }
-      continue;
-    }
     double values[4];
     bool   numeric = count == 4;
     for (int i = 0; numeric && i < 4; ++i)
     {
       numeric = ParseNumber(tokens[i], values[i]);
     }
-    if (!numeric)
+    if (numeric)
     {
-      if (!current.rows.empty())
-      {
-        last = current;
-      }
-      inBlock = false;
-      continue;
+      blocks.back().rows.emplace_back(static_cast<long>(values[0]), Vector3(values[1], values[2], values[3]));
     }
-    current.rows.emplace_back(static_cast<long>(values[0]), Vector3(values[1], values[2], values[3]));
+    else if (count > 0 || !blocks.back().rows.empty())
+    {
+      inBlock = false; // the blank line under the header keeps the block open
+    }
   }
-  if (inBlock && !current.rows.empty())
+  return blocks;
+}
+
+/** The last non-empty block of DatBlocks. */
+DatBlock
+LastDatBlock(const std::string & text, const std::string & header)
+{
+  std::vector<DatBlock> blocks = DatBlocks(text, header);
+  while (!blocks.empty() && blocks.back().rows.empty())
   {
-    last = current;
+    blocks.pop_back();
   }
-  return last;
+  return blocks.empty() ? DatBlock{} : blocks.back();
 }
 
 } // namespace
@@ -382,6 +375,20 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
       }
     }
   }
+  const bool stabilised = settings.stabilisationStiffness > 0.0;
+  if (!std::isfinite(settings.stabilisationStiffness) || settings.stabilisationStiffness < 0.0 ||
+      settings.stabilisationSteps < 0 || (stabilised && settings.stabilisationSteps < 1))
+  {
+    throw Error("CalculiX deck: CalculixSettings::stabilisationStiffness " +
+                FormatDouble(settings.stabilisationStiffness) + " N/mm and stabilisationSteps " +
+                std::to_string(settings.stabilisationSteps) +
+                " are not a stabilisation: give a finite stiffness > 0 and at least one step, or stiffness 0 (off).");
+  }
+  if (stabilised && continuation)
+  {
+    throw Error("CalculiX deck: CalculixSettings::stabilisationStiffness and startDisplacements are two ways into a "
+                "hard contact problem; give one of them.");
+  }
   if (!settings.releaseForces.empty() || settings.holdOnly)
   {
     if (!continuation)
@@ -452,11 +459,90 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
 
   stream << "** Written by BiomechanicalRegistration (bmrCalculix).\n"
          << "** Units: mm, N, s, tonne; stresses MPa.\n";
+  // What the continuation holds (and its release forces act on) and the
+  // stabilisation ties to anchors: the corner
+  // nodes of the body's boundary, in the components the model leaves free.
+  std::vector<char> boundary(modelNodes, 0);
+  for (const auto & triangle : mesh.boundaryTriangles)
+  {
+    for (const Index node : triangle)
+    {
+      boundary[static_cast<std::size_t>(node)] = 1;
+    }
+  }
+  const auto held = [&](std::size_t node, int d) { return boundary[node] && !constrained[3 * node + d]; };
+  // Per component: the mesh nodes constrained (the model nodes constrained in
+  // it, and the mid-edge nodes on boundary faces whose vertices all are).
+  std::array<std::vector<char>, 3> meshConstrained;
+  for (int d = 0; d < 3; ++d)
+  {
+    std::vector<char> modelMask(modelNodes, 0);
+    for (std::size_t node = 0; node < modelNodes; ++node)
+    {
+      modelMask[node] = constrained[3 * node + d];
+    }
+    meshConstrained[d] = mesh.MeshNodeMask(modelMask);
+  }
+  // The stabilisation's springs: every node of the boundary faces, mid-edge
+  // nodes too (on Colin27 a mid-edge node of a single 40 Pa tetrahedron took
+  // Newton corrections of 4 mm), in the components left free.
+  std::vector<char> boundaryMeshNode(mesh.nodes.size(), 0);
+  std::copy(boundary.begin(), boundary.end(), boundaryMeshNode.begin());
+  for (const auto & mids : mesh.boundaryTriangleMidNodes)
+  {
+    for (const Index mid : mids)
+    {
+      if (mid >= 0)
+      {
+        boundaryMeshNode[static_cast<std::size_t>(mid)] = 1;
+      }
+    }
+  }
+  const auto sprung = [&](std::size_t meshNode, int d) {
+    return boundaryMeshNode[meshNode] && !meshConstrained[d][meshNode];
+  };
+
+  // Stabilisation anchors: per sprung mesh node, two
+  // (sets A and B, numbered after the mesh nodes), at the node's position.
+  std::vector<std::size_t> anchored;
+  if (stabilised)
+  {
+    for (std::size_t node = 0; node < mesh.nodes.size(); ++node)
+    {
+      if (sprung(node, 0) || sprung(node, 1) || sprung(node, 2))
+      {
+        anchored.push_back(node);
+      }
+    }
+  }
+  const auto anchor = [&](std::size_t i, int set) { return mesh.nodes.size() + 2 * i + set + 1; }; // 1-based
+
   stream << "*NODE, NSET=NALL\n";
   for (std::size_t i = 0; i < mesh.nodes.size(); ++i)
   {
     const Vector3 & p = mesh.nodes[i];
     stream << i + 1 << ", " << FormatDouble(p.x()) << ", " << FormatDouble(p.y()) << ", " << FormatDouble(p.z()) << "\n";
+  }
+  if (!anchored.empty())
+  {
+    stream << "*NODE, NSET=BMRANCHORS\n";
+    for (std::size_t i = 0; i < anchored.size(); ++i)
+    {
+      const Vector3 & p = mesh.nodes[anchored[i]];
+      for (int set = 0; set < 2; ++set)
+      {
+        stream << anchor(i, set) << ", " << FormatDouble(p.x()) << ", " << FormatDouble(p.y()) << ", "
+               << FormatDouble(p.z()) << "\n";
+      }
+    }
+  }
+  for (int set = 0; set < 2 && !anchored.empty(); ++set)
+  {
+    stream << "*NSET, NSET=BMRANCHOR" << "AB"[set] << "\n";
+    for (std::size_t i = 0; i < anchored.size(); ++i)
+    {
+      stream << anchor(i, set) << "\n";
+    }
   }
 
   // Elements grouped by (material, type); one solid section per group.
@@ -516,33 +602,41 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
     stream << "*SOLID SECTION, ELSET=" << section.first << ", MATERIAL=MAT" << section.second << "\n";
   }
   WriteCalculixContactPairs(stream, model, mesh, settings);
-
-  // What the continuation holds (and its release forces act on): the corner
-  // nodes of the body's boundary, in the components the model leaves free.
-  std::vector<char> boundary(modelNodes, 0);
-  for (const auto & triangle : mesh.boundaryTriangles)
+  if (!anchored.empty())
   {
-    for (const Index node : triangle)
+    // SPRING2 elements (one component of each end), numbered after the wedges.
+    std::size_t element = model.cells.size();
+    for (const auto & pair : mesh.contactPairs)
     {
-      boundary[static_cast<std::size_t>(node)] = 1;
+      element += pair.masterWedges.size();
+    }
+    for (int set = 0; set < 2; ++set)
+    {
+      for (int d = 0; d < 3; ++d)
+      {
+        const std::string name = std::string("BMRSPRING") + "AB"[set] + std::to_string(d + 1);
+        if (std::none_of(anchored.begin(), anchored.end(), [&](std::size_t node) { return sprung(node, d); }))
+        {
+          continue;
+        }
+        stream << "*ELEMENT, TYPE=SPRING2, ELSET=" << name << "\n";
+        for (std::size_t i = 0; i < anchored.size(); ++i)
+        {
+          if (sprung(anchored[i], d))
+          {
+            stream << ++element << ", " << anchored[i] + 1 << ", " << anchor(i, set) << "\n";
+          }
+        }
+        stream << "*SPRING, ELSET=" << name << "\n"
+               << d + 1 << ", " << d + 1 << "\n"
+               << FormatDouble(settings.stabilisationStiffness) << "\n";
+      }
     }
   }
-  const auto held = [&](std::size_t node, int d) { return boundary[node] && !constrained[3 * node + d]; };
-  // Per component: the mesh nodes constrained (the model nodes constrained in
-  // it, and the mid-edge nodes on boundary faces whose vertices all are) and
-  // their values; with `start` (the continuation's first step) also the held
+
+  // The constrained mesh nodes' values; with `start` (the continuation's first step) also the held
   // nodes at the start state.
   const auto writeBoundary = [&](bool replace, const std::vector<Vector3> * start) {
-    std::array<std::vector<char>, 3> meshConstrained;
-    for (int d = 0; d < 3; ++d)
-    {
-      std::vector<char> modelMask(modelNodes, 0);
-      for (std::size_t node = 0; node < modelNodes; ++node)
-      {
-        modelMask[node] = constrained[3 * node + d];
-      }
-      meshConstrained[d] = mesh.MeshNodeMask(modelMask);
-    }
     stream << (replace ? "*BOUNDARY, OP=NEW\n" : "*BOUNDARY\n");
     for (std::size_t node = 0; node < mesh.nodes.size(); ++node)
     {
@@ -582,11 +676,39 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
     {
       stream << node + 1 << ", 1, 3, 0\n"; // the rigid masters' wedges
     }
+    for (std::size_t i = 0; i < anchored.size(); ++i)
+    {
+      for (int d = 0; d < 3; ++d)
+      {
+        if (!sprung(anchored[i], d))
+        {
+          for (int set = 0; set < 2; ++set)
+          {
+            stream << anchor(i, set) << ", " << d + 1 << ", " << d + 1 << ", 0\n"; // no spring there
+          }
+        }
+      }
+    }
   };
-  const auto writeStepHeader = [&]() {
+  // The stabilisation's anchors of `set` held: at the reference state, or
+  // (fixed) where the step before left them.
+  const auto writeAnchors = [&](int set, bool fixed) {
+    stream << (fixed ? "*BOUNDARY, FIXED\n" : "*BOUNDARY\n");
+    for (std::size_t i = 0; i < anchored.size(); ++i)
+    {
+      for (int d = 0; d < 3; ++d)
+      {
+        if (sprung(anchored[i], d))
+        {
+          stream << anchor(i, set) << ", " << d + 1 << ", " << d + 1 << (fixed ? "\n" : ", 0\n");
+        }
+      }
+    }
+  };
+  const auto writeStepHeader = [&](double initialIncrement) {
     stream << "*STEP, NLGEOM, INC=" << settings.maximumIncrements << "\n"
            << "*STATIC" << (settings.solver.empty() ? std::string{} : ", SOLVER=" + settings.solver) << "\n"
-           << FormatDouble(settings.initialIncrement) << ", 1.0, " << FormatDouble(settings.minimumIncrement) << ", 1.0\n"
+           << FormatDouble(initialIncrement) << ", 1.0, " << FormatDouble(settings.minimumIncrement) << ", 1.0\n"
            << "*CONTROLS, PARAMETERS=FIELD\n"
            << FormatDouble(settings.residualTolerance) << ", " << FormatDouble(settings.correctionTolerance)
            << ", 0, 0, 0.02, 1e-5, 1e-3, 1e-8\n";
@@ -598,7 +720,9 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
     // Step time 0 -> 1: the held nodes' forces fall from their hold values to zero.
     stream << "*AMPLITUDE, NAME=" << releaseAmplitude << "\n0., 1., 1., 0.\n";
   }
-  writeStepHeader();
+  // FREQUENCY beyond the increment limit: only the end of a step is printed.
+  const int frequency = settings.maximumIncrements + 1;
+  writeStepHeader(settings.initialIncrement);
   if (continuation)
   {
     // First step: the boundary's corner nodes held at the start state. Its
@@ -609,6 +733,10 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
   else
   {
     writeBoundary(false, nullptr);
+  }
+  if (stabilised)
+  {
+    writeAnchors(0, false);
   }
 
   if (gravity)
@@ -627,7 +755,7 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
   {
     // The release: the model's own constraints only; loads carry over.
     stream << "*END STEP\n";
-    writeStepHeader();
+    writeStepHeader(settings.initialIncrement);
     writeBoundary(true, nullptr);
     if (!settings.releaseForces.empty())
     {
@@ -644,8 +772,23 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
       }
     }
   }
-  // FREQUENCY beyond the increment limit: only the end of the (last) step is printed.
-  const int frequency = settings.maximumIncrements + 1;
+  if (stabilised)
+  {
+    // The proximal steps: each starts whole (it moves little once the first has
+    // loaded the body), the set that followed the nodes frozen, the other freed.
+    for (int step = 1; step <= settings.stabilisationSteps; ++step)
+    {
+      stream << "*NODE PRINT, NSET=BMRANCHOR" << "AB"[(step - 1) % 2] << ", FREQUENCY=" << frequency << "\n"
+             << "RF\n"
+             << "*END STEP\n";
+      writeStepHeader(1.0);
+      writeBoundary(true, nullptr);
+      writeAnchors(step % 2, true);
+    }
+    stream << "*NODE PRINT, NSET=BMRANCHOR" << "AB"[settings.stabilisationSteps % 2] << ", FREQUENCY=" << frequency
+           << "\n"
+           << "RF\n";
+  }
   stream << "*NODE PRINT, NSET=NALL, FREQUENCY=" << frequency << "\n"
          << "U\n"
          << "*NODE PRINT, NSET=NALL, FREQUENCY=" << frequency << "\n"
@@ -834,14 +977,16 @@ RunCalculix(const Model & model, const CalculixSettings & settings)
     fail("ccx failed (exit status " + std::to_string(status == -1 ? -1 : WEXITSTATUS(status)) + ")");
   }
 
-  const DatBlock u = LastDatBlock(dat, "displacements (vx,vy,vz) for set");
-  const DatBlock rf = LastDatBlock(dat, "forces (fx,fy,fz) for set");
+  const DatBlock u = LastDatBlock(dat, "displacements (vx,vy,vz) for set NALL ");
+  const DatBlock rf = LastDatBlock(dat, "forces (fx,fy,fz) for set NALL ");
   if (u.rows.empty() || rf.rows.empty())
   {
     fail("no displacement or reaction force output in " + job + ".dat");
   }
   // The .dat gives the total time: each static step runs for 1.
-  const double endTime = settings.startDisplacements.empty() || settings.holdOnly ? 1.0 : 2.0;
+  const double endTime = settings.stabilisationStiffness > 0.0 ? 1.0 + settings.stabilisationSteps
+                         : settings.startDisplacements.empty() || settings.holdOnly ? 1.0
+                                                                                    : 2.0;
   if (std::abs(u.time - endTime) > 1e-6 || std::abs(rf.time - endTime) > 1e-6)
   {
     fail("the static step did not converge to its end (last output at time " + FormatDouble(u.time) + " of " +
@@ -872,6 +1017,22 @@ RunCalculix(const Model & model, const CalculixSettings & settings)
     {
       fail("node " + std::to_string(i + 1) + " has no finite displacement in " + job + ".dat");
     }
+  }
+  // The anchors' reactions are their springs' forces; one block per step end
+  // (the free set's, printed too where CalculiX keeps earlier steps' requests,
+  // carry residual-size forces).
+  std::map<double, double> largestSpringForce;
+  for (const DatBlock & block : DatBlocks(dat, "forces (fx,fy,fz) for set BMRANCHOR"))
+  {
+    double & largest = largestSpringForce[block.time];
+    for (const auto & row : block.rows)
+    {
+      largest = std::max(largest, row.second.norm());
+    }
+  }
+  for (const auto & step : largestSpringForce)
+  {
+    result.stabilisationForces.push_back(step.second);
   }
   result.displacements.assign(result.meshDisplacements.begin(),
                               result.meshDisplacements.begin() + result.mesh.modelNodes);

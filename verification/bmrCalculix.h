@@ -23,7 +23,8 @@
 // The static step is geometrically nonlinear (NLGEOM); loads are ramped
 // linearly over the step (the end state of a hyperelastic solid does not depend
 // on the path). CalculixSettings::startDisplacements adds steps that hold the
-// boundary at a given state and then release it (continuation).
+// boundary at a given state and then release it (continuation);
+// CalculixSettings::stabilisationStiffness adds proximal steps instead.
 // Displacements and reaction forces are read back from the .dat file
 // (*NODE PRINT).
 #ifndef bmrCalculix_h
@@ -97,6 +98,22 @@ struct CalculixSettings
    *  (empty: none). */
   bool                 holdOnly = false;
   std::vector<Vector3> releaseForces;
+
+  /** Proximal stabilisation, for a body whose surface floats in soft tissue
+   *  (Colin27's 10 Pa CSF) and on which Newton diverges as soon as slaves lift
+   *  off the contact surface (docs/registration.md, "A truth from CalculiX").
+   *  stabilisationStiffness > 0 (N/mm) ties each corner node of the body's
+   *  boundary, in the components the model leaves free, by springs of this
+   *  stiffness to an anchor: the first step anchors them at the reference
+   *  state, each of the stabilisationSteps steps after it at where the step
+   *  before ended. Each step thus solves equilibrium plus k (u - u_before) at
+   *  those nodes (a proximal-point iteration); its fixed point is CalculiX's
+   *  own equilibrium, and what the springs still carry at the end is
+   *  CalculixResult::stabilisationForces.back(). Two anchor sets take turns:
+   *  the free one follows its nodes, *BOUNDARY, FIXED then freezes it there.
+   *  Not with startDisplacements (the other way in). */
+  double stabilisationStiffness = 0.0;
+  int    stabilisationSteps = 0;
 
   /** Equation solver (*STATIC, SOLVER=...): empty for CalculiX's default
    *  (SPOOLES in Debian's build), or "ITERATIVE CHOLESKY", "ITERATIVE SCALING". */
@@ -173,6 +190,10 @@ struct CalculixResult
   int                  lastStepIncrements = 0; // of the last step (the release, with startDisplacements)
   int                  lastStepIterations = 0;
   double               holdRunSeconds = 0.0;   // gradualRelease: the first run (the hold alone), not in wallSeconds
+  /** With stabilisation: per step, the largest force (N) a node's springs
+   *  carry at its end, k |u_step - u_step before| (the first step's against
+   *  the reference state). The last is the out-of-balance left in the result. */
+  std::vector<double>  stabilisationForces;
   std::string          workDirectory;       // kept only with keepFiles
 
   /** Sum of reaction forces (N) over the given model nodes and the mid-edge
