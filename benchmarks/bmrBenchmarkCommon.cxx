@@ -39,14 +39,6 @@ Median(std::vector<double> values)
   return n % 2 ? values[n / 2] : 0.5 * (values[n / 2 - 1] + values[n / 2]);
 }
 
-std::string
-Sci(double value, int digits)
-{
-  std::ostringstream text;
-  text << std::scientific << std::setprecision(digits) << value;
-  return text.str();
-}
-
 void
 Log(const std::string & line)
 {

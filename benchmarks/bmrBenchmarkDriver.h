@@ -65,9 +65,6 @@ Seconds(Clock::time_point start);
 double
 Median(std::vector<double> values);
 
-std::string
-Sci(double value, int digits = 2);
-
 /** A line of progress on stderr, "[bmrBenchmark] " first. */
 void
 Log(const std::string & line);

@@ -33,6 +33,15 @@ Fixed(double value, int digits)
   return text.str();
 }
 
+/** `value` in scientific notation with `digits` digits after the point. */
+inline std::string
+Sci(double value, int digits = 2)
+{
+  std::ostringstream text;
+  text << std::scientific << std::setprecision(digits) << value;
+  return text.str();
+}
+
 inline std::string
 CpuModel()
 {

@@ -148,7 +148,9 @@ struct Options
   bool        gradualRelease = true;   // CalculixSettings::gradualRelease
   double      csfModulus = 10.0;       // Pa, the CSF class of both truths (the study's: 10)
   double      stabilisationStiffness = 0.0; // N/mm, CalculixSettings::stabilisationStiffness (0: off)
-  int         stabilisationSteps = 10;
+  int         stabilisationSteps = 4;    // per stage
+  int         stabilisationStages = 1;
+  double      stabilisationSoftening = 10.0;
   int         threads = 2;
   std::string workDirectory;           // keep CalculiX's job folders here
 };
@@ -217,6 +219,8 @@ Run(const Scene & scene, const bmr::RegistrationImage * image, const bmr::Regist
   calculix.gradualRelease = options.gradualRelease;
   calculix.stabilisationStiffness = options.stabilisationStiffness;
   calculix.stabilisationSteps = options.stabilisationSteps;
+  calculix.stabilisationStages = options.stabilisationStages;
+  calculix.stabilisationSoftening = options.stabilisationSoftening;
   if (warmStart)
   {
     calculix.startDisplacements = anp.displacements;
@@ -270,7 +274,9 @@ Run(const Scene & scene, const bmr::RegistrationImage * image, const bmr::Regist
                            { "gradual_release", warmStart && options.gradualRelease },
                            { "stabilisation_stiffness_n_per_mm", options.stabilisationStiffness },
                            { "stabilisation_steps", options.stabilisationStiffness > 0.0 ? options.stabilisationSteps : 0 },
+                           { "stabilisation_stages", options.stabilisationStiffness > 0.0 ? options.stabilisationStages : 0 },
                            { "stabilisation_forces_n", reference.stabilisationForces },
+                           { "stabilisation_stiffnesses_n_per_mm", reference.stabilisationStiffnesses },
                            { "hold_run_seconds", reference.holdRunSeconds },
                            { "increments", reference.increments },
                            { "iterations", reference.iterations },
@@ -290,6 +296,31 @@ std::string
 Triple(const json & value, int digits = 2)
 {
   return Fixed(value["mean"], digits) + " / " + Fixed(value["p95"], digits) + " / " + Fixed(value["max"], digits);
+}
+
+/** The stabilisation cell of a run's record, "none" for a run without it. */
+std::string
+Stabilisation(const json & calculix)
+{
+  const double stiffness = calculix.value("stabilisation_stiffness_n_per_mm", 0.0);
+  if (!(stiffness > 0.0) || !calculix.contains("stabilisation_forces_n") || calculix["stabilisation_forces_n"].empty())
+  {
+    return "none";
+  }
+  using bmr::benchmark::Sci;
+  const json &       forces = calculix["stabilisation_forces_n"];
+  const json &       stiffnesses = calculix["stabilisation_stiffnesses_n_per_mm"];
+  const int          stages = calculix["stabilisation_stages"];
+  std::ostringstream cell;
+  cell << Sci(stiffness, 1) << " N/mm";
+  if (stages > 1)
+  {
+    cell << " to " << Sci(stiffnesses.back().get<double>(), 1) << " N/mm in " << stages << " stages";
+  }
+  cell << ", " << forces.size() - 1 << " steps; " << Sci(forces.front().get<double>(), 1) << " / "
+       << Sci(forces.back().get<double>(), 1) << " N ("
+       << Sci(forces.back().get<double>() / stiffnesses.back().get<double>(), 1) << " mm)";
+  return cell.str();
 }
 
 /** docs/calculix-ground-truth.md: every number and every conclusion from `runs`. */
@@ -312,15 +343,21 @@ Report(const json & runs, const std::string & machine, const std::string & comma
       << "same skull as CalculiX's scene: the body closed by the `skull_closing_mm` of each row's JSON record before "
       << "the skull is made, so that it has no rigid blades in the folds of CalculiX's coarse mesh. CalculiX starts "
       << "from the ANP solution where the record says `warm_start` (its boundary's corner nodes held there, then "
-      << "released: the result is CalculiX's own equilibrium). CalculiX's field (at every "
+      << "released: the result is CalculiX's own equilibrium). Where the table gives a stabilisation, CalculiX "
+      << "starts cold with every node of the brain's boundary tied by springs of the stated stiffness to anchors: "
+      << "at the reference state in the loading step, then, in each proximal step, where the step before ended "
+      << "(verification/bmrCalculix.h, `CalculixSettings::stabilisationStiffness`). The fixed point of these steps "
+      << "is CalculiX's own equilibrium, nothing of the module's solution enters, and what the springs still carry "
+      << "at the end, divided by their stiffness, is how far the last step moved any boundary node. CalculiX's field (at every "
       << "node of its quadratic mesh) and the study's truth are fitted with the same B-spline transform and compared "
       << "as docs/ground-truth-agreement.md compares two truths: |T_1(x) - T_2(x)| of the two backward maps on every "
       << "second voxel of the intraoperative brain. The ANP solve is compared with CalculiX node by node, on the "
       << "mesh's corner nodes: what the element and the contact formulation add, without the mesh.\n\n"
       << "Machine: " << machine << "\n\n"
       << "| scene | study's truth | CalculiX C3D10 mesh | materials (bins) / skull triangles | Newton increments / "
-         "iterations | CalculiX s | truths differ: mean / p95 / max mm | no registration: mean / p95 / max mm |\n"
-      << "|---|---|---|---|---|---|---|---|\n";
+         "iterations | stabilisation: springs, steps; largest spring force first / last step (last step's motion) | "
+         "CalculiX s | truths differ: mean / p95 / max mm | no registration: mean / p95 / max mm |\n"
+      << "|---|---|---|---|---|---|---|---|---|\n";
   for (const json & run : runs)
   {
     const json & truth = run["truth"];
@@ -332,7 +369,8 @@ Report(const json & runs, const std::string & machine, const std::string & comma
         << calculix["tetrahedra"] << " tetrahedra | " << calculix["materials"] << " of " << calculix["cell_materials"]
         << " (" << Fixed(100.0 * calculix["material_bin_width"].get<double>(), 0) << " %) / "
         << calculix["skull_triangles"] << " of " << calculix["skull_triangles_before"] << " | "
-        << calculix["increments"] << " / " << calculix["iterations"] << " | " << Fixed(calculix["seconds"], 0)
+        << calculix["increments"] << " / " << calculix["iterations"] << " | " << Stabilisation(calculix) << " | "
+        << Fixed(calculix["seconds"], 0)
         << " | " << Triple(run["truth_difference_mm"]) << " | " << Triple(run["no_registration_mm"]) << " |\n";
   }
   out << "\n| scene | ANP on CalculiX's mesh: steps, s | ANP against CalculiX, corner nodes: mean / p95 / max mm | "
@@ -407,8 +445,13 @@ main(int argc, char ** argv)
                  "N/mm: CalculiX's boundary nodes tied by springs to anchors that follow them step by step (a "
                  "proximal-point iteration to CalculiX's own equilibrium; needs --warm-start false); 0: off")
     ->check(CLI::NonNegativeNumber);
-  app.add_option("--stabilisation-steps", options.stabilisationSteps, "proximal steps after the loading step")
+  app.add_option("--stabilisation-steps", options.stabilisationSteps, "proximal steps of each stage")
     ->check(CLI::PositiveNumber);
+  app.add_option("--stabilisation-stages", options.stabilisationStages,
+                 "stages of proximal steps, each with springs --stabilisation-softening times softer than the one before")
+    ->check(CLI::PositiveNumber);
+  app.add_option("--stabilisation-softening", options.stabilisationSoftening, "stiffness ratio of one stage to the next")
+    ->check(CLI::Range(1.0, 1e6));
   app.add_option("--mid-edge-slaves", options.midEdgeSlaves,
                  "mid-edge nodes are contact slaves too (false: the corners, as the module's contact)");
   app.add_option("--threads", options.threads, "threads of both solvers")->check(CLI::PositiveNumber);
@@ -481,7 +524,8 @@ main(int argc, char ** argv)
             << " --warm-start " << (options.warmStart ? "true" : "false") << " --gradual-release "
             << (options.gradualRelease ? "true" : "false") << " --csf-modulus " << options.csfModulus
             << " --stabilisation-stiffness " << options.stabilisationStiffness << " --stabilisation-steps "
-            << options.stabilisationSteps << " --mid-edge-slaves "
+            << options.stabilisationSteps << " --stabilisation-stages " << options.stabilisationStages
+            << " --stabilisation-softening " << options.stabilisationSoftening << " --mid-edge-slaves "
             << (options.midEdgeSlaves ? "true" : "false") << " --threads " << options.threads;
     std::ofstream(output) << Report(runs, machine.str(), command.str());
     std::cout << json{ { "machine", machine.str() }, { "runs", runs } }.dump(2) << std::endl;

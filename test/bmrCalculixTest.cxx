@@ -775,6 +775,8 @@ TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
   }
   std::cout << " N" << std::endl;
   ASSERT_EQ(proximal.stabilisationForces.size(), static_cast<std::size_t>(stabilised.stabilisationSteps + 1));
+  ASSERT_EQ(proximal.stabilisationStiffnesses.size(), proximal.stabilisationForces.size());
+  EXPECT_EQ(proximal.stabilisationStiffnesses.back(), stabilised.stabilisationStiffness);
   for (std::size_t step = 1; step < proximal.stabilisationForces.size(); ++step)
   {
     EXPECT_LT(proximal.stabilisationForces[step], proximal.stabilisationForces[step - 1]) << "step " << step;
@@ -862,10 +864,16 @@ TEST(CalculixDeck, StabilisationWritesSpringsAnchorsAndProximalSteps)
   CalculixSettings   settings;
   settings.stabilisationStiffness = 1e-3;
   settings.stabilisationSteps = 3;
+  settings.stabilisationStages = 2; // then springs ten times softer
   std::ostringstream deck;
   WriteCalculixDeck(deck, model, mesh, settings);
   const std::string text = deck.str();
-  const auto        count = [&](const std::string & what) {
+  std::vector<std::size_t> fixedAt; // where each *BOUNDARY, FIXED starts
+  for (std::size_t at = text.find("*BOUNDARY, FIXED"); at != std::string::npos; at = text.find("*BOUNDARY, FIXED", at + 1))
+  {
+    fixedAt.push_back(at);
+  }
+  const auto count = [&](const std::string & what) {
     std::size_t n = 0;
     for (std::size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1))
     {
@@ -873,21 +881,26 @@ TEST(CalculixDeck, StabilisationWritesSpringsAnchorsAndProximalSteps)
     }
     return n;
   };
-  EXPECT_EQ(count("*STEP"), 4u);             // loading, then three proximal steps
-  EXPECT_EQ(count("*BOUNDARY, OP=NEW"), 3u); // each proximal step replaces the anchors' hold
-  EXPECT_EQ(count("*BOUNDARY, FIXED"), 3u);
-  EXPECT_EQ(count("*ELEMENT, TYPE=SPRING2"), 6u); // two anchor sets x three components
-  EXPECT_NE(text.find("*NSET, NSET=BMRANCHORA"), std::string::npos);
-  // The steps freeze the two anchor sets in turn: B (free while A held the
-  // loading step), then A, then B.
-  const std::size_t first = text.find("*BOUNDARY, FIXED");
-  const std::size_t second = text.find("*BOUNDARY, FIXED", first + 1);
-  ASSERT_NE(second, std::string::npos);
-  // The first fixed line names an anchor of set B: anchors alternate A, B per node.
-  const std::size_t firstAnchor = std::stoul(text.substr(first + std::string("*BOUNDARY, FIXED\n").size()));
-  const std::size_t secondAnchor = std::stoul(text.substr(second + std::string("*BOUNDARY, FIXED\n").size()));
-  EXPECT_EQ(firstAnchor, secondAnchor + 1);
-  EXPECT_EQ((firstAnchor - mesh.nodes.size()) % 2, 0u); // 1-based: B anchors are mesh nodes + 2, 4, ...
+  EXPECT_EQ(count("*STEP"), 7u);             // loading, then two stages of three proximal steps
+  EXPECT_EQ(count("*BOUNDARY, OP=NEW"), 6u); // each proximal step replaces the anchors' hold
+  ASSERT_EQ(fixedAt.size(), 6u);
+  EXPECT_EQ(count("*ELEMENT, TYPE=SPRING2"), 12u); // two stages x two anchor sets x three components
+  EXPECT_EQ(count("\n0.001\n"), 6u);              // the first stage's springs
+  EXPECT_EQ(count("\n0.0001\n"), 6u);             // the second's, ten times softer
+  EXPECT_NE(text.find("*NSET, NSET=BMRANCHOR1B"), std::string::npos);
+  // Anchors lie in blocks of one per sprung node: stage 0 A, stage 0 B, stage
+  // 1 A, stage 1 B. The steps freeze stage 0's B (free while A held the
+  // loading step), then its A, B; then stage 1's A, B, A.
+  const auto firstAnchor = [&](std::size_t step) {
+    return std::stol(text.substr(fixedAt[step] + std::string("*BOUNDARY, FIXED\n").size()));
+  };
+  const long block = firstAnchor(0) - firstAnchor(1); // sprung nodes
+  EXPECT_GT(block, 0);
+  EXPECT_EQ(firstAnchor(2), firstAnchor(0));
+  EXPECT_EQ(firstAnchor(3), firstAnchor(1) + 2 * block);
+  EXPECT_EQ(firstAnchor(4), firstAnchor(1) + 3 * block);
+  EXPECT_EQ(firstAnchor(5), firstAnchor(3));
+  EXPECT_EQ(firstAnchor(1), static_cast<long>(mesh.nodes.size()) + 1); // the first anchor follows the mesh
 
   const auto refusal = [&](const CalculixSettings & bad) { return DeckRefusal(model, mesh, bad); };
   CalculixSettings noSteps = settings;
@@ -896,6 +909,9 @@ TEST(CalculixDeck, StabilisationWritesSpringsAnchorsAndProximalSteps)
   CalculixSettings negative = settings;
   negative.stabilisationStiffness = -1.0;
   EXPECT_NE(refusal(negative).find("stabilisationStiffness -1"), std::string::npos);
+  CalculixSettings hardening = settings;
+  hardening.stabilisationSoftening = 0.5;
+  EXPECT_NE(refusal(hardening).find("softening >= 1"), std::string::npos);
   CalculixSettings both = settings;
   both.startDisplacements.assign(model.nodes.size(), Vector3::Zero());
   EXPECT_NE(refusal(both).find("give one of them"), std::string::npos);

@@ -377,13 +377,22 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
   }
   const bool stabilised = settings.stabilisationStiffness > 0.0;
   if (!std::isfinite(settings.stabilisationStiffness) || settings.stabilisationStiffness < 0.0 ||
-      settings.stabilisationSteps < 0 || (stabilised && settings.stabilisationSteps < 1))
+      settings.stabilisationSteps < 0 || (stabilised && settings.stabilisationSteps < 1) ||
+      settings.stabilisationStages < 1 || !std::isfinite(settings.stabilisationSoftening) ||
+      settings.stabilisationSoftening < 1.0)
   {
     throw Error("CalculiX deck: CalculixSettings::stabilisationStiffness " +
-                FormatDouble(settings.stabilisationStiffness) + " N/mm and stabilisationSteps " +
-                std::to_string(settings.stabilisationSteps) +
-                " are not a stabilisation: give a finite stiffness > 0 and at least one step, or stiffness 0 (off).");
+                FormatDouble(settings.stabilisationStiffness) + " N/mm, stabilisationSteps " +
+                std::to_string(settings.stabilisationSteps) + ", stabilisationStages " +
+                std::to_string(settings.stabilisationStages) + " and stabilisationSoftening " +
+                FormatDouble(settings.stabilisationSoftening) +
+                " are not a stabilisation: give a finite stiffness > 0, at least one step and one stage and a "
+                "softening >= 1, or stiffness 0 (off).");
   }
+  const int families = stabilised ? settings.stabilisationStages : 0; // spring families, one per stage
+  const auto familyStiffness = [&](int family) {
+    return settings.stabilisationStiffness / std::pow(settings.stabilisationSoftening, family);
+  };
   if (stabilised && continuation)
   {
     throw Error("CalculiX deck: CalculixSettings::stabilisationStiffness and startDisplacements are two ways into a "
@@ -502,7 +511,7 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
     return boundaryMeshNode[meshNode] && !meshConstrained[d][meshNode];
   };
 
-  // Stabilisation anchors: per sprung mesh node, two
+  // Stabilisation anchors: per stage and sprung mesh node, two
   // (sets A and B, numbered after the mesh nodes), at the node's position.
   std::vector<std::size_t> anchored;
   if (stabilised)
@@ -515,7 +524,10 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
       }
     }
   }
-  const auto anchor = [&](std::size_t i, int set) { return mesh.nodes.size() + 2 * i + set + 1; }; // 1-based
+  const auto anchor = [&](std::size_t i, int family, int set) { // 1-based, after the mesh nodes
+    return mesh.nodes.size() + (2 * static_cast<std::size_t>(family) + set) * anchored.size() + i + 1;
+  };
+  const auto anchorSet = [](int family, int set) { return "BMRANCHOR" + std::to_string(family) + "AB"[set]; };
 
   stream << "*NODE, NSET=NALL\n";
   for (std::size_t i = 0; i < mesh.nodes.size(); ++i)
@@ -526,22 +538,28 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
   if (!anchored.empty())
   {
     stream << "*NODE, NSET=BMRANCHORS\n";
-    for (std::size_t i = 0; i < anchored.size(); ++i)
+    for (int family = 0; family < families; ++family)
     {
-      const Vector3 & p = mesh.nodes[anchored[i]];
       for (int set = 0; set < 2; ++set)
       {
-        stream << anchor(i, set) << ", " << FormatDouble(p.x()) << ", " << FormatDouble(p.y()) << ", "
-               << FormatDouble(p.z()) << "\n";
+        for (std::size_t i = 0; i < anchored.size(); ++i)
+        {
+          const Vector3 & p = mesh.nodes[anchored[i]];
+          stream << anchor(i, family, set) << ", " << FormatDouble(p.x()) << ", " << FormatDouble(p.y()) << ", "
+                 << FormatDouble(p.z()) << "\n";
+        }
       }
     }
-  }
-  for (int set = 0; set < 2 && !anchored.empty(); ++set)
-  {
-    stream << "*NSET, NSET=BMRANCHOR" << "AB"[set] << "\n";
-    for (std::size_t i = 0; i < anchored.size(); ++i)
+    for (int family = 0; family < families; ++family)
     {
-      stream << anchor(i, set) << "\n";
+      for (int set = 0; set < 2; ++set)
+      {
+        stream << "*NSET, NSET=" << anchorSet(family, set) << "\n";
+        for (std::size_t i = 0; i < anchored.size(); ++i)
+        {
+          stream << anchor(i, family, set) << "\n";
+        }
+      }
     }
   }
 
@@ -610,32 +628,35 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
     {
       element += pair.masterWedges.size();
     }
-    for (int set = 0; set < 2; ++set)
+    for (int family = 0; family < families; ++family)
     {
-      for (int d = 0; d < 3; ++d)
+      for (int set = 0; set < 2; ++set)
       {
-        const std::string name = std::string("BMRSPRING") + "AB"[set] + std::to_string(d + 1);
-        if (std::none_of(anchored.begin(), anchored.end(), [&](std::size_t node) { return sprung(node, d); }))
+        for (int d = 0; d < 3; ++d)
         {
-          continue;
-        }
-        stream << "*ELEMENT, TYPE=SPRING2, ELSET=" << name << "\n";
-        for (std::size_t i = 0; i < anchored.size(); ++i)
-        {
-          if (sprung(anchored[i], d))
+          const std::string name = "BMRSPRING" + std::to_string(family) + "AB"[set] + std::to_string(d + 1);
+          if (std::none_of(anchored.begin(), anchored.end(), [&](std::size_t node) { return sprung(node, d); }))
           {
-            stream << ++element << ", " << anchored[i] + 1 << ", " << anchor(i, set) << "\n";
+            continue;
           }
+          stream << "*ELEMENT, TYPE=SPRING2, ELSET=" << name << "\n";
+          for (std::size_t i = 0; i < anchored.size(); ++i)
+          {
+            if (sprung(anchored[i], d))
+            {
+              stream << ++element << ", " << anchored[i] + 1 << ", " << anchor(i, family, set) << "\n";
+            }
+          }
+          stream << "*SPRING, ELSET=" << name << "\n"
+                 << d + 1 << ", " << d + 1 << "\n"
+                 << FormatDouble(familyStiffness(family)) << "\n";
         }
-        stream << "*SPRING, ELSET=" << name << "\n"
-               << d + 1 << ", " << d + 1 << "\n"
-               << FormatDouble(settings.stabilisationStiffness) << "\n";
       }
     }
   }
 
-  // The constrained mesh nodes' values; with `start` (the continuation's first step) also the held
-  // nodes at the start state.
+  // The constrained mesh nodes at their values; with `start` (the
+  // continuation's first step) also the held nodes at the start state.
   const auto writeBoundary = [&](bool replace, const std::vector<Vector3> * start) {
     stream << (replace ? "*BOUNDARY, OP=NEW\n" : "*BOUNDARY\n");
     for (std::size_t node = 0; node < mesh.nodes.size(); ++node)
@@ -682,9 +703,10 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
       {
         if (!sprung(anchored[i], d))
         {
-          for (int set = 0; set < 2; ++set)
+          for (int anchorBlock = 0; anchorBlock < 2 * families; ++anchorBlock)
           {
-            stream << anchor(i, set) << ", " << d + 1 << ", " << d + 1 << ", 0\n"; // no spring there
+            stream << anchor(i, anchorBlock / 2, anchorBlock % 2) << ", " << d + 1 << ", " << d + 1
+                   << ", 0\n"; // no spring there
           }
         }
       }
@@ -692,7 +714,7 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
   };
   // The stabilisation's anchors of `set` held: at the reference state, or
   // (fixed) where the step before left them.
-  const auto writeAnchors = [&](int set, bool fixed) {
+  const auto writeAnchors = [&](int family, int set, bool fixed) {
     stream << (fixed ? "*BOUNDARY, FIXED\n" : "*BOUNDARY\n");
     for (std::size_t i = 0; i < anchored.size(); ++i)
     {
@@ -700,7 +722,7 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
       {
         if (sprung(anchored[i], d))
         {
-          stream << anchor(i, set) << ", " << d + 1 << ", " << d + 1 << (fixed ? "\n" : ", 0\n");
+          stream << anchor(i, family, set) << ", " << d + 1 << ", " << d + 1 << (fixed ? "\n" : ", 0\n");
         }
       }
     }
@@ -736,7 +758,7 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
   }
   if (stabilised)
   {
-    writeAnchors(0, false);
+    writeAnchors(0, 0, false);
   }
 
   if (gravity)
@@ -775,18 +797,25 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
   if (stabilised)
   {
     // The proximal steps: each starts whole (it moves little once the first has
-    // loaded the body), the set that followed the nodes frozen, the other freed.
-    for (int step = 1; step <= settings.stabilisationSteps; ++step)
+    // loaded the body), the set that followed the nodes frozen, the other freed
+    // (OP=NEW); a new stage's springs start from where their anchors followed
+    // the nodes to, the earlier stages' all freed.
+    std::string fixedSet = anchorSet(0, 0); // the loading step's
+    for (int stage = 0; stage < families; ++stage)
     {
-      stream << "*NODE PRINT, NSET=BMRANCHOR" << "AB"[(step - 1) % 2] << ", FREQUENCY=" << frequency << "\n"
-             << "RF\n"
-             << "*END STEP\n";
-      writeStepHeader(1.0);
-      writeBoundary(true, nullptr);
-      writeAnchors(step % 2, true);
+      for (int step = 1; step <= settings.stabilisationSteps; ++step)
+      {
+        stream << "*NODE PRINT, NSET=" << fixedSet << ", FREQUENCY=" << frequency << "\n"
+               << "RF\n"
+               << "*END STEP\n";
+        writeStepHeader(1.0);
+        writeBoundary(true, nullptr);
+        const int set = stage == 0 ? step % 2 : (step - 1) % 2;
+        writeAnchors(stage, set, true);
+        fixedSet = anchorSet(stage, set);
+      }
     }
-    stream << "*NODE PRINT, NSET=BMRANCHOR" << "AB"[settings.stabilisationSteps % 2] << ", FREQUENCY=" << frequency
-           << "\n"
+    stream << "*NODE PRINT, NSET=" << fixedSet << ", FREQUENCY=" << frequency << "\n"
            << "RF\n";
   }
   stream << "*NODE PRINT, NSET=NALL, FREQUENCY=" << frequency << "\n"
@@ -984,7 +1013,8 @@ RunCalculix(const Model & model, const CalculixSettings & settings)
     fail("no displacement or reaction force output in " + job + ".dat");
   }
   // The .dat gives the total time: each static step runs for 1.
-  const double endTime = settings.stabilisationStiffness > 0.0 ? 1.0 + settings.stabilisationSteps
+  const double endTime = settings.stabilisationStiffness > 0.0
+                           ? 1.0 + settings.stabilisationSteps * settings.stabilisationStages
                          : settings.startDisplacements.empty() || settings.holdOnly ? 1.0
                                                                                     : 2.0;
   if (std::abs(u.time - endTime) > 1e-6 || std::abs(rf.time - endTime) > 1e-6)
@@ -1032,7 +1062,12 @@ RunCalculix(const Model & model, const CalculixSettings & settings)
   }
   for (const auto & step : largestSpringForce)
   {
+    // Step end time t: the loading step ends at 1, proximal step g at 1 + g.
+    const int proximalStep = static_cast<int>(std::lround(step.first)) - 1;
+    const int stage = proximalStep == 0 ? 0 : (proximalStep - 1) / std::max(1, settings.stabilisationSteps);
     result.stabilisationForces.push_back(step.second);
+    result.stabilisationStiffnesses.push_back(settings.stabilisationStiffness /
+                                              std::pow(settings.stabilisationSoftening, stage));
   }
   result.displacements.assign(result.meshDisplacements.begin(),
                               result.meshDisplacements.begin() + result.mesh.modelNodes);

@@ -111,9 +111,18 @@ struct CalculixSettings
    *  own equilibrium, and what the springs still carry at the end is
    *  CalculixResult::stabilisationForces.back(). Two anchor sets take turns:
    *  the free one follows its nodes, *BOUNDARY, FIXED then freezes it there.
-   *  Not with startDisplacements (the other way in). */
+   *  Not with startDisplacements (the other way in).
+   *  A mode of stiffness lambda (per node) contracts by k / (k + lambda) a
+   *  step: stiff springs hold Newton but converge slowly on the softest modes
+   *  (Colin27's brain drifting in its CSF: about 0.8 a step at 3e-4 N/mm). So
+   *  after stabilisationSteps steps the springs can be replaced by softer ones,
+   *  stabilisationSoftening times softer each stage, stabilisationStages stages
+   *  in all (stabilisationSteps each; each stage's springs anchored where the
+   *  stage before ended). */
   double stabilisationStiffness = 0.0;
   int    stabilisationSteps = 0;
+  int    stabilisationStages = 1;
+  double stabilisationSoftening = 10.0;
 
   /** Equation solver (*STATIC, SOLVER=...): empty for CalculiX's default
    *  (SPOOLES in Debian's build), or "ITERATIVE CHOLESKY", "ITERATIVE SCALING". */
@@ -192,8 +201,10 @@ struct CalculixResult
   double               holdRunSeconds = 0.0;   // gradualRelease: the first run (the hold alone), not in wallSeconds
   /** With stabilisation: per step, the largest force (N) a node's springs
    *  carry at its end, k |u_step - u_step before| (the first step's against
-   *  the reference state). The last is the out-of-balance left in the result. */
+   *  the reference state), and that k (N/mm). The last force is the
+   *  out-of-balance left in the result. */
   std::vector<double>  stabilisationForces;
+  std::vector<double>  stabilisationStiffnesses;
   std::string          workDirectory;       // kept only with keepFiles
 
   /** Sum of reaction forces (N) over the given model nodes and the mid-edge
