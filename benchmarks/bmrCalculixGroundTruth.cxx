@@ -277,6 +277,7 @@ Run(const Scene & scene, const bmr::RegistrationImage * image, const bmr::Regist
                            { "stabilisation_stages", options.stabilisationStiffness > 0.0 ? options.stabilisationStages : 0 },
                            { "stabilisation_forces_n", reference.stabilisationForces },
                            { "stabilisation_stiffnesses_n_per_mm", reference.stabilisationStiffnesses },
+                           { "stabilisation_stopped", reference.stabilisationStopped },
                            { "hold_run_seconds", reference.holdRunSeconds },
                            { "increments", reference.increments },
                            { "iterations", reference.iterations },
@@ -320,6 +321,10 @@ Stabilisation(const json & calculix)
   cell << ", " << forces.size() - 1 << " steps; " << Sci(forces.front().get<double>(), 1) << " / "
        << Sci(forces.back().get<double>(), 1) << " N ("
        << Sci(forces.back().get<double>() / stiffnesses.back().get<double>(), 1) << " mm)";
+  if (!calculix.value("stabilisation_stopped", std::string{}).empty())
+  {
+    cell << "; Newton stopped in the next step, so the result is this step's";
+  }
   return cell.str();
 }
 

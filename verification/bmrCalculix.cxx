@@ -213,6 +213,13 @@ FormatDouble(double value)
       break;
     }
   }
+  // CalculiX reads a real without a point as no number in some cards (a
+  // *SPRING stiffness of "3e-05" is "a card without data"; "3.e-05" is read).
+  if (std::isfinite(value) && text.find('.') == std::string::npos)
+  {
+    const std::size_t exponent = text.find('e');
+    text.insert(exponent == std::string::npos ? text.size() : exponent, ".");
+  }
   return text;
 }
 
@@ -805,8 +812,12 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
     {
       for (int step = 1; step <= settings.stabilisationSteps; ++step)
       {
+        // The nodes' state at every step's end: a later step that Newton does
+        // not finish leaves this one as the result.
         stream << "*NODE PRINT, NSET=" << fixedSet << ", FREQUENCY=" << frequency << "\n"
                << "RF\n"
+               << "*NODE PRINT, NSET=NALL, FREQUENCY=" << frequency << "\n"
+               << "U\n"
                << "*END STEP\n";
         writeStepHeader(1.0);
         writeBoundary(true, nullptr);
@@ -1001,23 +1012,34 @@ RunCalculix(const Model & model, const CalculixSettings & settings)
   {
     fail("ccx was killed by signal " + std::to_string(WTERMSIG(status)) + " (out of memory?)");
   }
-  if (!exitedNormally || log.find("*ERROR") != std::string::npos)
+  const DatBlock u = LastDatBlock(dat, "displacements (vx,vy,vz) for set NALL ");
+  const DatBlock rf = LastDatBlock(dat, "forces (fx,fy,fz) for set NALL ");
+  // The .dat gives the total time: each static step runs for 1.
+  const bool   stabilised = settings.stabilisationStiffness > 0.0;
+  const double endTime = stabilised ? 1.0 + settings.stabilisationSteps * settings.stabilisationStages
+                         : settings.startDisplacements.empty() || settings.holdOnly ? 1.0
+                                                                                    : 2.0;
+  const bool failed = !exitedNormally || log.find("*ERROR") != std::string::npos;
+  // A proximal step that Newton does not finish (penalty contact that flips
+  // between iterations) leaves the step before it as the result: an
+  // equilibrium with springs whose force CalculixResult::stabilisationForces
+  // states, like any other proximal step's.
+  const bool stoppedInAProximalStep = failed && stabilised && !u.rows.empty() && u.time >= 2.0 - 1e-6;
+  if (failed && !stoppedInAProximalStep)
   {
     fail("ccx failed (exit status " + std::to_string(status == -1 ? -1 : WEXITSTATUS(status)) + ")");
   }
-
-  const DatBlock u = LastDatBlock(dat, "displacements (vx,vy,vz) for set NALL ");
-  const DatBlock rf = LastDatBlock(dat, "forces (fx,fy,fz) for set NALL ");
-  if (u.rows.empty() || rf.rows.empty())
+  if (u.rows.empty() || (rf.rows.empty() && !stoppedInAProximalStep))
   {
     fail("no displacement or reaction force output in " + job + ".dat");
   }
-  // The .dat gives the total time: each static step runs for 1.
-  const double endTime = settings.stabilisationStiffness > 0.0
-                           ? 1.0 + settings.stabilisationSteps * settings.stabilisationStages
-                         : settings.startDisplacements.empty() || settings.holdOnly ? 1.0
-                                                                                    : 2.0;
-  if (std::abs(u.time - endTime) > 1e-6 || std::abs(rf.time - endTime) > 1e-6)
+  if (stoppedInAProximalStep)
+  {
+    result.stabilisationStopped = "CalculiX stopped in proximal step " + FormatDouble(u.time) + " of " +
+                                  FormatDouble(endTime - 1.0) + "; the result is the step before. " +
+                                  Tail(log, 3);
+  }
+  else if (std::abs(u.time - endTime) > 1e-6 || std::abs(rf.time - endTime) > 1e-6)
   {
     fail("the static step did not converge to its end (last output at time " + FormatDouble(u.time) + " of " +
          FormatDouble(endTime) + "); try a smaller initial increment or more increments");
@@ -1034,7 +1056,7 @@ RunCalculix(const Model & model, const CalculixSettings & settings)
       seen[row.first - 1] = 1;
     }
   }
-  for (const auto & row : rf.rows)
+  for (const auto & row : stoppedInAProximalStep ? std::vector<std::pair<long, Vector3>>{} : rf.rows)
   {
     if (row.first >= 1 && static_cast<std::size_t>(row.first) <= meshNodes)
     {

@@ -205,6 +205,11 @@ struct CalculixResult
    *  out-of-balance left in the result. */
   std::vector<double>  stabilisationForces;
   std::vector<double>  stabilisationStiffnesses;
+  /** Non-empty when CalculiX stopped in a proximal step after the first (no
+   *  Newton convergence, e.g. penalty contact flipping between iterations):
+   *  what it said; the result is then the last finished step's (its reaction
+   *  forces zero), whose springs' force is stabilisationForces.back(). */
+  std::string          stabilisationStopped;
   std::string          workDirectory;       // kept only with keepFiles
 
   /** Sum of reaction forces (N) over the given model nodes and the mid-edge
