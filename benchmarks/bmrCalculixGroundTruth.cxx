@@ -14,10 +14,14 @@
 // CalculiX starts from the ANP solution by default (a first step holds the
 // boundary's corner nodes there, the last releases them), the skull closed by
 // 5 mm (no rigid blades in the coarse mesh's folds) and decimated to 2 mm.
+// With --warm-start false --stabilisation-stiffness K it starts cold instead,
+// its boundary tied by springs to anchors that follow it step by step
+// (proximal steps, CalculixSettings::stabilisationStiffness).
 //
-// Status (2026-11-27): no report yet: on Colin27 CalculiX's Newton diverges
+// Status (2026-11-28): no report yet: on Colin27 CalculiX's Newton diverges
 // in the skull contact, from a cold start and at the release from the ANP
-// solution, at once or gradually (docs/registration.md, "A truth from CalculiX").
+// solution, at once or gradually; the proximal steps converge, but too slowly
+// for the brain's drift in its CSF (docs/registration.md, "A truth from CalculiX").
 
 // ITK's headers first: they bring ITK's own Eigen, which must precede the system's.
 #include "bmrSyntheticBrainShift.h"
