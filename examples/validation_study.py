@@ -334,7 +334,9 @@ def truth_agreement(runs, machine):
               "contact at large shifts).",
               "* Not done: a truth from CalculiX (C3D10). The harness writes the skull contact and can start "
               "CalculiX from the module's solution, but CalculiX's Newton iterations diverge on these scenes, "
-              "also when released from there, at once or gradually (docs/registration.md, \"A truth from CalculiX\")."]
+              "also when released from there, at once or gradually; with its boundary held by springs that follow "
+              "it step by step (proximal steps) it converges, but the brain's drift in its CSF settles over some 40 "
+              "steps, 1.5-2.5 hours a scene (docs/registration.md, \"A truth from CalculiX\")."]
     return "\n".join(lines) + "\n"
 
 
