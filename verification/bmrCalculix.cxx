@@ -475,8 +475,7 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
 
   stream << "** Written by BiomechanicalRegistration (bmrCalculix).\n"
          << "** Units: mm, N, s, tonne; stresses MPa.\n";
-  // What the continuation holds (and its release forces act on) and the
-  // stabilisation ties to anchors: the corner
+  // What the continuation holds (and its release forces act on): the corner
   // nodes of the body's boundary, in the components the model leaves free.
   std::vector<char> boundary(modelNodes, 0);
   for (const auto & triangle : mesh.boundaryTriangles)
@@ -1035,9 +1034,10 @@ RunCalculix(const Model & model, const CalculixSettings & settings)
   }
   if (stoppedInAProximalStep)
   {
-    result.stabilisationStopped = "CalculiX stopped in proximal step " + FormatDouble(u.time) + " of " +
-                                  FormatDouble(endTime - 1.0) + "; the result is the step before. " +
-                                  Tail(log, 3);
+    // Proximal step g ends at time 1 + g: the last one finished is u.time - 1.
+    result.stabilisationStopped = "CalculiX stopped in proximal step " + std::to_string(std::lround(u.time)) +
+                                  " of " + std::to_string(std::lround(endTime - 1.0)) +
+                                  "; the result is the step before. " + Tail(log, 3);
   }
   else if (std::abs(u.time - endTime) > 1e-6 || std::abs(rf.time - endTime) > 1e-6)
   {
