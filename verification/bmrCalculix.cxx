@@ -1,6 +1,7 @@
 // CalculiX harness: deck writer, runner and result reader (see bmrCalculix.h).
 #include "bmrCalculix.h"
 #include "bmrCalculixContact.h"
+#include "bmrCalculixStabilisation.h"
 
 #include "bmrUnits.h"
 
@@ -396,10 +397,6 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
                 " are not a stabilisation: give a finite stiffness > 0, at least one step and one stage and a "
                 "softening >= 1, or stiffness 0 (off).");
   }
-  const int families = stabilised ? settings.stabilisationStages : 0; // spring families, one per stage
-  const auto familyStiffness = [&](int family) {
-    return settings.stabilisationStiffness / std::pow(settings.stabilisationSoftening, family);
-  };
   if (stabilised && continuation)
   {
     throw Error("CalculiX deck: CalculixSettings::stabilisationStiffness and startDisplacements are two ways into a "
@@ -513,27 +510,16 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
       }
     }
   }
-  const auto sprung = [&](std::size_t meshNode, int d) {
-    return boundaryMeshNode[meshNode] && !meshConstrained[d][meshNode];
-  };
-
-  // Stabilisation anchors: per stage and sprung mesh node, two
-  // (sets A and B, numbered after the mesh nodes), at the node's position.
-  std::vector<std::size_t> anchored;
-  if (stabilised)
+  std::array<std::vector<char>, 3> sprung;
+  for (int d = 0; d < 3; ++d)
   {
+    sprung[d].assign(mesh.nodes.size(), 0);
     for (std::size_t node = 0; node < mesh.nodes.size(); ++node)
     {
-      if (sprung(node, 0) || sprung(node, 1) || sprung(node, 2))
-      {
-        anchored.push_back(node);
-      }
+      sprung[d][node] = boundaryMeshNode[node] && !meshConstrained[d][node];
     }
   }
-  const auto anchor = [&](std::size_t i, int family, int set) { // 1-based, after the mesh nodes
-    return mesh.nodes.size() + (2 * static_cast<std::size_t>(family) + set) * anchored.size() + i + 1;
-  };
-  const auto anchorSet = [](int family, int set) { return "BMRANCHOR" + std::to_string(family) + "AB"[set]; };
+  const CalculixAnchors anchors(mesh, sprung, settings);
 
   stream << "*NODE, NSET=NALL\n";
   for (std::size_t i = 0; i < mesh.nodes.size(); ++i)
@@ -541,33 +527,7 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
     const Vector3 & p = mesh.nodes[i];
     stream << i + 1 << ", " << FormatDouble(p.x()) << ", " << FormatDouble(p.y()) << ", " << FormatDouble(p.z()) << "\n";
   }
-  if (!anchored.empty())
-  {
-    stream << "*NODE, NSET=BMRANCHORS\n";
-    for (int family = 0; family < families; ++family)
-    {
-      for (int set = 0; set < 2; ++set)
-      {
-        for (std::size_t i = 0; i < anchored.size(); ++i)
-        {
-          const Vector3 & p = mesh.nodes[anchored[i]];
-          stream << anchor(i, family, set) << ", " << FormatDouble(p.x()) << ", " << FormatDouble(p.y()) << ", "
-                 << FormatDouble(p.z()) << "\n";
-        }
-      }
-    }
-    for (int family = 0; family < families; ++family)
-    {
-      for (int set = 0; set < 2; ++set)
-      {
-        stream << "*NSET, NSET=" << anchorSet(family, set) << "\n";
-        for (std::size_t i = 0; i < anchored.size(); ++i)
-        {
-          stream << anchor(i, family, set) << "\n";
-        }
-      }
-    }
-  }
+  anchors.WriteNodes(stream);
 
   // Elements grouped by (material, type); one solid section per group.
   std::map<std::pair<Index, std::string>, std::vector<std::size_t>> groups;
@@ -626,39 +586,15 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
     stream << "*SOLID SECTION, ELSET=" << section.first << ", MATERIAL=MAT" << section.second << "\n";
   }
   WriteCalculixContactPairs(stream, model, mesh, settings);
-  if (!anchored.empty())
+  if (!anchors.Empty())
   {
-    // SPRING2 elements (one component of each end), numbered after the wedges.
+    // Numbered after the wedges.
     std::size_t element = model.cells.size();
     for (const auto & pair : mesh.contactPairs)
     {
       element += pair.masterWedges.size();
     }
-    for (int family = 0; family < families; ++family)
-    {
-      for (int set = 0; set < 2; ++set)
-      {
-        for (int d = 0; d < 3; ++d)
-        {
-          const std::string name = "BMRSPRING" + std::to_string(family) + "AB"[set] + std::to_string(d + 1);
-          if (std::none_of(anchored.begin(), anchored.end(), [&](std::size_t node) { return sprung(node, d); }))
-          {
-            continue;
-          }
-          stream << "*ELEMENT, TYPE=SPRING2, ELSET=" << name << "\n";
-          for (std::size_t i = 0; i < anchored.size(); ++i)
-          {
-            if (sprung(anchored[i], d))
-            {
-              stream << ++element << ", " << anchored[i] + 1 << ", " << anchor(i, family, set) << "\n";
-            }
-          }
-          stream << "*SPRING, ELSET=" << name << "\n"
-                 << d + 1 << ", " << d + 1 << "\n"
-                 << FormatDouble(familyStiffness(family)) << "\n";
-        }
-      }
-    }
+    anchors.WriteSprings(stream, element);
   }
 
   // The constrained mesh nodes at their values; with `start` (the
@@ -703,35 +639,7 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
     {
       stream << node + 1 << ", 1, 3, 0\n"; // the rigid masters' wedges
     }
-    for (std::size_t i = 0; i < anchored.size(); ++i)
-    {
-      for (int d = 0; d < 3; ++d)
-      {
-        if (!sprung(anchored[i], d))
-        {
-          for (int anchorBlock = 0; anchorBlock < 2 * families; ++anchorBlock)
-          {
-            stream << anchor(i, anchorBlock / 2, anchorBlock % 2) << ", " << d + 1 << ", " << d + 1
-                   << ", 0\n"; // no spring there
-          }
-        }
-      }
-    }
-  };
-  // The stabilisation's anchors of `set` held: at the reference state, or
-  // (fixed) where the step before left them.
-  const auto writeAnchors = [&](int family, int set, bool fixed) {
-    stream << (fixed ? "*BOUNDARY, FIXED\n" : "*BOUNDARY\n");
-    for (std::size_t i = 0; i < anchored.size(); ++i)
-    {
-      for (int d = 0; d < 3; ++d)
-      {
-        if (sprung(anchored[i], d))
-        {
-          stream << anchor(i, family, set) << ", " << d + 1 << ", " << d + 1 << (fixed ? "\n" : ", 0\n");
-        }
-      }
-    }
+    anchors.WriteUnsprungHolds(stream);
   };
   const auto writeStepHeader = [&](double initialIncrement) {
     stream << "*STEP, NLGEOM, INC=" << settings.maximumIncrements << "\n"
@@ -764,7 +672,7 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
   }
   if (stabilised)
   {
-    writeAnchors(0, 0, false);
+    anchors.WriteHold(stream, 0, 0, false);
   }
 
   if (gravity)
@@ -806,8 +714,8 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
     // loaded the body), the set that followed the nodes frozen, the other freed
     // (OP=NEW); a new stage's springs start from where their anchors followed
     // the nodes to, the earlier stages' all freed.
-    std::string fixedSet = anchorSet(0, 0); // the loading step's
-    for (int stage = 0; stage < families; ++stage)
+    std::string fixedSet = CalculixAnchors::SetName(0, 0); // the loading step's
+    for (int stage = 0; stage < anchors.Families(); ++stage)
     {
       for (int step = 1; step <= settings.stabilisationSteps; ++step)
       {
@@ -821,8 +729,8 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
         writeStepHeader(1.0);
         writeBoundary(true, nullptr);
         const int set = stage == 0 ? step % 2 : (step - 1) % 2;
-        writeAnchors(stage, set, true);
-        fixedSet = anchorSet(stage, set);
+        anchors.WriteHold(stream, stage, set, true);
+        fixedSet = CalculixAnchors::SetName(stage, set);
       }
     }
     stream << "*NODE PRINT, NSET=" << fixedSet << ", FREQUENCY=" << frequency << "\n"
