@@ -929,6 +929,16 @@ TEST(CalculixDeck, StabilisationWritesSpringsAnchorsAndProximalSteps)
   CalculixSettings both = settings;
   both.startDisplacements.assign(model.nodes.size(), Vector3::Zero());
   EXPECT_NE(refusal(both).find("give one of them"), std::string::npos);
+  // A body held everywhere has nothing to stabilise.
+  Model held = model;
+  for (Index node = 0; node < static_cast<Index>(held.nodes.size()); ++node)
+  {
+    held.nodeSets["everything"].push_back(node);
+  }
+  held.fixedConstraints.push_back({ "everything", { true, true, true } });
+  held.prescribedDisplacements.clear();
+  const CalculixMesh heldMesh = MakeCalculixMesh(held);
+  EXPECT_NE(DeckRefusal(held, heldMesh, settings).find("nothing floats"), std::string::npos);
 }
 
 TEST(CalculixContact, BadContactSurfacesAreNamedErrors)

@@ -470,8 +470,6 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
     }
   }
 
-  stream << "** Written by BiomechanicalRegistration (bmrCalculix).\n"
-         << "** Units: mm, N, s, tonne; stresses MPa.\n";
   // What the continuation holds (and its release forces act on): the corner
   // nodes of the body's boundary, in the components the model leaves free.
   std::vector<char> boundary(modelNodes, 0);
@@ -498,18 +496,7 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
   // The stabilisation's springs: every node of the boundary faces, mid-edge
   // nodes too (on Colin27 a mid-edge node of a single 40 Pa tetrahedron took
   // Newton corrections of 4 mm), in the components left free.
-  std::vector<char> boundaryMeshNode(mesh.nodes.size(), 0);
-  std::copy(boundary.begin(), boundary.end(), boundaryMeshNode.begin());
-  for (const auto & mids : mesh.boundaryTriangleMidNodes)
-  {
-    for (const Index mid : mids)
-    {
-      if (mid >= 0)
-      {
-        boundaryMeshNode[static_cast<std::size_t>(mid)] = 1;
-      }
-    }
-  }
+  const std::vector<char>          boundaryMeshNode = mesh.MeshNodeMask(boundary);
   std::array<std::vector<char>, 3> sprung;
   for (int d = 0; d < 3; ++d)
   {
@@ -520,7 +507,15 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
     }
   }
   const CalculixAnchors anchors(mesh, sprung, settings);
+  if (stabilised && anchors.Empty())
+  {
+    throw Error("CalculiX deck: CalculixSettings::stabilisationStiffness asks for springs on the body's boundary, "
+                "but every boundary node is constrained in every component: nothing floats, so leave the "
+                "stabilisation off (stiffness 0).");
+  }
 
+  stream << "** Written by BiomechanicalRegistration (bmrCalculix).\n"
+         << "** Units: mm, N, s, tonne; stresses MPa.\n";
   stream << "*NODE, NSET=NALL\n";
   for (std::size_t i = 0; i < mesh.nodes.size(); ++i)
   {
@@ -964,11 +959,14 @@ RunCalculix(const Model & model, const CalculixSettings & settings)
       seen[row.first - 1] = 1;
     }
   }
-  for (const auto & row : stoppedInAProximalStep ? std::vector<std::pair<long, Vector3>>{} : rf.rows)
+  if (!stoppedInAProximalStep) // the stopped step's reactions were not printed
   {
-    if (row.first >= 1 && static_cast<std::size_t>(row.first) <= meshNodes)
+    for (const auto & row : rf.rows)
     {
-      result.meshReactionForces[row.first - 1] = row.second;
+      if (row.first >= 1 && static_cast<std::size_t>(row.first) <= meshNodes)
+      {
+        result.meshReactionForces[row.first - 1] = row.second;
+      }
     }
   }
   for (std::size_t i = 0; i < meshNodes; ++i)
@@ -996,8 +994,7 @@ RunCalculix(const Model & model, const CalculixSettings & settings)
     const int proximalStep = static_cast<int>(std::lround(step.first)) - 1;
     const int stage = proximalStep == 0 ? 0 : (proximalStep - 1) / std::max(1, settings.stabilisationSteps);
     result.stabilisationForces.push_back(step.second);
-    result.stabilisationStiffnesses.push_back(settings.stabilisationStiffness /
-                                              std::pow(settings.stabilisationSoftening, stage));
+    result.stabilisationStiffnesses.push_back(StabilisationStiffness(settings, stage));
   }
   result.displacements.assign(result.meshDisplacements.begin(),
                               result.meshDisplacements.begin() + result.mesh.modelNodes);

@@ -7,12 +7,17 @@
 namespace bmr
 {
 
+double
+StabilisationStiffness(const CalculixSettings & settings, int stage)
+{
+  return settings.stabilisationStiffness / std::pow(settings.stabilisationSoftening, stage);
+}
+
 CalculixAnchors::CalculixAnchors(const CalculixMesh & mesh, const std::array<std::vector<char>, 3> & sprung,
                                  const CalculixSettings & settings)
   : m_Mesh(mesh)
   , m_Sprung(sprung)
-  , m_Stiffness(settings.stabilisationStiffness)
-  , m_Softening(settings.stabilisationSoftening)
+  , m_Settings(settings)
 {
   if (!(settings.stabilisationStiffness > 0.0))
   {
@@ -92,7 +97,7 @@ CalculixAnchors::WriteSprings(std::ostream & stream, std::size_t lastElement) co
       {
         stream << "*SPRING, ELSET=" << name << "\n"
                << d + 1 << ", " << d + 1 << "\n"
-               << FormatDouble(m_Stiffness / std::pow(m_Softening, family)) << "\n";
+               << FormatDouble(StabilisationStiffness(m_Settings, family)) << "\n";
       }
     }
   }

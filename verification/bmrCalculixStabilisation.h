@@ -14,6 +14,11 @@
 namespace bmr
 {
 
+/** The springs' stiffness (N/mm) of a stage: stabilisationStiffness divided
+ *  by stabilisationSoftening once per stage before it. */
+double
+StabilisationStiffness(const CalculixSettings & settings, int stage);
+
 /** Per stage ("family") two anchor sets A and B of one anchor per sprung mesh
  *  node, numbered after the mesh nodes in blocks: stage 0 A, stage 0 B,
  *  stage 1 A, ... Each sprung component of a node has a SPRING2 to its
@@ -21,7 +26,8 @@ namespace bmr
 class CalculixAnchors
 {
 public:
-  /** `sprung[d][n]`: mesh node n is tied in component d. No anchors unless
+  /** `sprung[d][n]`: mesh node n is tied in component d (kept: mesh and
+   *  settings must outlive the anchors). No anchors unless
    *  settings.stabilisationStiffness > 0. */
   CalculixAnchors(const CalculixMesh & mesh, const std::array<std::vector<char>, 3> & sprung,
                   const CalculixSettings & settings);
@@ -47,8 +53,7 @@ private:
   std::array<std::vector<char>, 3> m_Sprung;
   std::vector<std::size_t>         m_Nodes; // the sprung mesh nodes
   int                              m_Families = 0;
-  double                           m_Stiffness = 0.0; // N/mm, stage 0
-  double                           m_Softening = 1.0;
+  const CalculixSettings &         m_Settings;
 };
 
 } // namespace bmr
