@@ -155,9 +155,24 @@ struct Options
   int         stabilisationSteps = 4;    // per stage
   int         stabilisationStages = 1;
   double      stabilisationSoftening = 10.0;
+  int         stabilisationExtrapolations = 0; // CalculixSettings::stabilisationExtrapolations
   int         threads = 2;
   std::string workDirectory;           // keep CalculiX's job folders here
 };
+
+/** The restarts of a stabilised CalculiX run, for its JSON record. */
+json
+Extrapolations(const bmr::CalculixResult & result)
+{
+  json restarts = json::array();
+  for (const auto & restart : result.stabilisationExtrapolations)
+  {
+    restarts.push_back({ { "ratio", restart.ratio },
+                         { "largest_shift_mm", restart.largestShift },
+                         { "first_step", restart.firstStep } });
+  }
+  return restarts;
+}
 
 json
 Run(const Scene & scene, const bmr::RegistrationImage * image, const bmr::RegistrationLabelImage * mask,
@@ -225,6 +240,7 @@ Run(const Scene & scene, const bmr::RegistrationImage * image, const bmr::Regist
   calculix.stabilisationSteps = options.stabilisationSteps;
   calculix.stabilisationStages = options.stabilisationStages;
   calculix.stabilisationSoftening = options.stabilisationSoftening;
+  calculix.stabilisationExtrapolations = options.stabilisationExtrapolations;
   if (warmStart)
   {
     calculix.startDisplacements = anp.displacements;
@@ -282,6 +298,7 @@ Run(const Scene & scene, const bmr::RegistrationImage * image, const bmr::Regist
                            { "stabilisation_forces_n", reference.stabilisationForces },
                            { "stabilisation_stiffnesses_n_per_mm", reference.stabilisationStiffnesses },
                            { "stabilisation_stopped", reference.stabilisationStopped },
+                           { "stabilisation_extrapolations", Extrapolations(reference) },
                            { "hold_run_seconds", reference.holdRunSeconds },
                            { "increments", reference.increments },
                            { "iterations", reference.iterations },
@@ -322,8 +339,23 @@ Stabilisation(const json & calculix)
   {
     cell << " to " << Sci(stiffnesses.back().get<double>(), 1) << " N/mm in " << stages << " stages";
   }
-  cell << ", " << forces.size() - 1 << " steps; " << Sci(forces.front().get<double>(), 1) << " / "
-       << Sci(forces.back().get<double>(), 1) << " N ("
+  const json restarts = calculix.value("stabilisation_extrapolations", json::array());
+  cell << ", " << forces.size() - 1 - restarts.size() << " steps";
+  if (!restarts.empty())
+  {
+    // Each restart's loading step: its springs' force is how far the extrapolation missed.
+    cell << " in " << restarts.size() + 1 << " runs, restarted from the extrapolated limit (contraction, largest "
+         << "anchor shift, first spring force:";
+    const char * separator = " ";
+    for (const json & restart : restarts)
+    {
+      cell << separator << Fixed(restart["ratio"], 2) << ", " << Fixed(restart["largest_shift_mm"], 2) << " mm, "
+           << Sci(forces[restart["first_step"].get<std::size_t>()].get<double>(), 1) << " N";
+      separator = "; ";
+    }
+    cell << ")";
+  }
+  cell << "; " << Sci(forces.front().get<double>(), 1) << " / " << Sci(forces.back().get<double>(), 1) << " N ("
        << Sci(forces.back().get<double>() / stiffnesses.back().get<double>(), 1) << " mm)";
   if (!calculix.value("stabilisation_stopped", std::string{}).empty())
   {
@@ -357,7 +389,11 @@ Report(const json & runs, const std::string & machine, const std::string & comma
       << "at the reference state in the loading step, then, in each proximal step, where the step before ended "
       << "(verification/bmrCalculix.h, `CalculixSettings::stabilisationStiffness`). The fixed point of these steps "
       << "is CalculiX's own equilibrium, nothing of the module's solution enters, and what the springs still carry "
-      << "at the end, divided by their stiffness, is how far the last step moved any boundary node. CalculiX's field (at every "
+      << "at the end, divided by their stiffness, is how far the last step moved any boundary node. Where the cell "
+      << "gives restarts, CalculiX ran the whole deck again with the loading step's anchors where the steps' "
+      << "measured contraction r says they would end, u_n + r / (1 - r) (u_n - u_n-1) "
+      << "(`CalculixSettings::stabilisationExtrapolations`): the fixed point is the same, and the restart's first "
+      << "spring force says how far the extrapolation missed. CalculiX's field (at every "
       << "node of its quadratic mesh) and the study's truth are fitted with the same B-spline transform and compared "
       << "as docs/ground-truth-agreement.md compares two truths: |T_1(x) - T_2(x)| of the two backward maps on every "
       << "second voxel of the intraoperative brain. The ANP solve is compared with CalculiX node by node, on the "
@@ -461,6 +497,10 @@ main(int argc, char ** argv)
     ->check(CLI::PositiveNumber);
   app.add_option("--stabilisation-softening", options.stabilisationSoftening, "stiffness ratio of one stage to the next")
     ->check(CLI::Range(1.0, 1e6));
+  app.add_option("--stabilisation-extrapolations", options.stabilisationExtrapolations,
+                 "restarts from the proximal steps' extrapolated limit (each a whole CalculiX run; needs "
+                 "--stabilisation-steps >= 2)")
+    ->check(CLI::NonNegativeNumber);
   app.add_option("--mid-edge-slaves", options.midEdgeSlaves,
                  "mid-edge nodes are contact slaves too (false: the corners, as the module's contact)");
   app.add_option("--threads", options.threads, "threads of both solvers")->check(CLI::PositiveNumber);
@@ -534,7 +574,8 @@ main(int argc, char ** argv)
             << (options.gradualRelease ? "true" : "false") << " --csf-modulus " << options.csfModulus
             << " --stabilisation-stiffness " << options.stabilisationStiffness << " --stabilisation-steps "
             << options.stabilisationSteps << " --stabilisation-stages " << options.stabilisationStages
-            << " --stabilisation-softening " << options.stabilisationSoftening << " --mid-edge-slaves "
+            << " --stabilisation-softening " << options.stabilisationSoftening
+            << " --stabilisation-extrapolations " << options.stabilisationExtrapolations << " --mid-edge-slaves "
             << (options.midEdgeSlaves ? "true" : "false") << " --threads " << options.threads;
     std::ofstream(output) << Report(runs, machine.str(), command.str());
     std::cout << json{ { "machine", machine.str() }, { "runs", runs } }.dump(2) << std::endl;

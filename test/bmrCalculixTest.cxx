@@ -785,6 +785,45 @@ TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
   EXPECT_LT(proximal.stabilisationForces.back(), 0.01 * proximal.stabilisationForces.front());
   EXPECT_LT(proximalAgainstCold.rmsError, 0.1 * agreement.rmsError);
   EXPECT_LT(proximalAgainstCold.maxError, 0.2 * agreement.maxError);
+
+  // Restarting from the proximal sequence's extrapolated limit: 3 steps, a
+  // restart with the anchors where the measured contraction says the steps
+  // would end, 3 more. It ends at the same equilibrium, and nearer to it
+  // than 6 steps in one run.
+  CalculixSettings extrapolated = stabilised;
+  extrapolated.stabilisationSteps = 3;
+  extrapolated.stabilisationExtrapolations = 1;
+  const CalculixResult         restarted = RunCalculix(walled, extrapolated);
+  const DisplacementComparison restartedAgainstCold =
+    CompareDisplacements(walled.nodes, restarted.displacements, walled.nodes, reference.displacements);
+  ASSERT_EQ(restarted.stabilisationExtrapolations.size(), 1u);
+  const CalculixResult::Extrapolation & restart = restarted.stabilisationExtrapolations[0];
+  std::cout << "walls, stabilised, restarted from the extrapolated limit after 3 steps (contraction " << restart.ratio
+            << ", anchors shifted up to " << restart.largestShift << " mm): against the cold start RMS / max "
+            << restartedAgainstCold.rmsError << " / " << restartedAgainstCold.maxError
+            << " mm; largest spring force per step";
+  for (const double force : restarted.stabilisationForces)
+  {
+    std::cout << " " << force;
+  }
+  std::cout << " N" << std::endl;
+  ASSERT_EQ(restarted.stabilisationForces.size(), 8u); // two runs of a loading step and 3 proximal steps
+  EXPECT_EQ(restart.firstStep, 5u);
+  EXPECT_GT(restart.ratio, 0.0);
+  EXPECT_LE(restart.ratio, kMaxExtrapolationRatio);
+  EXPECT_GT(restart.largestShift, 0.0);
+  EXPECT_TRUE(restarted.stabilisationStopped.empty()) << restarted.stabilisationStopped;
+  // Measured 2026-11-28: contraction 0.46, anchors shifted up to 0.026 mm;
+  // spring forces 1.9e-4, 2.0e-5, 1.0e-5, 5.9e-6, then 1.9e-4 (the loading
+  // step again), 2.0e-5, 1.6e-6, 5.4e-7 N against 1.3e-6 N after 6 steps in
+  // one run. The restart's first proximal step carries 2.0e-5 N at the
+  // block's vertical edges, where a node between two walls settles against
+  // either (two penalty equilibria 0.07 mm apart; the run before had it on
+  // the other wall), which is also the largest difference from the cold
+  // start (0.058 mm; RMS 0.0064 mm).
+  EXPECT_LT(restarted.stabilisationForces.back(), proximal.stabilisationForces[6]);
+  EXPECT_LT(restartedAgainstCold.rmsError, 0.1 * agreement.rmsError);
+  EXPECT_LT(restartedAgainstCold.maxError, 0.3 * agreement.maxError);
 }
 
 /** The error of a deck that must be refused, checking that nothing was written. */
@@ -929,6 +968,39 @@ TEST(CalculixDeck, StabilisationWritesSpringsAnchorsAndProximalSteps)
   CalculixSettings both = settings;
   both.startDisplacements.assign(model.nodes.size(), Vector3::Zero());
   EXPECT_NE(refusal(both).find("give one of them"), std::string::npos);
+  // The first proximal step's anchors may stand at a given state (a
+  // restart from an extrapolated one): their hold carries the given values
+  // instead of freezing them; the steps after it freeze as before.
+  CalculixSettings displaced = settings;
+  displaced.stabilisationAnchorStart.assign(mesh.nodes.size(), Vector3(0.25, -0.5, 0.125));
+  std::ostringstream displacedDeck;
+  WriteCalculixDeck(displacedDeck, model, mesh, displaced);
+  const std::string displacedText = displacedDeck.str();
+  std::size_t displacedFixed = 0;
+  for (std::size_t at = displacedText.find("*BOUNDARY, FIXED"); at != std::string::npos;
+       at = displacedText.find("*BOUNDARY, FIXED", at + 1))
+  {
+    ++displacedFixed;
+  }
+  EXPECT_EQ(displacedFixed, fixedAt.size() - 1); // all but the first proximal step's
+  const std::size_t placedHold = displacedText.find("*BOUNDARY\n" + std::to_string(firstAnchor(0)) + ", ");
+  ASSERT_NE(placedHold, std::string::npos);
+  EXPECT_GT(placedHold, displacedText.find("*END STEP")); // in the first proximal step
+  const std::string firstLine = displacedText.substr(placedHold + 10, displacedText.find('\n', placedHold + 10) -
+                                                                        placedHold - 10);
+  const int component = std::stoi(firstLine.substr(firstLine.find(", ") + 2));
+  EXPECT_EQ(std::stod(firstLine.substr(firstLine.rfind(", ") + 2)), displaced.stabilisationAnchorStart[0][component - 1])
+    << firstLine;
+  displaced.stabilisationAnchorStart.pop_back();
+  EXPECT_NE(refusal(displaced).find("stabilisationAnchorStart has " + std::to_string(mesh.nodes.size() - 1)),
+            std::string::npos);
+  CalculixSettings unstabilised;
+  unstabilised.stabilisationAnchorStart.assign(mesh.nodes.size(), Vector3::Zero());
+  EXPECT_NE(refusal(unstabilised).find("without a stabilisation"), std::string::npos);
+  CalculixSettings oneStep = settings;
+  oneStep.stabilisationSteps = 1;
+  oneStep.stabilisationExtrapolations = 1;
+  EXPECT_NE(refusal(oneStep).find("at least 2 proximal steps"), std::string::npos);
   // A body held everywhere has nothing to stabilise.
   Model held = model;
   for (Index node = 0; node < static_cast<Index>(held.nodes.size()); ++node)

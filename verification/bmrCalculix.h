@@ -24,7 +24,9 @@
 // linearly over the step (the end state of a hyperelastic solid does not depend
 // on the path). CalculixSettings::startDisplacements adds steps that hold the
 // boundary at a given state and then release it (continuation);
-// CalculixSettings::stabilisationStiffness adds proximal steps instead.
+// CalculixSettings::stabilisationStiffness adds proximal steps instead, and
+// stabilisationExtrapolations restarts them from their extrapolated limit.
+// bmrCalculixDeck.cxx writes the deck; bmrCalculix.cxx runs ccx and reads it.
 // Displacements and reaction forces are read back from the .dat file
 // (*NODE PRINT).
 #ifndef bmrCalculix_h
@@ -123,6 +125,21 @@ struct CalculixSettings
   int    stabilisationSteps = 0;
   int    stabilisationStages = 1;
   double stabilisationSoftening = 10.0;
+  /** Restarts of the proximal iteration from its extrapolated limit (needs
+   *  at least 2 stabilisationSteps). The slowest mode dominates the steps'
+   *  motions d_k after a few steps, so that they shrink geometrically, by r a
+   *  step; RunCalculix measures r = <d_n, d_n-1> / |d_n-1|^2 over the body's
+   *  nodes from a run's last two steps and runs the whole deck again with the
+   *  first proximal step's anchors at u_n + r / (1 - r) d_n, where that
+   *  geometric sequence ends (r capped at kMaxExtrapolationRatio). The fixed
+   *  point does not depend on where the anchors stand, so the result is
+   *  still CalculiX's own equilibrium; that step's spring force measures how
+   *  far the extrapolation missed. */
+  int stabilisationExtrapolations = 0;
+  /** Per CalculiX mesh node (mm): where the first proximal step's anchors
+   *  stand (empty: where the loading step left the nodes). What
+   *  stabilisationExtrapolations sets for each restart. */
+  std::vector<Vector3> stabilisationAnchorStart;
 
   /** Equation solver (*STATIC, SOLVER=...): empty for CalculiX's default
    *  (SPOOLES in Debian's build), or "ITERATIVE CHOLESKY", "ITERATIVE SCALING". */
@@ -210,6 +227,21 @@ struct CalculixResult
    *  what it said; the result is then the last finished step's (its reaction
    *  forces zero), whose springs' force is stabilisationForces.back(). */
   std::string          stabilisationStopped;
+  /** Stabilised runs: the mesh displacements at the ends of the (up to) two
+   *  steps before the result's, older first; the result minus the last of
+   *  them is the last step's motion. */
+  std::vector<std::vector<Vector3>> stabilisationStepsBefore;
+  /** stabilisationExtrapolations: per restart, the contraction r measured
+   *  on the run before, the largest anchor shift r / (1 - r) |d_n| (mm),
+   *  and the index in stabilisationForces of the restart's first proximal
+   *  step (the one anchored there). */
+  struct Extrapolation
+  {
+    double      ratio = 0.0;
+    double      largestShift = 0.0;
+    std::size_t firstStep = 0;
+  };
+  std::vector<Extrapolation> stabilisationExtrapolations;
   std::string          workDirectory;       // kept only with keepFiles
 
   /** Sum of reaction forces (N) over the given model nodes and the mid-edge
@@ -221,6 +253,11 @@ struct CalculixResult
  *  PATH), or empty if none is found. */
 std::string
 FindCalculix(const std::string & executable = {});
+
+/** The largest contraction a restart extrapolates with (a factor
+ *  r / (1 - r) = 9 on the last step's motion): beyond it the sequence is
+ *  not yet geometric enough to trust its tail. */
+constexpr double kMaxExtrapolationRatio = 0.9;
 
 /** Writes the deck, runs ccx, reads the results. Throws bmr::Error when ccx is
  *  missing, fails, or does not complete the step (with the tail of its output). */

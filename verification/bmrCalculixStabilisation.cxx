@@ -122,17 +122,24 @@ CalculixAnchors::WriteUnsprungHolds(std::ostream & stream) const
 }
 
 void
-CalculixAnchors::WriteHold(std::ostream & stream, int family, int set, bool fixed) const
+CalculixAnchors::WriteHold(std::ostream & stream, int family, int set, bool fixed,
+                           const std::vector<Vector3> * start) const
 {
   stream << (fixed ? "*BOUNDARY, FIXED\n" : "*BOUNDARY\n");
   for (std::size_t i = 0; i < m_Nodes.size(); ++i)
   {
     for (int d = 0; d < 3; ++d)
     {
-      if (m_Sprung[d][m_Nodes[i]])
+      if (!m_Sprung[d][m_Nodes[i]])
       {
-        stream << Anchor(i, family, set) << ", " << d + 1 << ", " << d + 1 << (fixed ? "\n" : ", 0\n");
+        continue;
       }
+      stream << Anchor(i, family, set) << ", " << d + 1 << ", " << d + 1;
+      if (!fixed)
+      {
+        stream << ", " << (start ? FormatDouble((*start)[m_Nodes[i]][d]) : std::string("0"));
+      }
+      stream << "\n";
     }
   }
 }

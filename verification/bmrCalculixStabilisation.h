@@ -42,9 +42,11 @@ public:
   void WriteSprings(std::ostream & stream, std::size_t lastElement) const;
   /** Lines of a *BOUNDARY card: the components without a spring, at 0. */
   void WriteUnsprungHolds(std::ostream & stream) const;
-  /** A *BOUNDARY card holding `set` of `family`: at the reference state, or
-   *  (fixed) where the step before left it. */
-  void WriteHold(std::ostream & stream, int family, int set, bool fixed) const;
+  /** A *BOUNDARY card holding `set` of `family`: at the reference state
+   *  (or, given `start`, per mesh node, displaced by it), or (fixed) where
+   *  the step before left it. */
+  void WriteHold(std::ostream & stream, int family, int set, bool fixed,
+                 const std::vector<Vector3> * start = nullptr) const;
 
 private:
   std::size_t Anchor(std::size_t i, int family, int set) const; // 1-based
