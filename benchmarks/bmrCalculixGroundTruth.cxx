@@ -291,7 +291,7 @@ Run(const Scene & scene, const bmr::RegistrationImage * image, const bmr::Regist
                            { "residual_tolerance", options.residualTolerance },
                            { "skull_closing_mm", options.skullClosing },
                            { "mid_edge_slaves", options.midEdgeSlaves },
-                           { "gradual_release", warmStart && options.gradualRelease },
+                           { "gradual_release", (warmStart || options.stabilisationStiffness > 0.0) && options.gradualRelease },
                            { "stabilisation_stiffness_n_per_mm", options.stabilisationStiffness },
                            { "stabilisation_steps", options.stabilisationStiffness > 0.0 ? options.stabilisationSteps : 0 },
                            { "stabilisation_stages", options.stabilisationStiffness > 0.0 ? options.stabilisationStages : 0 },
@@ -354,6 +354,10 @@ Stabilisation(const json & calculix)
       separator = "; ";
     }
     cell << ")";
+  }
+  if (calculix.value("gradual_release", false))
+  {
+    cell << ", the loading step's springs handed over gradually";
   }
   cell << "; " << Sci(forces.front().get<double>(), 1) << " / " << Sci(forces.back().get<double>(), 1) << " N ("
        << Sci(forces.back().get<double>() / stiffnesses.back().get<double>(), 1) << " mm)";
@@ -482,7 +486,9 @@ main(int argc, char ** argv)
   app.add_option("--warm-start", options.warmStart,
                  "start CalculiX from the ANP solution (a first step holds the boundary there, a second releases it)");
   app.add_option("--gradual-release", options.gradualRelease,
-                 "with --warm-start: release the held boundary gradually (its reaction forces falling to zero) instead of at once");
+                 "with --warm-start: release the held boundary gradually (its reaction forces falling to zero) instead "
+                 "of at once; with --stabilisation-stiffness: the same for the loading step's springs in the first "
+                 "proximal step (one more CalculiX run, of the loading step alone)");
   app.add_option("--csf-modulus", options.csfModulus,
                  "Young's modulus (Pa) of the CSF class in both truths; the study's scene has 10")
     ->check(CLI::PositiveNumber);

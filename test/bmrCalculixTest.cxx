@@ -824,6 +824,29 @@ TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
   EXPECT_LT(restarted.stabilisationForces.back(), proximal.stabilisationForces[6]);
   EXPECT_LT(restartedAgainstCold.rmsError, 0.1 * agreement.rmsError);
   EXPECT_LT(restartedAgainstCold.maxError, 0.3 * agreement.maxError);
+
+  // The loading step's springs handed over gradually in the first proximal
+  // step (their forces from a run of the loading step alone, as loads falling
+  // to zero): the same steps to the same equilibrium.
+  CalculixSettings handedOver = stabilised;
+  handedOver.gradualRelease = true;
+  const CalculixResult         gradualProximal = RunCalculix(walled, handedOver);
+  const DisplacementComparison gradualProximalAgainstCold =
+    CompareDisplacements(walled.nodes, gradualProximal.displacements, walled.nodes, reference.displacements);
+  std::cout << "walls, stabilised, the loading step's springs handed over gradually: against the cold start RMS / max "
+            << gradualProximalAgainstCold.rmsError << " / " << gradualProximalAgainstCold.maxError
+            << " mm; largest spring force per step";
+  for (const double force : gradualProximal.stabilisationForces)
+  {
+    std::cout << " " << force;
+  }
+  std::cout << " N (the loading step alone " << gradualProximal.holdRunSeconds << " s)" << std::endl;
+  ASSERT_EQ(gradualProximal.stabilisationForces.size(), proximal.stabilisationForces.size());
+  EXPECT_GT(gradualProximal.holdRunSeconds, 0.0);
+  EXPECT_TRUE(gradualProximal.stabilisationStopped.empty()) << gradualProximal.stabilisationStopped;
+  EXPECT_LT(gradualProximal.stabilisationForces.back(), 0.01 * gradualProximal.stabilisationForces.front());
+  EXPECT_LT(gradualProximalAgainstCold.rmsError, 0.1 * agreement.rmsError);
+  EXPECT_LT(gradualProximalAgainstCold.maxError, 0.2 * agreement.maxError);
 }
 
 /** The error of a deck that must be refused, checking that nothing was written. */
@@ -997,6 +1020,29 @@ TEST(CalculixDeck, StabilisationWritesSpringsAnchorsAndProximalSteps)
   CalculixSettings unstabilised;
   unstabilised.stabilisationAnchorStart.assign(mesh.nodes.size(), Vector3::Zero());
   EXPECT_NE(refusal(unstabilised).find("without a stabilisation"), std::string::npos);
+  // The loading step's springs handed over (CalculixSettings::gradualRelease):
+  // loads at the sprung nodes in the first proximal step, falling to zero by
+  // its end (total time 2) and staying there; the loading step alone is one
+  // step.
+  CalculixSettings handedOver = settings;
+  handedOver.releaseForces.assign(mesh.nodes.size(), Vector3(1e-4, -2e-4, 3e-4));
+  std::ostringstream handedOverDeck;
+  WriteCalculixDeck(handedOverDeck, model, mesh, handedOver);
+  const std::string handedOverText = handedOverDeck.str();
+  EXPECT_NE(handedOverText.find("*AMPLITUDE, NAME=BMRRELEASE, TIME=TOTAL TIME\n1., 1., 2., 0."), std::string::npos);
+  const std::size_t cload = handedOverText.find("*CLOAD, AMPLITUDE=BMRRELEASE");
+  ASSERT_NE(cload, std::string::npos);
+  const std::size_t secondStep = handedOverText.find("*STEP", handedOverText.find("*STEP") + 1);
+  EXPECT_GT(cload, secondStep);
+  EXPECT_LT(cload, handedOverText.find("*STEP", secondStep + 1)); // in the first proximal step only
+  EXPECT_EQ(handedOverText.find("*CLOAD", cload + 1), std::string::npos);
+  handedOver.holdOnly = true;
+  std::ostringstream loadingOnly;
+  WriteCalculixDeck(loadingOnly, model, mesh, handedOver);
+  EXPECT_EQ(loadingOnly.str().find("*STEP", loadingOnly.str().find("*STEP") + 1), std::string::npos);
+  handedOver.releaseForces.pop_back();
+  handedOver.holdOnly = false;
+  EXPECT_NE(refusal(handedOver).find("releaseForces has " + std::to_string(mesh.nodes.size() - 1)), std::string::npos);
   CalculixSettings oneStep = settings;
   oneStep.stabilisationSteps = 1;
   oneStep.stabilisationExtrapolations = 1;

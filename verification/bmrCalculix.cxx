@@ -243,6 +243,28 @@ CalculixResult::TotalReactionForce(const std::vector<Index> & modelNodes) const
 namespace
 {
 
+/** CalculixSettings::gradualRelease with a stabilisation: the loading step
+ *  alone, and the forces its springs (anchored at the reference state) exert
+ *  on every mesh node, -k u, for the sprung components to take over. */
+std::vector<Vector3>
+LoadingSpringForces(const Model & model, const CalculixSettings & settings, double & seconds)
+{
+  CalculixSettings loading = settings;
+  loading.gradualRelease = false;
+  loading.holdOnly = true;
+  loading.releaseForces.clear();
+  loading.stabilisationExtrapolations = 0;
+  loading.jobName = (settings.jobName.empty() ? std::string("bmr") : settings.jobName) + "-loading";
+  const CalculixResult loaded = RunCalculix(model, loading);
+  seconds = loaded.wallSeconds;
+  std::vector<Vector3> forces(loaded.meshDisplacements.size());
+  for (std::size_t node = 0; node < forces.size(); ++node)
+  {
+    forces[node] = -StabilisationStiffness(settings, 0) * loaded.meshDisplacements[node];
+  }
+  return forces;
+}
+
 /** CalculixSettings::stabilisationExtrapolations: the deck run again from
  *  its proximal sequence's extrapolated limit, the runs' counts summed. */
 CalculixResult
@@ -251,7 +273,15 @@ RunExtrapolatedStabilisation(const Model & model, const CalculixSettings & setti
   CalculixSettings run = settings;
   run.stabilisationExtrapolations = 0;
   const std::string job = settings.jobName.empty() ? std::string("bmr") : settings.jobName;
-  CalculixResult    result = RunCalculix(model, run);
+  double            loadingSeconds = 0.0;
+  if (run.gradualRelease && run.releaseForces.empty())
+  {
+    // Every run's loading step is the same: its springs' forces once.
+    run.releaseForces = LoadingSpringForces(model, run, loadingSeconds);
+    run.gradualRelease = false;
+  }
+  CalculixResult result = RunCalculix(model, run);
+  result.holdRunSeconds = loadingSeconds;
   for (int restart = 1; restart <= settings.stabilisationExtrapolations; ++restart)
   {
     if (result.stabilisationStepsBefore.size() < 2)
@@ -293,6 +323,7 @@ RunExtrapolatedStabilisation(const Model & model, const CalculixSettings & setti
     next.stabilisationStiffnesses.insert(next.stabilisationStiffnesses.begin(),
                                          result.stabilisationStiffnesses.begin(),
                                          result.stabilisationStiffnesses.end());
+    next.holdRunSeconds = result.holdRunSeconds;
     next.stabilisationExtrapolations = result.stabilisationExtrapolations;
     next.stabilisationExtrapolations.push_back(extrapolation);
     if (!result.stabilisationStopped.empty())
@@ -310,6 +341,21 @@ RunExtrapolatedStabilisation(const Model & model, const CalculixSettings & setti
 CalculixResult
 RunCalculix(const Model & model, const CalculixSettings & settings)
 {
+  if (settings.stabilisationExtrapolations > 0)
+  {
+    return RunExtrapolatedStabilisation(model, settings);
+  }
+  if (settings.gradualRelease && settings.releaseForces.empty() && settings.stabilisationStiffness > 0.0 &&
+      !settings.holdOnly)
+  {
+    CalculixSettings release = settings;
+    double           loadingSeconds = 0.0;
+    release.releaseForces = LoadingSpringForces(model, settings, loadingSeconds);
+    release.gradualRelease = false;
+    CalculixResult result = RunCalculix(model, release);
+    result.holdRunSeconds = loadingSeconds;
+    return result;
+  }
   if (settings.gradualRelease && !settings.startDisplacements.empty())
   {
     // The hold alone, for its reaction forces; then hold and gradual release.
@@ -326,10 +372,6 @@ RunCalculix(const Model & model, const CalculixSettings & settings)
     CalculixResult result = RunCalculix(model, release);
     result.holdRunSeconds = held.wallSeconds;
     return result;
-  }
-  if (settings.stabilisationExtrapolations > 0)
-  {
-    return RunExtrapolatedStabilisation(model, settings);
   }
   const std::string executable = FindCalculix(settings.executable);
   if (executable.empty())
@@ -434,9 +476,10 @@ RunCalculix(const Model & model, const CalculixSettings & settings)
   const DatBlock rf = LastDatBlock(dat, "forces (fx,fy,fz) for set NALL ");
   // The .dat gives the total time: each static step runs for 1.
   const bool   stabilised = settings.stabilisationStiffness > 0.0;
-  const double endTime = stabilised ? 1.0 + settings.stabilisationSteps * settings.stabilisationStages
-                         : settings.startDisplacements.empty() || settings.holdOnly ? 1.0
-                                                                                    : 2.0;
+  const double endTime = settings.holdOnly                   ? 1.0
+                         : stabilised                          ? 1.0 + settings.stabilisationSteps * settings.stabilisationStages
+                         : settings.startDisplacements.empty() ? 1.0
+                                                               : 2.0;
   const bool failed = !exitedNormally || log.find("*ERROR") != std::string::npos;
   // A proximal step that Newton does not finish (penalty contact that flips
   // between iterations) leaves the step before it as the result: an

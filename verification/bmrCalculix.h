@@ -92,12 +92,18 @@ struct CalculixSettings
    *  linearly to zero over the release step: the release starts in
    *  equilibrium and Newton follows the body as it lets go, where a release
    *  at once (false) leaves Newton the whole out-of-balance at the first
-   *  iteration (on Colin27 a first correction of 55 mm, docs/registration.md). */
+   *  iteration (on Colin27 a first correction of 55 mm, docs/registration.md).
+   *  With a stabilisation the same for the loading step's springs, which the
+   *  first proximal step releases: a run of the loading step alone gives
+   *  their forces, -k u at each sprung node, and the first proximal step
+   *  applies them as loads falling linearly to zero (on Colin27's 20 mm
+   *  scene that step diverged at every increment size without it). */
   bool gradualRelease = false;
   /** What gradualRelease sets for each run (or a caller with its own forces):
-   *  stop after the hold step; and per mesh node, forces (N) applied at the
-   *  held components in the release step, falling linearly to zero over it
-   *  (empty: none). */
+   *  stop after the first step (the hold, or the stabilisation's loading
+   *  step); and per mesh node, forces (N) applied at the held (sprung)
+   *  components in the release (first proximal) step, falling linearly to
+   *  zero over it (empty: none). */
   bool                 holdOnly = false;
   std::vector<Vector3> releaseForces;
 

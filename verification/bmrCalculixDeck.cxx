@@ -269,10 +269,11 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
   }
   if (!settings.releaseForces.empty() || settings.holdOnly)
   {
-    if (!continuation)
+    if (!continuation && !stabilised)
     {
       throw Error("CalculiX deck: CalculixSettings::releaseForces and holdOnly need startDisplacements (the state "
-                  "that is held and released); give them, or leave releaseForces empty and holdOnly false.");
+                  "that is held and released) or a stabilisation (whose loading step's springs are released); give "
+                  "one, or leave releaseForces empty and holdOnly false.");
     }
     if (!settings.releaseForces.empty() && settings.releaseForces.size() != mesh.nodes.size())
     {
@@ -513,8 +514,9 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
   const char * releaseAmplitude = "BMRRELEASE";
   if (!settings.releaseForces.empty())
   {
-    // Step time 0 -> 1: the held nodes' forces fall from their hold values to zero.
-    stream << "*AMPLITUDE, NAME=" << releaseAmplitude << "\n0., 1., 1., 0.\n";
+    // The second step (total time 1 -> 2: the release, or the first proximal
+    // step): the forces fall from their full values to zero, and stay there.
+    stream << "*AMPLITUDE, NAME=" << releaseAmplitude << ", TIME=TOTAL TIME\n1., 1., 2., 0., 1.e6, 0.\n";
   }
   // FREQUENCY beyond the increment limit: only the end of a step is printed.
   const int frequency = settings.maximumIncrements + 1;
@@ -568,7 +570,7 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
       }
     }
   }
-  if (stabilised)
+  if (stabilised && !settings.holdOnly)
   {
     // The proximal steps: each starts whole (it moves little once the first has
     // loaded the body), the set that followed the nodes frozen, the other freed
@@ -599,6 +601,22 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
         else
         {
           anchors.WriteHold(stream, stage, set, true);
+        }
+        if (stage == 0 && step == 1 && !settings.releaseForces.empty())
+        {
+          // The loading step's springs, released here, handed over to loads
+          // that fall to zero over the step: it starts in equilibrium.
+          stream << "*CLOAD, AMPLITUDE=" << releaseAmplitude << "\n";
+          for (std::size_t node = 0; node < mesh.nodes.size(); ++node)
+          {
+            for (int d = 0; d < 3; ++d)
+            {
+              if (sprung[d][node] && settings.releaseForces[node][d] != 0.0)
+              {
+                stream << node + 1 << ", " << d + 1 << ", " << FormatDouble(settings.releaseForces[node][d]) << "\n";
+              }
+            }
+          }
         }
         fixedSet = CalculixAnchors::SetName(stage, set);
       }
