@@ -632,6 +632,18 @@ WallsAroundBlock(const Vector3 & size, double gap)
   return walls;
 }
 
+/** A stabilised run's largest spring force per step, for the test's log. */
+std::string
+SpringForces(const CalculixResult & result)
+{
+  std::ostringstream text;
+  for (const double force : result.stabilisationForces)
+  {
+    text << " " << force;
+  }
+  return text.str();
+}
+
 TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
 {
   // The block indentation with the block's sides against four frictionless
@@ -768,12 +780,8 @@ TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
     CompareDisplacements(walled.nodes, proximal.displacements, walled.nodes, reference.displacements);
   std::cout << "walls, stabilised (" << stabilised.stabilisationSteps << " proximal steps, k "
             << stabilised.stabilisationStiffness << " N/mm): against the cold start RMS / max "
-            << proximalAgainstCold.rmsError << " / " << proximalAgainstCold.maxError << " mm; largest spring force per step";
-  for (const double force : proximal.stabilisationForces)
-  {
-    std::cout << " " << force;
-  }
-  std::cout << " N" << std::endl;
+            << proximalAgainstCold.rmsError << " / " << proximalAgainstCold.maxError << " mm; largest spring force per step"
+            << SpringForces(proximal) << " N" << std::endl;
   ASSERT_EQ(proximal.stabilisationForces.size(), static_cast<std::size_t>(stabilised.stabilisationSteps + 1));
   ASSERT_EQ(proximal.stabilisationStiffnesses.size(), proximal.stabilisationForces.size());
   EXPECT_EQ(proximal.stabilisationStiffnesses.back(), stabilised.stabilisationStiffness);
@@ -801,12 +809,8 @@ TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
   std::cout << "walls, stabilised, restarted from the extrapolated limit after 3 steps (contraction " << restart.ratio
             << ", anchors shifted up to " << restart.largestShift << " mm): against the cold start RMS / max "
             << restartedAgainstCold.rmsError << " / " << restartedAgainstCold.maxError
-            << " mm; largest spring force per step";
-  for (const double force : restarted.stabilisationForces)
-  {
-    std::cout << " " << force;
-  }
-  std::cout << " N" << std::endl;
+            << " mm; largest spring force per step"
+            << SpringForces(restarted) << " N" << std::endl;
   ASSERT_EQ(restarted.stabilisationForces.size(), 8u); // two runs of a loading step and 3 proximal steps
   EXPECT_EQ(restart.firstStep, 5u);
   EXPECT_GT(restart.ratio, 0.0);
@@ -835,12 +839,8 @@ TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
     CompareDisplacements(walled.nodes, gradualProximal.displacements, walled.nodes, reference.displacements);
   std::cout << "walls, stabilised, the loading step's springs handed over gradually: against the cold start RMS / max "
             << gradualProximalAgainstCold.rmsError << " / " << gradualProximalAgainstCold.maxError
-            << " mm; largest spring force per step";
-  for (const double force : gradualProximal.stabilisationForces)
-  {
-    std::cout << " " << force;
-  }
-  std::cout << " N (the loading step alone " << gradualProximal.holdRunSeconds << " s)" << std::endl;
+            << " mm; largest spring force per step"
+            << SpringForces(gradualProximal) << " N (the loading step alone " << gradualProximal.holdRunSeconds << " s)" << std::endl;
   ASSERT_EQ(gradualProximal.stabilisationForces.size(), proximal.stabilisationForces.size());
   EXPECT_GT(gradualProximal.holdRunSeconds, 0.0);
   EXPECT_TRUE(gradualProximal.stabilisationStopped.empty()) << gradualProximal.stabilisationStopped;
