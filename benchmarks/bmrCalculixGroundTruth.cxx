@@ -160,6 +160,19 @@ struct Options
   std::string workDirectory;           // keep CalculiX's job folders here
 };
 
+/** The first line of a message, shortened for a table cell. */
+std::string
+Short(const std::string & message)
+{
+  std::string line = message.substr(0, message.find('\n'));
+  if (line.size() > 160)
+  {
+    line = line.substr(0, 157) + "...";
+  }
+  std::replace(line.begin(), line.end(), '|', '/');
+  return line;
+}
+
 /** The restarts of a stabilised CalculiX run, for its JSON record. */
 json
 Extrapolations(const bmr::CalculixResult & result)
@@ -361,7 +374,13 @@ Stabilisation(const json & calculix)
   }
   cell << "; " << Sci(forces.front().get<double>(), 1) << " / " << Sci(forces.back().get<double>(), 1) << " N ("
        << Sci(forces.back().get<double>() / stiffnesses.back().get<double>(), 1) << " mm)";
-  if (!calculix.value("stabilisation_stopped", std::string{}).empty())
+  const std::string stopped = calculix.value("stabilisation_stopped", std::string{});
+  if (stopped.find("failed, so the result is the run before") != std::string::npos)
+  {
+    cell << "; a restart after it failed (" << Short(stopped.substr(stopped.find("restart"))) << "), so the result is "
+         << "this run's";
+  }
+  else if (!stopped.empty())
   {
     cell << "; Newton stopped in the next step, so the result is this step's";
   }

@@ -314,7 +314,21 @@ RunExtrapolatedStabilisation(const Model & model, const CalculixSettings & setti
       extrapolation.largestShift = std::max(extrapolation.largestShift, shift.norm());
     }
     run.jobName = job + "-restart" + std::to_string(restart);
-    CalculixResult next = RunCalculix(model, run);
+    CalculixResult next;
+    try
+    {
+      next = RunCalculix(model, run);
+    }
+    catch (const Error & error)
+    {
+      // The run before stands: a proximal step is an equilibrium whatever
+      // follows it.
+      result.stabilisationStopped += std::string(result.stabilisationStopped.empty() ? "" : "\n") + "restart " +
+                                     std::to_string(restart) + " from the extrapolated limit (contraction " +
+                                     FormatDouble(ratio) + ") failed, so the result is the run before it: " +
+                                     error.what();
+      break;
+    }
     next.wallSeconds += result.wallSeconds;
     next.increments += result.increments;
     next.iterations += result.iterations;

@@ -140,7 +140,8 @@ struct CalculixSettings
    *  geometric sequence ends (r capped at kMaxExtrapolationRatio). The fixed
    *  point does not depend on where the anchors stand, so the result is
    *  still CalculiX's own equilibrium; that step's spring force measures how
-   *  far the extrapolation missed. */
+   *  far the extrapolation missed. A restart that fails leaves the run
+   *  before it as the result (CalculixResult::stabilisationStopped says so). */
   int stabilisationExtrapolations = 0;
   /** Per CalculiX mesh node (mm): where the first proximal step's anchors
    *  stand (empty: where the loading step left the nodes). What

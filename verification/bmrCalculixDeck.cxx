@@ -588,10 +588,14 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
                << "*NODE PRINT, NSET=NALL, FREQUENCY=" << frequency << "\n"
                << "U\n"
                << "*END STEP\n";
-        writeStepHeader(1.0);
+        const bool placed = stage == 0 && step == 1 && !settings.stabilisationAnchorStart.empty();
+        // A step whose anchors move (a restart's first) starts with the
+        // loading step's increment: at once, on Colin27, the contact set grew
+        // from 302 to 1,080 elements and Newton diverged.
+        writeStepHeader(placed ? settings.initialIncrement : 1.0);
         writeBoundary(true, nullptr);
         const int set = stage == 0 ? step % 2 : (step - 1) % 2;
-        if (stage == 0 && step == 1 && !settings.stabilisationAnchorStart.empty())
+        if (placed)
         {
           // A restart: the first proximal step's anchors at the given state,
           // not where the loading step left them (a loading step with the
