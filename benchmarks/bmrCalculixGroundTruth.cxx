@@ -18,10 +18,15 @@
 // its boundary tied by springs to anchors that follow it step by step
 // (proximal steps, CalculixSettings::stabilisationStiffness).
 //
-// Status (2026-11-28): no report yet: on Colin27 CalculiX's Newton diverges
-// in the skull contact, from a cold start and at the release from the ANP
-// solution, at once or gradually; the proximal steps converge, but too slowly
-// for the brain's drift in its CSF (docs/registration.md, "A truth from CalculiX").
+// With --stabilisation-extrapolations N it restarts the proximal steps from
+// their extrapolated limit.
+//
+// Status (2026-11-28): no report in docs/ yet: on Colin27 CalculiX's Newton
+// diverges in the skull contact, from a cold start and at the release from
+// the ANP solution, at once or gradually; the proximal steps converge, slowly,
+// sinking along gravity past the module's solution of the same mesh, and a
+// restart from their extrapolated limit stalled in the skull contact
+// (docs/registration.md, "A truth from CalculiX").
 
 // ITK's headers first: they bring ITK's own Eigen, which must precede the system's.
 #include "bmrSyntheticBrainShift.h"
