@@ -24,9 +24,9 @@
 // Status (2026-11-28): no report in docs/ yet: on Colin27 CalculiX's Newton
 // diverges in the skull contact, from a cold start and at the release from
 // the ANP solution, at once or gradually; the proximal steps converge, slowly,
-// sinking along gravity past the module's solution of the same mesh, and a
-// restart from their extrapolated limit stalled in the skull contact
-// (docs/registration.md, "A truth from CalculiX").
+// but the brain sinks through the skull's floor (the penalty contact does not
+// hold those slaves), and a restart from their extrapolated limit stalled in
+// the skull contact (docs/registration.md, "A truth from CalculiX").
 
 // ITK's headers first: they bring ITK's own Eigen, which must precede the system's.
 #include "bmrSyntheticBrainShift.h"
