@@ -361,7 +361,8 @@ Stabilisation(const json & calculix)
   cell << ", " << forces.size() - 1 - restarts.size() << " steps";
   if (!restarts.empty())
   {
-    // Each restart's loading step: its springs' force is how far the extrapolation missed.
+    // Each restart's first proximal step (anchored at the extrapolated state):
+    // its springs' force is how far the extrapolation missed.
     cell << " in " << restarts.size() + 1 << " runs, restarted from the extrapolated limit (contraction, largest "
          << "anchor shift, first spring force:";
     const char * separator = " ";
@@ -418,7 +419,7 @@ Report(const json & runs, const std::string & machine, const std::string & comma
       << "(verification/bmrCalculix.h, `CalculixSettings::stabilisationStiffness`). The fixed point of these steps "
       << "is CalculiX's own equilibrium, nothing of the module's solution enters, and what the springs still carry "
       << "at the end, divided by their stiffness, is how far the last step moved any boundary node. Where the cell "
-      << "gives restarts, CalculiX ran the whole deck again with the loading step's anchors where the steps' "
+      << "gives restarts, CalculiX ran the whole deck again with the first proximal step's anchors where the steps' "
       << "measured contraction r says they would end, u_n + r / (1 - r) (u_n - u_n-1) "
       << "(`CalculixSettings::stabilisationExtrapolations`): the fixed point is the same, and the restart's first "
       << "spring force says how far the extrapolation missed. CalculiX's field (at every "
