@@ -701,6 +701,10 @@ TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
   const DisplacementComparison agreement = CompareDisplacements(walled.nodes, withWalls, walled.nodes, reference.displacements);
   const DisplacementComparison elements = CompareDisplacements(free.nodes, withoutWalls, free.nodes, freeReference.displacements);
   const DisplacementComparison wallEffect = CompareDisplacements(walled.nodes, withoutWalls, walled.nodes, withWalls);
+  // Each other way into the walled block's contact must end at the cold start's equilibrium.
+  const auto againstCold = [&](const CalculixResult & result) {
+    return CompareDisplacements(walled.nodes, result.displacements, walled.nodes, reference.displacements);
+  };
   // How far each solution passes the walls (mm), and how far the free block would.
   const auto outside = [&](const std::vector<Vector3> & u) {
     double largest = 0.0;
@@ -736,8 +740,7 @@ TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
   CalculixSettings warm = quadratic;
   warm.startDisplacements = withWalls;
   const CalculixResult         continued = RunCalculix(walled, warm);
-  const DisplacementComparison warmAgainstCold =
-    CompareDisplacements(walled.nodes, continued.displacements, walled.nodes, reference.displacements);
+  const DisplacementComparison warmAgainstCold = againstCold(continued);
   std::cout << "walls, CalculiX started from dynamic relaxation: against the cold start RMS / max "
             << warmAgainstCold.rmsError << " / " << warmAgainstCold.maxError << " mm (" << continued.lastStepIncrements
             << " increments, " << continued.lastStepIterations << " Newton iterations after the release, "
@@ -757,8 +760,7 @@ TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
   // release with them falling to zero) ends at the same equilibrium.
   warm.gradualRelease = true;
   const CalculixResult         gradual = RunCalculix(walled, warm);
-  const DisplacementComparison gradualAgainstCold =
-    CompareDisplacements(walled.nodes, gradual.displacements, walled.nodes, reference.displacements);
+  const DisplacementComparison gradualAgainstCold = againstCold(gradual);
   std::cout << "walls, released gradually: against the cold start RMS / max " << gradualAgainstCold.rmsError << " / "
             << gradualAgainstCold.maxError << " mm (" << gradual.lastStepIncrements << " increments, "
             << gradual.lastStepIterations << " Newton iterations after the release; the hold alone "
@@ -776,8 +778,7 @@ TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
   stabilised.stabilisationStiffness = 2e-4; // N/mm: the slowest mode here contracts by about 0.6 a step
   stabilised.stabilisationSteps = 8;
   const CalculixResult         proximal = RunCalculix(walled, stabilised);
-  const DisplacementComparison proximalAgainstCold =
-    CompareDisplacements(walled.nodes, proximal.displacements, walled.nodes, reference.displacements);
+  const DisplacementComparison proximalAgainstCold = againstCold(proximal);
   std::cout << "walls, stabilised (" << stabilised.stabilisationSteps << " proximal steps, k "
             << stabilised.stabilisationStiffness << " N/mm): against the cold start RMS / max "
             << proximalAgainstCold.rmsError << " / " << proximalAgainstCold.maxError << " mm; largest spring force per step"
@@ -802,8 +803,7 @@ TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
   extrapolated.stabilisationSteps = 3;
   extrapolated.stabilisationExtrapolations = 1;
   const CalculixResult         restarted = RunCalculix(walled, extrapolated);
-  const DisplacementComparison restartedAgainstCold =
-    CompareDisplacements(walled.nodes, restarted.displacements, walled.nodes, reference.displacements);
+  const DisplacementComparison restartedAgainstCold = againstCold(restarted);
   ASSERT_EQ(restarted.stabilisationExtrapolations.size(), 1u);
   const CalculixResult::Extrapolation & restart = restarted.stabilisationExtrapolations[0];
   std::cout << "walls, stabilised, restarted from the extrapolated limit after 3 steps (contraction " << restart.ratio
@@ -835,8 +835,7 @@ TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
   CalculixSettings handedOver = stabilised;
   handedOver.gradualRelease = true;
   const CalculixResult         gradualProximal = RunCalculix(walled, handedOver);
-  const DisplacementComparison gradualProximalAgainstCold =
-    CompareDisplacements(walled.nodes, gradualProximal.displacements, walled.nodes, reference.displacements);
+  const DisplacementComparison gradualProximalAgainstCold = againstCold(gradualProximal);
   std::cout << "walls, stabilised, the loading step's springs handed over gradually: against the cold start RMS / max "
             << gradualProximalAgainstCold.rmsError << " / " << gradualProximalAgainstCold.maxError
             << " mm; largest spring force per step"

@@ -273,15 +273,7 @@ RunExtrapolatedStabilisation(const Model & model, const CalculixSettings & setti
   CalculixSettings run = settings;
   run.stabilisationExtrapolations = 0;
   const std::string job = settings.jobName.empty() ? std::string("bmr") : settings.jobName;
-  double            loadingSeconds = 0.0;
-  if (run.gradualRelease && run.releaseForces.empty())
-  {
-    // Every run's loading step is the same: its springs' forces once.
-    run.releaseForces = LoadingSpringForces(model, run, loadingSeconds);
-    run.gradualRelease = false;
-  }
-  CalculixResult result = RunCalculix(model, run);
-  result.holdRunSeconds = loadingSeconds;
+  CalculixResult    result = RunCalculix(model, run);
   for (int restart = 1; restart <= settings.stabilisationExtrapolations; ++restart)
   {
     if (result.stabilisationStepsBefore.size() < 2)
@@ -337,7 +329,6 @@ RunExtrapolatedStabilisation(const Model & model, const CalculixSettings & setti
     next.stabilisationStiffnesses.insert(next.stabilisationStiffnesses.begin(),
                                          result.stabilisationStiffnesses.begin(),
                                          result.stabilisationStiffnesses.end());
-    next.holdRunSeconds = result.holdRunSeconds;
     next.stabilisationExtrapolations = result.stabilisationExtrapolations;
     next.stabilisationExtrapolations.push_back(extrapolation);
     if (!result.stabilisationStopped.empty())
@@ -355,13 +346,11 @@ RunExtrapolatedStabilisation(const Model & model, const CalculixSettings & setti
 CalculixResult
 RunCalculix(const Model & model, const CalculixSettings & settings)
 {
-  if (settings.stabilisationExtrapolations > 0)
-  {
-    return RunExtrapolatedStabilisation(model, settings);
-  }
   if (settings.gradualRelease && settings.releaseForces.empty() && settings.stabilisationStiffness > 0.0 &&
       !settings.holdOnly)
   {
+    // Before any restart: every run's loading step is the same, so its
+    // springs' forces are computed once.
     CalculixSettings release = settings;
     double           loadingSeconds = 0.0;
     release.releaseForces = LoadingSpringForces(model, settings, loadingSeconds);
@@ -369,6 +358,10 @@ RunCalculix(const Model & model, const CalculixSettings & settings)
     CalculixResult result = RunCalculix(model, release);
     result.holdRunSeconds = loadingSeconds;
     return result;
+  }
+  if (settings.stabilisationExtrapolations > 0)
+  {
+    return RunExtrapolatedStabilisation(model, settings);
   }
   if (settings.gradualRelease && !settings.startDisplacements.empty())
   {

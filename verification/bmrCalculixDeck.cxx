@@ -518,6 +518,21 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
     // step): the forces fall from their full values to zero, and stay there.
     stream << "*AMPLITUDE, NAME=" << releaseAmplitude << ", TIME=TOTAL TIME\n1., 1., 2., 0., 1.e6, 0.\n";
   }
+  // The released components of the first `nodes` mesh nodes carry their
+  // releaseForces, scaled by the release amplitude.
+  const auto writeReleaseLoads = [&](std::size_t nodes, const auto & released) {
+    stream << "*CLOAD, AMPLITUDE=" << releaseAmplitude << "\n";
+    for (std::size_t node = 0; node < nodes; ++node)
+    {
+      for (int d = 0; d < 3; ++d)
+      {
+        if (released(node, d) && settings.releaseForces[node][d] != 0.0)
+        {
+          stream << node + 1 << ", " << d + 1 << ", " << FormatDouble(settings.releaseForces[node][d]) << "\n";
+        }
+      }
+    }
+  };
   // FREQUENCY beyond the increment limit: only the end of a step is printed.
   const int frequency = settings.maximumIncrements + 1;
   writeStepHeader(settings.initialIncrement);
@@ -557,17 +572,7 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
     writeBoundary(true, nullptr);
     if (!settings.releaseForces.empty())
     {
-      stream << "*CLOAD, AMPLITUDE=" << releaseAmplitude << "\n";
-      for (std::size_t node = 0; node < modelNodes; ++node)
-      {
-        for (int d = 0; d < 3; ++d)
-        {
-          if (held(node, d) && settings.releaseForces[node][d] != 0.0)
-          {
-            stream << node + 1 << ", " << d + 1 << ", " << FormatDouble(settings.releaseForces[node][d]) << "\n";
-          }
-        }
-      }
+      writeReleaseLoads(modelNodes, held);
     }
   }
   if (stabilised && !settings.holdOnly)
@@ -610,17 +615,7 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
         {
           // The loading step's springs, released here, handed over to loads
           // that fall to zero over the step: it starts in equilibrium.
-          stream << "*CLOAD, AMPLITUDE=" << releaseAmplitude << "\n";
-          for (std::size_t node = 0; node < mesh.nodes.size(); ++node)
-          {
-            for (int d = 0; d < 3; ++d)
-            {
-              if (sprung[d][node] && settings.releaseForces[node][d] != 0.0)
-              {
-                stream << node + 1 << ", " << d + 1 << ", " << FormatDouble(settings.releaseForces[node][d]) << "\n";
-              }
-            }
-          }
+          writeReleaseLoads(mesh.nodes.size(), [&](std::size_t node, int d) { return sprung[d][node] != 0; });
         }
         fixedSet = CalculixAnchors::SetName(stage, set);
       }
