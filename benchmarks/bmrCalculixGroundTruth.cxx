@@ -153,7 +153,6 @@ struct Options
   double      initialIncrement = 0.05; // fraction of a step
   double      residualTolerance = 0.005;
   bool        warmStart = true;        // CalculiX starts from the ANP solution
-  bool        midEdgeSlaves = false;   // CalculixSettings::midEdgeSlaves
   bool        gradualRelease = true;   // CalculixSettings::gradualRelease
   double      csfModulus = 10.0;       // Pa, the CSF class of both truths (the study's: 10)
   double      stabilisationStiffness = 0.0; // N/mm, CalculixSettings::stabilisationStiffness (0: off)
@@ -252,7 +251,6 @@ Run(const Scene & scene, const bmr::RegistrationImage * image, const bmr::Regist
   calculix.minimumIncrement = 1e-5;
   calculix.residualTolerance = options.residualTolerance;
   calculix.correctionTolerance = 2.0 * options.residualTolerance;
-  calculix.midEdgeSlaves = options.midEdgeSlaves;
   calculix.gradualRelease = options.gradualRelease;
   calculix.stabilisationStiffness = options.stabilisationStiffness;
   calculix.stabilisationSteps = options.stabilisationSteps;
@@ -308,7 +306,7 @@ Run(const Scene & scene, const bmr::RegistrationImage * image, const bmr::Regist
                            { "csf_modulus_pa", options.csfModulus },
                            { "residual_tolerance", options.residualTolerance },
                            { "skull_closing_mm", options.skullClosing },
-                           { "mid_edge_slaves", options.midEdgeSlaves },
+                           { "contact_slaves", "element faces" }, // before 2026-11-28 17:00: nodes
                            { "gradual_release", (warmStart || options.stabilisationStiffness > 0.0) && options.gradualRelease },
                            { "stabilisation_stiffness_n_per_mm", options.stabilisationStiffness },
                            { "stabilisation_steps", options.stabilisationStiffness > 0.0 ? options.stabilisationSteps : 0 },
@@ -532,8 +530,6 @@ main(int argc, char ** argv)
                  "restarts from the proximal steps' extrapolated limit (each a whole CalculiX run; needs "
                  "--stabilisation-steps >= 2)")
     ->check(CLI::NonNegativeNumber);
-  app.add_option("--mid-edge-slaves", options.midEdgeSlaves,
-                 "mid-edge nodes are contact slaves too (false: the corners, as the module's contact)");
   app.add_option("--threads", options.threads, "threads of both solvers")->check(CLI::PositiveNumber);
   app.add_option("--scenes", names, "only these scenes (parietal-10mm, parietal-20mm)");
   app.add_option("--earlier", earlier, "an earlier run's --json: its scenes that are not rerun go into the report too")
@@ -606,8 +602,8 @@ main(int argc, char ** argv)
             << " --stabilisation-stiffness " << options.stabilisationStiffness << " --stabilisation-steps "
             << options.stabilisationSteps << " --stabilisation-stages " << options.stabilisationStages
             << " --stabilisation-softening " << options.stabilisationSoftening
-            << " --stabilisation-extrapolations " << options.stabilisationExtrapolations << " --mid-edge-slaves "
-            << (options.midEdgeSlaves ? "true" : "false") << " --threads " << options.threads;
+            << " --stabilisation-extrapolations " << options.stabilisationExtrapolations << " --threads "
+            << options.threads;
     std::ofstream(output) << Report(runs, machine.str(), command.str());
     std::cout << json{ { "machine", machine.str() }, { "runs", runs } }.dump(2) << std::endl;
   }

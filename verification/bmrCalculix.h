@@ -16,10 +16,10 @@
 // surface nodes that cuts through the interior.
 // A rigid contact surface becomes frictionless node-to-face penalty contact:
 // its triangles are the faces of a fixed layer of wedges outside the body
-// (master); the nodes (mid-edge nodes included unless midEdgeSlaves is off) of the body's boundary faces
-// whose corners are all slave nodes are the slave. Face-to-face contact,
-// CalculiX's advice for quadratic elements, did not converge on Colin27
-// (docs/registration.md).
+// (master); the body's boundary faces whose corners are all slave nodes are
+// the slave, as element faces (a nodal slave surface gets the wrong penalty
+// area, docs/registration.md). Face-to-face contact did not converge on
+// Colin27 (docs/registration.md).
 // The static step is geometrically nonlinear (NLGEOM); loads are ramped
 // linearly over the step (the end state of a hyperelastic solid does not depend
 // on the path). CalculixSettings::startDisplacements adds steps that hold the
@@ -69,13 +69,6 @@ struct CalculixSettings
    *  mean edge length of the slave faces, which keeps the overlap near 10 %
    *  of an edge at contact pressures of the size of E. */
   double contactStiffness = 0.0;
-  /** true: the slave nodes are every node of the slave faces, mid-edge nodes
-   *  included (the quadratic faces' own contact); false: their corners only,
-   *  the nodes the module's contact holds. On Colin27 a mid-edge node between
-   *  two corners on the skull, in 10 Pa CSF, went in and out of contact
-   *  from one Newton iteration to the next until the increment was cut to
-   *  nothing (docs/registration.md). */
-  bool midEdgeSlaves = true;
 
   /** Continuation from a given state: per model node, displacements (mm).
    *  Non-empty: a first step holds the corner nodes of the body's boundary
@@ -182,13 +175,12 @@ struct CalculixMesh
    *  wedges (all nodes fixed) built outward from the surface's triangles, so
    *  that each wedge's face S1 is a triangle of the surface facing the body;
    *  and the slave faces (model cell, CalculiX face number 1...) of the
-   *  body's boundary whose corners all are slave nodes, and their nodes. The wedges' nodes
+   *  body's boundary whose corners all are slave nodes. The wedges' nodes
    *  follow the mid-edge nodes (from firstRigidNode on). */
   struct ContactPair
   {
     std::vector<std::array<Index, 6>>    masterWedges;
     std::vector<std::pair<Index, int>>   slaveFaces;
-    std::vector<Index>                   slaveNodes; // the slave faces' nodes (mid-edge nodes: midEdgeSlaves)
     double                               slaveMeanEdge = 0.0; // mm
   };
   std::vector<ContactPair> contactPairs;

@@ -125,7 +125,7 @@ MasterWedges(const ContactSurface & surface, std::vector<Vector3> & nodes)
 } // namespace
 
 void
-AddCalculixContactPairs(const Model & model, CalculixMesh & mesh, bool midEdgeSlaves)
+AddCalculixContactPairs(const Model & model, CalculixMesh & mesh)
 {
   mesh.firstRigidNode = static_cast<Index>(mesh.nodes.size());
   for (const ContactSurface & surface : model.contactSurfaces)
@@ -142,10 +142,9 @@ AddCalculixContactPairs(const Model & model, CalculixMesh & mesh, bool midEdgeSl
       throw Error("CalculiX deck: contact surface '" + surface.name + "' has no slave face (no boundary face of the "
                   "body has all its corners in node set '" + surface.slaveNodeSet + "'); give a slave set of boundary nodes.");
     }
-    // The slave faces' mean edge, and their nodes: the corners and (midEdgeSlaves) the mid-edge nodes between two of them.
-    double            edgeSum = 0.0;
-    int               edges = 0;
-    std::vector<char> onFace(mesh.nodes.size(), 0);
+    // The slave faces' mean edge (the default penalty's length scale).
+    double edgeSum = 0.0;
+    int    edges = 0;
     for (const auto & [cell, face] : pair.slaveFaces)
     {
       const std::vector<Index> corners = FaceCorners(model.cells[static_cast<std::size_t>(cell)], face);
@@ -153,29 +152,9 @@ AddCalculixContactPairs(const Model & model, CalculixMesh & mesh, bool midEdgeSl
       {
         edgeSum += (model.nodes[corners[k]] - model.nodes[corners[(k + 1) % corners.size()]]).norm();
         ++edges;
-        onFace[static_cast<std::size_t>(corners[k])] = 1;
-      }
-      const auto isCorner = [&](Index p) { return std::find(corners.begin(), corners.end(), p) != corners.end(); };
-      for (const Index node : mesh.elements[static_cast<std::size_t>(cell)])
-      {
-        if (midEdgeSlaves && node >= mesh.modelNodes)
-        {
-          const auto & parents = mesh.edgeParents[static_cast<std::size_t>(node - mesh.modelNodes)];
-          if (isCorner(parents[0]) && isCorner(parents[1]))
-          {
-            onFace[static_cast<std::size_t>(node)] = 1;
-          }
-        }
       }
     }
     pair.slaveMeanEdge = edgeSum / edges;
-    for (std::size_t node = 0; node < onFace.size(); ++node)
-    {
-      if (onFace[node])
-      {
-        pair.slaveNodes.push_back(static_cast<Index>(node));
-      }
-    }
     pair.masterWedges = MasterWedges(surface, mesh.nodes);
     mesh.contactPairs.push_back(std::move(pair));
   }
@@ -219,10 +198,15 @@ WriteCalculixContactPairs(std::ostream & stream, const Model & model, const Calc
     {
       stream << e << ", S1\n";
     }
-    stream << "*SURFACE, NAME=SLAVE" << id << ", TYPE=NODE\n";
-    for (const Index node : pair.slaveNodes)
+    // Element faces, not nodes: CalculiX gives each node of a face-based
+    // slave its share of the faces' area (the force is pressure times that
+    // area); a nodal slave surface of C3D10 corners held a block on a floor
+    // with a penalty some 240 times too soft, one with the mid-edge nodes too
+    // some 120 times too stiff (docs/registration.md).
+    stream << "*SURFACE, NAME=SLAVE" << id << ", TYPE=ELEMENT\n";
+    for (const auto & [cell, face] : pair.slaveFaces)
     {
-      stream << node + 1 << "\n";
+      stream << cell + 1 << ", S" << face << "\n";
     }
     const double slope =
       settings.contactStiffness > 0.0 ? settings.contactStiffness : 10.0 * stiffest / pair.slaveMeanEdge;

@@ -18,13 +18,12 @@ FormatDouble(double value);
 /** Appends the model's contact surfaces to the mesh: mesh.contactPairs, their
  *  wedges' nodes after the mesh's nodes (mesh.firstRigidNode). Call once the
  *  cells and mid-edge nodes are in the mesh. Throws bmr::Error for a surface
- *  without slave faces or with a degenerate triangle. `midEdgeSlaves`:
- *  CalculixSettings::midEdgeSlaves. */
+ *  without slave faces or with a degenerate triangle. */
 void
-AddCalculixContactPairs(const Model & model, CalculixMesh & mesh, bool midEdgeSlaves);
+AddCalculixContactPairs(const Model & model, CalculixMesh & mesh);
 
-/** The masters' wedges, the surfaces and the frictionless node-to-face
- *  penalty interaction (model definition, before the step). */
+/** The masters' wedges, the surfaces (the slave as element faces) and the
+ *  frictionless node-to-face penalty interaction (model definition, before the step). */
 void
 WriteCalculixContactPairs(std::ostream & stream, const Model & model, const CalculixMesh & mesh,
                           const CalculixSettings & settings);

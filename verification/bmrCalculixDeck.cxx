@@ -184,7 +184,7 @@ MakeCalculixMesh(const Model & model, const CalculixSettings & settings)
     }
   }
 
-  AddCalculixContactPairs(model, mesh, settings.midEdgeSlaves);
+  AddCalculixContactPairs(model, mesh);
   return mesh;
 }
 
