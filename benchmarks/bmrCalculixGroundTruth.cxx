@@ -152,6 +152,7 @@ struct Options
   double      materialStep = 0.02;     // relative width of the material bins
   double      initialIncrement = 0.05; // fraction of a step
   double      residualTolerance = 0.005;
+  bool        smallSliding = false;    // CalculixSettings::smallSliding
   bool        warmStart = true;        // CalculiX starts from the ANP solution
   bool        gradualRelease = true;   // CalculixSettings::gradualRelease
   double      csfModulus = 10.0;       // Pa, the CSF class of both truths (the study's: 10)
@@ -250,6 +251,7 @@ Run(const Scene & scene, const bmr::RegistrationImage * image, const bmr::Regist
   calculix.initialIncrement = options.initialIncrement;
   calculix.minimumIncrement = 1e-5;
   calculix.residualTolerance = options.residualTolerance;
+  calculix.smallSliding = options.smallSliding;
   calculix.correctionTolerance = 2.0 * options.residualTolerance;
   calculix.gradualRelease = options.gradualRelease;
   calculix.stabilisationStiffness = options.stabilisationStiffness;
@@ -305,6 +307,7 @@ Run(const Scene & scene, const bmr::RegistrationImage * image, const bmr::Regist
                            { "warm_start", warmStart },
                            { "csf_modulus_pa", options.csfModulus },
                            { "residual_tolerance", options.residualTolerance },
+                           { "small_sliding", options.smallSliding },
                            { "skull_closing_mm", options.skullClosing },
                            { "contact_slaves", "element faces" }, // before 2026-11-28 17:00: nodes
                            { "gradual_release", (warmStart || options.stabilisationStiffness > 0.0) && options.gradualRelease },
@@ -506,6 +509,8 @@ main(int argc, char ** argv)
   app.add_option("--residual-tolerance", options.residualTolerance,
                  "CalculiX's Newton tolerance on the residual force relative to the mean force (the correction's is twice it)")
     ->check(CLI::Range(1e-8, 0.1));
+  app.add_option("--small-sliding", options.smallSliding,
+                 "CalculiX pairs contact slaves with master faces once per increment, not at every iteration");
   app.add_option("--warm-start", options.warmStart,
                  "start CalculiX from the ANP solution (a first step holds the boundary there, a second releases it)");
   app.add_option("--gradual-release", options.gradualRelease,
@@ -597,6 +602,7 @@ main(int argc, char ** argv)
     command << "bmrCalculixGroundTruth --element-size " << options.elementSize << " --skull-closing "
             << options.skullClosing << " --skull-edge " << options.skullEdge << " --material-bins " << options.materialStep
             << " --initial-increment " << options.initialIncrement << " --residual-tolerance " << options.residualTolerance
+            << " --small-sliding " << (options.smallSliding ? "true" : "false")
             << " --warm-start " << (options.warmStart ? "true" : "false") << " --gradual-release "
             << (options.gradualRelease ? "true" : "false") << " --csf-modulus " << options.csfModulus
             << " --stabilisation-stiffness " << options.stabilisationStiffness << " --stabilisation-steps "

@@ -894,26 +894,40 @@ TEST(CalculixContact, PenaltyHoldsABlockOnARigidFloorAsItsLawSays)
     settings.quadratic = c.quadratic;
     settings.threads = 1;             // CTest runs two tests at once
     settings.contactStiffness = 1e-3; // MPa/mm: p / K about 0.1 mm, far above the .dat's digits
-    const CalculixResult result = RunCalculix(block, settings);
-    ASSERT_EQ(result.mesh.contactPairs.size(), 1u);
     const double expected = pressure / settings.contactStiffness;
-    double       deepest = 0.0;
-    double       shallowest = std::numeric_limits<double>::infinity();
-    for (Index node = c.midEdgeOnly ? result.mesh.modelNodes : 0; node < result.mesh.firstRigidNode; ++node)
-    {
-      if (std::abs(result.mesh.nodes[static_cast<std::size_t>(node)].z()) < 1e-9)
+    // The bottom face's nodes' depths into the floor: the shallowest and the deepest (mm).
+    const auto depths = [&](const CalculixSettings & run) {
+      const CalculixResult result = RunCalculix(block, run);
+      EXPECT_EQ(result.mesh.contactPairs.size(), 1u);
+      std::pair<double, double> range{ std::numeric_limits<double>::infinity(), 0.0 };
+      for (Index node = c.midEdgeOnly ? result.mesh.modelNodes : 0; node < result.mesh.firstRigidNode; ++node)
       {
-        const double depth = -result.meshDisplacements[static_cast<std::size_t>(node)].z();
-        deepest = std::max(deepest, depth);
-        shallowest = std::min(shallowest, depth);
+        if (std::abs(result.mesh.nodes[static_cast<std::size_t>(node)].z()) < 1e-9)
+        {
+          const double depth = -result.meshDisplacements[static_cast<std::size_t>(node)].z();
+          range = { std::min(range.first, depth), std::max(range.second, depth) };
+        }
       }
-    }
+      return range;
+    };
+    const auto [shallowest, deepest] = depths(settings);
     std::cout << c.name << " on a rigid floor: the bottom face's " << (c.midEdgeOnly ? "mid-edge " : "") << "nodes "
               << shallowest << " to " << deepest << " mm into the floor, p / K = " << expected << " mm" << std::endl;
     // Measured 2026-11-28: C3D10 0.0976-0.0988, C3D20R (mid-edge) 0.0898-0.1020,
     // C3D8 0.0979-0.0989 mm; p / K = 0.0981 mm.
     EXPECT_NEAR(shallowest, expected, c.tolerance * expected) << c.name;
     EXPECT_NEAR(deepest, expected, c.tolerance * expected) << c.name;
+
+    // Pairing slaves with faces once per increment ends at the same state.
+    CalculixSettings small = settings;
+    small.smallSliding = true;
+    std::ostringstream deck;
+    WriteCalculixDeck(deck, block, MakeCalculixMesh(block, small), small);
+    EXPECT_NE(deck.str().find("TYPE=NODE TO SURFACE, SMALL SLIDING\n"), std::string::npos) << c.name;
+    EXPECT_NE(deck.str().find("*SURFACE, NAME=SLAVE1, TYPE=ELEMENT\n"), std::string::npos) << c.name;
+    const auto [smallShallowest, smallDeepest] = depths(small);
+    EXPECT_NEAR(smallShallowest, shallowest, 1e-3 * expected) << c.name;
+    EXPECT_NEAR(smallDeepest, deepest, 1e-3 * expected) << c.name;
   }
 }
 

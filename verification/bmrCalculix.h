@@ -69,6 +69,12 @@ struct CalculixSettings
    *  mean edge length of the slave faces, which keeps the overlap near 10 %
    *  of an edge at contact pressures of the size of E. */
   double contactStiffness = 0.0;
+  /** true: CalculiX pairs each slave node with a master face once per
+   *  increment (SMALL SLIDING) instead of at every Newton iteration below the
+   *  ninth. On Colin27 a mid-edge slave switched faces from one iteration to
+   *  the next, so each increment converged only once CalculiX froze the
+   *  pairing at the ninth (docs/registration.md). */
+  bool smallSliding = false;
 
   /** Continuation from a given state: per model node, displacements (mm).
    *  Non-empty: a first step holds the corner nodes of the body's boundary

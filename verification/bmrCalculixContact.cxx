@@ -216,7 +216,8 @@ WriteCalculixContactPairs(std::ostream & stream, const Model & model, const Calc
     stream << "*SURFACE INTERACTION, NAME=FRICTIONLESS" << id << "\n"
            << "*SURFACE BEHAVIOR, PRESSURE-OVERCLOSURE=LINEAR\n"
            << FormatDouble(slope) << ", " << FormatDouble(1e-6 * slope) << ", 0.001\n"
-           << "*CONTACT PAIR, INTERACTION=FRICTIONLESS" << id << ", TYPE=NODE TO SURFACE\n"
+           << "*CONTACT PAIR, INTERACTION=FRICTIONLESS" << id << ", TYPE=NODE TO SURFACE"
+           << (settings.smallSliding ? ", SMALL SLIDING" : "") << "\n"
            << "SLAVE" << id << ", MASTERFACES" << id << "\n";
   }
 }
