@@ -143,6 +143,37 @@ NodeDifference(const std::vector<Vector3> & a, const std::vector<Vector3> & b)
   return { { "mean", sum / distances.size() }, { "p95", distances[p95] }, { "max", distances.back() } };
 }
 
+/** How far the proximal steps have settled, over the brain's mesh nodes: the
+ *  last step's motion (mean, p95, max), and the nodes that moved more than
+ *  0.1 mm in it but less than half that over the last two steps: they
+ *  alternate between two states (e.g. two contact pairings) instead of
+ *  settling. Empty without two steps before the result's. */
+json
+Settling(const bmr::CalculixResult & result, std::size_t bodyNodes)
+{
+  const auto & before = result.stabilisationStepsBefore;
+  if (before.size() < 2)
+  {
+    return json::object();
+  }
+  const std::vector<Vector3> now(result.meshDisplacements.begin(), result.meshDisplacements.begin() + bodyNodes);
+  const std::vector<Vector3> last(before.back().begin(), before.back().begin() + bodyNodes);
+  int    alternating = 0;
+  double largestAlternation = 0.0;
+  for (std::size_t i = 0; i < bodyNodes; ++i)
+  {
+    const double step = (now[i] - last[i]).norm();
+    if (step > 0.1 && (now[i] - before.front()[i]).norm() < 0.5 * step)
+    {
+      ++alternating;
+      largestAlternation = std::max(largestAlternation, step);
+    }
+  }
+  return { { "last_step_motion_mm", NodeDifference(now, last) },
+           { "alternating_nodes", alternating },
+           { "largest_alternation_mm", largestAlternation } };
+}
+
 /** The command line's settings of CalculiX's scene and solve. */
 struct Options
 {
@@ -318,6 +349,7 @@ Run(const Scene & scene, const bmr::RegistrationImage * image, const bmr::Regist
                            { "stabilisation_stiffnesses_n_per_mm", reference.stabilisationStiffnesses },
                            { "stabilisation_stopped", reference.stabilisationStopped },
                            { "stabilisation_extrapolations", Extrapolations(reference) },
+                           { "settling", Settling(reference, bodyNodes) },
                            { "hold_run_seconds", reference.holdRunSeconds },
                            { "increments", reference.increments },
                            { "iterations", reference.iterations },
@@ -406,7 +438,10 @@ Report(const json & runs, const std::string & machine, const std::string & comma
       << "* by **CalculiX** (Newton, NLGEOM, neo-Hookean) with quadratic tetrahedra **C3D10** on a conforming "
       << "tetrahedral mesh of the brain (CGAL Mesh_3, the module's `tetrahedra` grid), the skull as node-to-face "
       << "penalty contact (verification/bmrCalculix.h: the skull's triangles are the faces of a fixed layer of "
-      << "wedges; the penalty slope is 10 x the stiffest Young's modulus per slave edge length). This mesh's "
+      << "wedges, the brain's boundary faces the slave as element faces; the penalty slope is 10 x the stiffest "
+      << "Young's modulus per slave edge length; where the record says `small_sliding`, slaves are paired with "
+      << "skull faces once per increment). Runs before 2026-11-28 17:00 wrote the slave as nodes, which gave the "
+      << "penalty a wrong area (docs/registration.md). This mesh's "
       << "per-cell materials (fuzzy tissue classes) are grouped into bins of the stated relative width and its "
       << "skull decimated, for CalculiX's sake; the module's solve of the same mesh uses the same model;\n"
       << "* by the module's **ANP tetrahedra** (dynamic relaxation, projection contact) on that very mesh.\n\n"
@@ -474,7 +509,23 @@ Report(const json & runs, const std::string & machine, const std::string & comma
         << (largest < fits ? ", so it may come from the fits as much as from the solvers"
                            : ": the solutions differ by more than the fits can explain")
         << ". On CalculiX's own mesh the module's ANP tetrahedra differ from C3D10 by " << Fixed(anp["p95"], 2)
-        << " mm at the 95th percentile of the nodes (" << Fixed(anp["max"], 2) << " mm at most).\n";
+        << " mm at the 95th percentile of the nodes (" << Fixed(anp["max"], 2) << " mm at most).";
+    const json settling = run["calculix"].value("settling", json::object());
+    if (settling.contains("last_step_motion_mm"))
+    {
+      const json & motion = settling["last_step_motion_mm"];
+      out << " CalculiX's last proximal step moved its mesh's nodes by " << Fixed(motion["mean"], 3) << " mm on average ("
+          << Fixed(motion["p95"], 3) << " mm at the 95th percentile, " << Fixed(motion["max"], 2) << " mm at most)";
+      const int alternating = settling["alternating_nodes"];
+      if (alternating > 0)
+      {
+        out << "; " << alternating << " nodes moved more than 0.1 mm (up to " << Fixed(settling["largest_alternation_mm"], 2)
+            << " mm) and came back to where they were two steps before: they alternate between two states instead of "
+               "settling";
+      }
+      out << ".";
+    }
+    out << "\n";
   }
   return out.str();
 }
