@@ -347,7 +347,9 @@ def markdown(runs, machine):
                 "%.1f%%" % (100 * fraction) if fraction is not None else "-"))
     lines += ["", "![error against run time](validation-error-vs-time.png)", reading(runs, machine),
               "How far two ground truths of the same scene on different discretizations differ, and the registrations "
-              "scored against each, is in [ground-truth-agreement.md](ground-truth-agreement.md).",
+              "scored against each, is in [ground-truth-agreement.md](ground-truth-agreement.md); how far a truth from "
+              "another solver (CalculiX, quadratic tetrahedra) differs from the study's, in "
+              "[calculix-ground-truth.md](calculix-ground-truth.md).",
               "",
               "The stiff and extreme cases on every discretization are in [stability-matrix.md](stability-matrix.md)."]
     return "\n".join(lines) + "\n"
@@ -414,14 +416,11 @@ def truth_agreement(runs, machine):
               "script): hexahedra of 4 mm fold a cell at 20 mm, mixed cells of 4 mm invert a tetrahedron at the first "
               "step, and a meshless truth of 5 mm had not converged after 6 minutes (issue 17: meshless with skull "
               "contact at large shifts).",
-              "* Not done: a truth from CalculiX (C3D10). The harness writes the skull contact and can start "
-              "CalculiX from the module's solution, but CalculiX's Newton iterations diverge on these scenes, "
-              "also when released from there, at once or gradually; with its boundary held by springs that "
-              "follow it step by step (proximal steps) it converges, slowly, and its iterates sink along "
-              "gravity through the skull's floor (slaves up to 4.4 mm beyond it after 4 steps: its penalty "
-              "contact does not hold them), 2.49 mm from the module's settled solution of the same mesh on "
-              "average; restarts from the extrapolated limit stalled in the skull contact "
-              "(docs/registration.md, \"A truth from CalculiX\")."]
+              "* A third truth, from CalculiX (C3D10 on a conforming tetrahedral mesh, penalty skull contact, "
+              "started cold and settled by proximal steps), for both scenes: "
+              "[calculix-ground-truth.md](calculix-ground-truth.md), written by "
+              "`build/benchmarks/bmrCalculixGroundTruth` (how it got there: docs/registration.md, "
+              "\"A truth from CalculiX\")."]
     return "\n".join(lines) + "\n"
 
 
