@@ -855,9 +855,9 @@ TEST(CalculixContact, PenaltyHoldsABlockOnARigidFloorAsItsLawSays)
   // its bottom stays flat, the floor carries the uniform pressure rho g H, and
   // the linear penalty lets the block into the floor by p / K. The bottom
   // face's nodes must sit that deep, for each element CalculiX gets. A nodal
-  // slave surface failed this by orders of magnitude (C3D10: corner slaves
-  // about 240 times too deep, corners and mid-edge nodes about 120 times too
-  // shallow).
+  // slave surface fails this by orders of magnitude (a hand-written C3D10
+  // deck of this kind: corner slaves about 240 times too deep, corners and
+  // mid-edge nodes about 120 times too shallow; docs/registration.md).
   BMR_REQUIRE_CALCULIX();
   const Vector3  size(10.0, 10.0, 10.0); // mm
   const Material tissue{ "tissue", 3000.0, 0.0, 1000.0 }; // nu > 0 would curve the bottom (u_z ~ nu rho g r^2 / 2E)
