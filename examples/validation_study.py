@@ -41,7 +41,7 @@ REALISTIC = ["--intraoperative-contrast", "t2", "--bias-field", "0.2", "--noise-
 # folds the cells at the ring) and the ground truth is ANP tetrahedra (5 mm); docs/model-building.md.
 LARGE = ["--free-rim", "0.2", "--truth-grid", "tetrahedra", "--truth-element-size", "5"]
 
-LARGE_VARIANTS = ["tetrahedra:7"]
+LARGE_VARIANTS = ["tetrahedra:7", "meshless:7"]
 
 # (name, craniotomy, demo arguments, registration variants or None for VARIANTS)
 SCENES = [

@@ -3,6 +3,7 @@
 // every node analytically, the absence of tangential (friction) forces, the
 // absence of sticking, and the analytic solution of a block compressed on a
 // frictionless support.
+#include "bmrContact.h"
 #include "bmrTestUtilities.h"
 
 #include <gtest/gtest.h>
@@ -331,6 +332,50 @@ TEST(Contact, PartiallyConstrainedNodesStillContact)
     EXPECT_GT(model.nodes[n].z() + result.displacements[n].z(), -1e-6) << "bottom node " << n << " at "
                                                                         << model.nodes[n].transpose();
   EXPECT_EQ(result.contactNodes, 9);
+}
+
+// The normal a projection reports (the meshless contact's constraint
+// direction) is the surface's interpolated normal: it changes continuously
+// across an edge. Two points just either side of the bisector below a
+// ridge (two facets sloping 15 degrees down from x = 0, the body above)
+// project onto different facets; their normals, from the vertices'
+// pseudo-normals interpolated at the closest points, differ by about 1
+// degree, where the facets' own normals differ by 30. With the facets'
+// normals a meshless slave pressed onto a ridge of Colin27's skull flipped
+// between two constraint planes in a cycle that never converged
+// (docs/solver.md); on a flat surface the normal is the facet's.
+TEST(Contact, ReportedNormalsChangeContinuouslyAcrossARidge)
+{
+  const double   slope = std::tan(15.0 * M_PI / 180.0);
+  ContactSurface roof;
+  roof.bodySide = ContactSurface::Side::Outside;
+  for (const double x : { -5.0, 0.0, 5.0 })
+  {
+    roof.vertices.emplace_back(x, -5.0, -slope * std::abs(x));
+    roof.vertices.emplace_back(x, 5.0, -slope * std::abs(x));
+  }
+  // Counter-clockwise seen from above: normals up, towards the body.
+  roof.triangles = { { 0, 2, 3 }, { 0, 3, 1 }, { 2, 4, 5 }, { 2, 5, 3 } };
+  const std::vector<Vector3> reference = { Vector3(-0.01, 0.0, -0.5), Vector3(0.01, 0.0, -0.5),
+                                           Vector3(0.0, 0.3, 1.0) };
+  RigidContact               contact(roof, { 0, 1, 2 }, reference);
+  std::vector<double>        u(3 * reference.size(), 0.0);
+  const std::vector<char>    free(u.size(), 0);
+  std::vector<char>          inContact(reference.size(), 0);
+  std::vector<Vector3>       corrections, normals;
+  contact.Enforce(u.data(), free, inContact, 1, &corrections, &normals);
+  ASSERT_TRUE(inContact[0] && inContact[1]);
+  EXPECT_FALSE(inContact[2]) << "a point above the roof stays free";
+  EXPECT_LT(corrections[0].x(), 0.0) << "the left point projects onto the left facet";
+  EXPECT_GT(corrections[1].x(), 0.0) << "the right point projects onto the right facet";
+  const double degrees = std::acos(std::clamp(normals[0].dot(normals[1]), -1.0, 1.0)) * 180.0 / M_PI;
+  RecordProperty("angleBetweenNormals_deg", std::to_string(degrees));
+  EXPECT_LT(degrees, 2.0);
+  for (int k = 0; k < 2; ++k)
+  {
+    EXPECT_NEAR(normals[k].norm(), 1.0, 1e-12);
+    EXPECT_GT(normals[k].z(), std::cos(2.0 * M_PI / 180.0)) << "towards the body, nearly the ridge's bisector";
+  }
 }
 
 // A body inside a closed rigid skull with gravity: no node leaves the skull.

@@ -26,15 +26,16 @@ struct RigidContact::Tree
   bool                                       closed = false;
   double                                     sideSign = -1.0; // -1: body inside, +1: body outside
 
-  // Signed distance of x to the surface (positive outside), the closest point
-  // and (when asked) the unit outward normal there: the direction from the
-  // closest point to x, or the pseudo-normal where x is on the surface.
-  // `lastHit` (when given and set) is the closest point of an earlier query
-  // near x: its distance bounds the search from the start (a node sliding on
-  // the surface visits a few boxes instead of the whole descent); it
-  // receives this query's.
-  double SignedDistance(const Vector3 & x, Vector3 & closest, Vector3 * outwardNormal = nullptr,
-                        TriangleSurfaceTree::Hit * lastHit = nullptr) const
+  // Signed distance of x to the surface (positive outside) and the closest
+  // point. `lastHit` (when given and set) is the closest point of an earlier
+  // query near x: its distance bounds the search from the start (a node
+  // sliding on the surface visits a few boxes instead of the whole descent);
+  // it receives this query's. `smoothNormal` (when asked): the unit outward
+  // normal of the surface made smooth, the vertices' pseudo-normals
+  // interpolated at the closest point; it changes continuously as the
+  // closest point crosses an edge, where the facets' normals jump.
+  double SignedDistance(const Vector3 & x, Vector3 & closest, TriangleSurfaceTree::Hit * lastHit = nullptr,
+                        Vector3 * smoothNormal = nullptr) const
   {
     const TriangleSurfaceTree::Hit hit =
       lastHit != nullptr && lastHit->triangle >= 0 ? surface->Closest(x, *lastHit) : surface->Closest(x);
@@ -67,6 +68,15 @@ struct RigidContact::Tree
         nonzero[count++] = k;
       }
     }
+    if (smoothNormal != nullptr)
+    {
+      Vector3 sum = Vector3::Zero();
+      for (int k = 0; k < 3; ++k)
+      {
+        sum += std::clamp(weights[k], 0.0, 1.0) * vertexNormals[c[k]].normalized();
+      }
+      *smoothNormal = sum.norm() > 0.0 ? Vector3(sum.normalized()) : Vector3(faceNormals[t].normalized());
+    }
     Vector3 normal = faceNormals[t];
     if (count == 1)
     {
@@ -80,14 +90,6 @@ struct RigidContact::Tree
     // The pseudo-normal gives the side only: edge and vertex pseudo-normals
     // are sums of face normals, not unit vectors.
     const double distance = (x - closest).dot(normal) < 0.0 ? -(x - closest).norm() : (x - closest).norm();
-    if (outwardNormal != nullptr)
-    {
-      // Below 1e-7 mm the difference of two positions ~100 mm from the origin has no direction left.
-      constexpr double kDirectionless = 1e-7;
-      const double     gap = (x - closest).norm();
-      *outwardNormal = gap > kDirectionless ? Vector3((distance < 0.0 ? -1.0 : 1.0) * (x - closest) / gap)
-                                            : normal.normalized();
-    }
     return distance;
   }
 };
@@ -283,8 +285,8 @@ RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std:
       }
       continue;
     }
-    Vector3 closest, outward;
-    if (tree.sideSign * tree.SignedDistance(x, closest, &outward, &m_LastHit[i]) >= 0.0)
+    Vector3 closest, smooth;
+    if (tree.sideSign * tree.SignedDistance(x, closest, &m_LastHit[i], normals ? &smooth : nullptr) >= 0.0)
     {
       m_LastQueried[i] = x;
       m_SafeDistance[i] = (x - closest).norm();
@@ -296,7 +298,7 @@ RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std:
     }
     if (normals != nullptr)
     {
-      (*normals)[static_cast<std::size_t>(i)] = m_Rotation * (tree.sideSign * outward);
+      (*normals)[static_cast<std::size_t>(i)] = m_Rotation * (tree.sideSign * smooth);
     }
     // Project onto the surface; a node held in some components (a symmetry
     // plane) moves in the others only: alternate projection and restoring the

@@ -28,8 +28,10 @@ public:
    *  node) keep their value; the node moves in its free components only.
    *  `corrections` (when given): per slave node, the displacement the
    *  projection added (zero for nodes it left alone). `normals` (when given):
-   *  per projected slave node, the unit normal of the surface at its closest
-   *  point, towards the body's side (model frame; zero for nodes left alone).
+   *  per projected slave node, the surface's interpolated unit normal at its
+   *  closest point (the vertices' pseudo-normals interpolated there: it
+   *  changes continuously across edges), towards the body's side (model
+   *  frame; zero for nodes left alone).
    *  `clearances` (when given): per slave node, a lower bound of its
    *  distance to the surface on the body's side (0 for nodes projected or
    *  held in every component): while the pose stays, a node that moves less
