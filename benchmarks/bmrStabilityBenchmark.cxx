@@ -420,7 +420,8 @@ RunColin27Cells(int threads)
                                                           { bmr::ImageGridKind::Meshless, 7.0 } };
   for (std::size_t k = 0; k < std::size(grids); ++k)
   {
-    const auto [kind, size] = grids[k];
+    const bmr::ImageGridKind kind = grids[k].first; // named, not bound: lambdas capture them (C++17)
+    const double             size = grids[k].second;
     const auto register_ = [&](double tolerance, bmr::BrainShiftRegistrationResult * result) {
       bmr::BrainShiftRegistrationInputs inputs;
       inputs.preoperativeImage = image;

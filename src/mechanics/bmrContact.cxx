@@ -20,7 +20,7 @@ struct RigidContact::Tree
   std::vector<Vector3>                       vertices;
   std::vector<std::array<Index, 3>>          corners; // after the orientation flip
   std::vector<Vector3>                       faceNormals;
-  std::vector<Vector3>                       vertexNormals; // angle-weighted pseudo-normals
+  std::vector<Vector3>                       vertexNormals; // angle-weighted pseudo-normals, unit length
   std::vector<std::array<Vector3, 3>>        edgeNormals; // per triangle, of its edge from corner k to k + 1: sum of the adjacent face normals
   std::unique_ptr<TriangleSurfaceTree>       surface; // over `corners`: none is degenerate, so none is left out
   bool                                       closed = false;
@@ -30,7 +30,8 @@ struct RigidContact::Tree
   // point. `lastHit` (when given and set) is the closest point of an earlier
   // query near x: its distance bounds the search from the start (a node
   // sliding on the surface visits a few boxes instead of the whole descent);
-  // it receives this query's. `smoothNormal` (when asked): the unit outward
+  // it receives this query's. `smoothNormal` (when asked, and set only
+  // where x lies beyond the surface, off the body's side): the unit outward
   // normal of the surface made smooth, the vertices' pseudo-normals
   // interpolated at the closest point; it changes continuously as the
   // closest point crosses an edge, where the facets' normals jump.
@@ -68,15 +69,6 @@ struct RigidContact::Tree
         nonzero[count++] = k;
       }
     }
-    if (smoothNormal != nullptr)
-    {
-      Vector3 sum = Vector3::Zero();
-      for (int k = 0; k < 3; ++k)
-      {
-        sum += std::clamp(weights[k], 0.0, 1.0) * vertexNormals[c[k]].normalized();
-      }
-      *smoothNormal = sum.norm() > 0.0 ? Vector3(sum.normalized()) : Vector3(faceNormals[t].normalized());
-    }
     Vector3 normal = faceNormals[t];
     if (count == 1)
     {
@@ -90,6 +82,16 @@ struct RigidContact::Tree
     // The pseudo-normal gives the side only: edge and vertex pseudo-normals
     // are sums of face normals, not unit vectors.
     const double distance = (x - closest).dot(normal) < 0.0 ? -(x - closest).norm() : (x - closest).norm();
+    if (smoothNormal != nullptr && sideSign * distance < 0.0)
+    {
+      // Only there: most queries find the node on the body's side.
+      Vector3 sum = Vector3::Zero();
+      for (int k = 0; k < 3; ++k)
+      {
+        sum += std::clamp(weights[k], 0.0, 1.0) * vertexNormals[c[k]];
+      }
+      *smoothNormal = sum.norm() > 0.0 ? Vector3(sum.normalized()) : faceNormals[t];
+    }
     return distance;
   }
 };
@@ -196,6 +198,14 @@ RigidContact::RigidContact(const ContactSurface & surface, std::vector<Index> sl
       const Vector3 e1 = (p[(k + 1) % 3] - p[k]).normalized();
       const Vector3 e2 = (p[(k + 2) % 3] - p[k]).normalized();
       tree.vertexNormals[c[k]] += std::acos(std::clamp(e1.dot(e2), -1.0, 1.0)) * normal;
+    }
+  }
+  // Unit length: the side test needs only their direction, the smooth normal interpolates them.
+  for (Vector3 & normal : tree.vertexNormals)
+  {
+    if (normal.norm() > 0.0)
+    {
+      normal.normalize();
     }
   }
   // An edge's pseudo-normal sums the normals of the triangles that share it, in triangle order.
