@@ -753,13 +753,14 @@ AddDemoCommand(CLI::App & app)
   demo->add_option("--tumour-radius", options->truth.tumourRadius, "Tumour radius (mm); 0: none")->capture_default_str();
   demo->add_option("--tumour-stiffness", options->truth.tumourStiffness, "Tumour Young's modulus / parenchyma's")
     ->capture_default_str();
-  demo->add_option("--truth-grid", options->truthGrid, "Ground-truth grid: hexahedra, tetrahedra, mixed")
+  demo->add_option("--truth-grid", options->truthGrid, "Ground-truth grid: hexahedra, tetrahedra, mixed, meshless")
     ->capture_default_str();
   demo->add_option("--truth-element-size", options->truth.grid.elementSize, "Ground-truth element size (mm)")
     ->capture_default_str();
   demo->add_option("--truth-skull-closing", options->truth.skullClosing,
                    "Radius (mm) of the closing of the ground truth's brain before its skull is made: the skull stays "
-                   "out of fissures narrower than twice (radius + gap); 0: it follows every fold")
+                   "out of fissures narrower than twice (radius + gap); 0: it follows every fold (3 for a meshless "
+                   "truth under gravity at large shifts: docs/model-building.md)")
     ->capture_default_str()
     ->check(CLI::NonNegativeNumber);
   demo->add_option("--noise", options->truth.noise, "Noise of the intraoperative image (fraction of the bright level)")

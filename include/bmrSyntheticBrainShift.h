@@ -105,6 +105,7 @@ struct SyntheticBrainShiftSettings
     return settings;
   }();
   double solverTolerance = 0.01; // mm
+  int    solverMaxSteps = 0;      // dynamic-relaxation steps before the truth's solve gives up; 0: the solver's default
   /** Closing radius of the ground truth's body before its skull is made (mm;
    *  BrainModelSettings::skullClosing; 0, as the registration's default: the
    *  skull follows every fold, e.g. the Sylvian fissure as a thin sheet).

@@ -51,6 +51,19 @@ CoarseTruth(double gravity)
   return settings;
 }
 
+/** The 25 mm parietal sag on a 6 mm ground truth, the craniotomy's outer
+ *  fifth left to the model (the demo's settings for large shifts). */
+bmr::SyntheticBrainShiftSettings
+TwentyFiveMillimetreTruth(bmr::ImageGridKind kind)
+{
+  bmr::SyntheticBrainShiftSettings settings;
+  settings.targetShift = 25.0;
+  settings.freeRim = 0.2;
+  settings.grid.kind = kind;
+  settings.grid.elementSize = 6.0;
+  return settings;
+}
+
 bmr::BrainShiftRegistrationResult
 RegisterFromTrackedPoints(const bmr::SyntheticBrainShift & truth, const bmr::SyntheticBrainShiftSettings & scene,
                           double elementSize, bmr::ImageGridKind kind = bmr::ImageGridKind::Hexahedra, int maxSteps = 0)
@@ -132,13 +145,9 @@ TEST(BrainShiftRegistration, TwentyFiveMillimetreShiftOnEveryDiscretization)
   {
     GTEST_SKIP() << "Colin27 (mricron-data) is not installed";
   }
-  const Colin27 &                  colin = Colin27::Get();
-  bmr::SyntheticBrainShiftSettings scene;
-  scene.targetShift = 25.0;
-  scene.freeRim = 0.2;
-  scene.grid.kind = bmr::ImageGridKind::Tetrahedra;
-  scene.grid.elementSize = 6.0;
-  const bmr::SyntheticBrainShift truth = bmr::MakeSyntheticBrainShift(colin.image, colin.mask, scene);
+  const Colin27 &                        colin = Colin27::Get();
+  const bmr::SyntheticBrainShiftSettings scene = TwentyFiveMillimetreTruth(bmr::ImageGridKind::Tetrahedra);
+  const bmr::SyntheticBrainShift         truth = bmr::MakeSyntheticBrainShift(colin.image, colin.mask, scene);
   ASSERT_TRUE(truth.solve.converged) << truth.solve.message;
   EXPECT_NEAR(truth.shift, scene.targetShift, 0.05 * scene.targetShift);
   const auto none = bmr::MeasureDisplacementError(nullptr, truth.truthTransform, truth.intraoperativeBrainOnPreoperativeGrid);
@@ -163,6 +172,38 @@ TEST(BrainShiftRegistration, TwentyFiveMillimetreShiftOnEveryDiscretization)
     EXPECT_LT(registered.p95, 0.3 * none.p95);
     EXPECT_LT(registered.p95, 2.5);
   }
+}
+
+// A meshless ground truth of the same 25 mm shift under the demo's 0.3 g,
+// its skull closed by 3 mm: on the skull that follows every fold, a slave
+// pressed by gravity onto a crease at the temporal base left contact and fell
+// back onto it in a cycle of 8-9 steps (docs/model-building.md); with the
+// closing it converges in about 1,700 steps. 5 mm hexahedra, a
+// discretization the truth does not use, register it.
+TEST(BrainShiftRegistration, MeshlessGroundTruthUnderGravityAtTwentyFiveMillimetres)
+{
+  if (!HaveColin27())
+  {
+    GTEST_SKIP() << "Colin27 (mricron-data) is not installed";
+  }
+  const Colin27 &                  colin = Colin27::Get();
+  bmr::SyntheticBrainShiftSettings scene = TwentyFiveMillimetreTruth(bmr::ImageGridKind::Meshless);
+  scene.skullClosing = 3.0;
+  scene.solverMaxSteps = 4000;
+  ASSERT_GT(scene.gravity, 0.0);
+  const bmr::SyntheticBrainShift truth = bmr::MakeSyntheticBrainShift(colin.image, colin.mask, scene);
+  ASSERT_TRUE(truth.solve.converged) << truth.solve.message;
+  RecordProperty("truth_steps", truth.solve.steps);
+  EXPECT_NEAR(truth.shift, scene.targetShift, 0.05 * scene.targetShift);
+  EXPECT_LT(truth.solve.maxPenetration, 0.01);
+  const auto none = bmr::MeasureDisplacementError(nullptr, truth.truthTransform, truth.intraoperativeBrainOnPreoperativeGrid);
+  const auto result = RegisterFromTrackedPoints(truth, scene, 5.0, bmr::ImageGridKind::Hexahedra);
+  ASSERT_TRUE(result.solve.converged) << result.solve.message;
+  const auto registered =
+    bmr::MeasureDisplacementError(result.transform, truth.truthTransform, truth.intraoperativeBrainOnPreoperativeGrid);
+  RecordProperty("hexahedra_p95_mm", std::to_string(registered.p95));
+  EXPECT_LT(registered.p95, 0.3 * none.p95);
+  EXPECT_LT(registered.p95, 2.5);
 }
 
 // The two other sources of the exposed surface's motion: the displaced

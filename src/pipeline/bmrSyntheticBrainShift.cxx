@@ -456,6 +456,10 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
   const Vector3       centroid = NodeCentroid(model);
   SolverSettings solverSettings;
   solverSettings.tolerance = settings.solverTolerance;
+  if (settings.solverMaxSteps > 0)
+  {
+    solverSettings.maxSteps = settings.solverMaxSteps;
+  }
   solverSettings.threads = settings.threads;
   truth.solve = timer.Run("truth-solve", [&] {
     try
