@@ -757,6 +757,10 @@ AddDemoCommand(CLI::App & app)
     ->capture_default_str();
   demo->add_option("--truth-element-size", options->truth.grid.elementSize, "Ground-truth element size (mm)")
     ->capture_default_str();
+  demo->add_option("--truth-max-steps", options->truth.solverMaxSteps,
+                   "Dynamic-relaxation steps before the ground-truth solve gives up (0: the solver's 100,000)")
+    ->capture_default_str()
+    ->check(CLI::NonNegativeNumber);
   demo->add_option("--truth-skull-closing", options->truth.skullClosing,
                    "Radius (mm) of the closing of the ground truth's brain before its skull is made: the skull stays "
                    "out of fissures narrower than twice (radius + gap); 0: it follows every fold (3 for a meshless "

@@ -521,6 +521,13 @@ TEST_F(ModelCommandTest, DemoNamesAResectionWithoutTumourAndAMissingElastix)
   EXPECT_NE(run.err.find("tumour"), std::string::npos) << run.err;
   EXPECT_EQ(FileCount(output), 0u);
 
+  // A ground truth that does not converge within its step limit: named, and no report left behind.
+  run = Biomech("demo --quiet --truth-element-size 8 --truth-max-steps 5 --no-baseline --overlays 0 -o " + Quoted(output));
+  EXPECT_EQ(run.exitCode, 1) << run.err;
+  EXPECT_NE(run.err.find("the ground-truth solve did not converge"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("after 5 steps"), std::string::npos) << run.err;
+  EXPECT_FALSE(fs::exists(output / "demo-report.json"));
+
   // A second ground truth written without its size: named before any solve.
   run = Biomech("demo --truth-check tetrahedra -o " + Quoted(output));
   EXPECT_EQ(run.exitCode, 1) << run.err;
