@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <sstream>
+
 namespace bmr
 {
 namespace
@@ -486,6 +488,19 @@ TEST(Failure, TooFewRelaxationStepsIsNotConverged)
   EXPECT_LE(result.steps, settings.maxSteps);
   EXPECT_FALSE(result.message.empty());
   EXPECT_TRUE(Contains(result.message, "is above the tolerance")) << result.message;
+  // It names where it still moves.
+  const std::size_t at = result.message.find("moves most at node ");
+  ASSERT_NE(at, std::string::npos) << result.message;
+  const Index node = std::stoi(result.message.substr(at + std::string("moves most at node ").size()));
+  ASSERT_GE(node, 0);
+  ASSERT_LT(static_cast<std::size_t>(node), model.nodes.size());
+  std::ostringstream position;
+  position << "(" << model.nodes[node].x() << ", " << model.nodes[node].y() << ", " << model.nodes[node].z() << " mm)";
+  EXPECT_TRUE(Contains(result.message, position.str())) << result.message;
+  // Its last increment is the largest one, which the estimate multiplies by rate / (1 - rate) >= 1.
+  const double increment = std::stod(result.message.substr(result.message.find(" mm), ", at) + 6));
+  EXPECT_GT(increment, 0.0) << result.message;
+  EXPECT_LE(increment, result.estimatedError) << result.message;
 }
 
 // Stopped within the tolerance but before the convergence test's hold ran

@@ -544,6 +544,23 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
               << " mm. Increase max_steps, loosen the tolerance, or check that the model is constrained "
                  "against rigid-body motion.";
     }
+    // Where it still moves: the first thing to look at.
+    std::size_t moving = 0;
+    for (std::size_t d = 1; d < u.size(); ++d)
+    {
+      if (std::abs(u[d] - uPrevious[d]) > std::abs(u[moving] - uPrevious[moving]))
+      {
+        moving = d;
+      }
+    }
+    const auto      node = static_cast<Index>(moving / 3);
+    const Vector3 & at = model.nodes[node];
+    message << " It moves most at node " << node << " (" << at.x() << ", " << at.y() << ", " << at.z() << " mm), "
+            << std::abs(u[moving] - uPrevious[moving]) << " mm in the last step"
+            << (inContact[node] ? ", in contact with a surface: a contact that opens and closes from step to step "
+                                  "(e.g. at a crease of the surface) does not settle"
+                                : "")
+            << ".";
   }
   if (restarts > 0)
   {
