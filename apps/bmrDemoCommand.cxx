@@ -9,11 +9,13 @@
 // ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.
 #include "itkBSplineTransform.h"
 #include "itkBiomechanicalTransformIO.h"
-#include "itkCastImageFilter.h"
-#include "itkDisplacementFieldTransform.h"
+#include "itkIdentityTransform.h"
 #include "itkImageFileWriter.h"
 
+#include "bmrElastixPeer.h"
+
 #include "bmrCommandSupport.h"
+#include "bmrDemoTruth.h"
 
 #include "bmrMeshIO.h"
 #include "bmrElectrodes.h"
@@ -21,24 +23,14 @@
 
 #include <nlohmann/json.hpp>
 
-#include <cerrno>
 #include <chrono>
 #include <cstdio>
-#include <cstring>
-#include <deque>
 #include <filesystem>
-#include <fstream>
 #include <iostream>
 #include <optional>
-#include <regex>
 #include <sstream>
 
-#include <fcntl.h>
-#include <spawn.h>
-#include <sys/wait.h>
 #include <unistd.h>
-
-extern char ** environ;
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
@@ -68,6 +60,8 @@ struct DemoOptions
   std::string                 surfaceMatch = "closest";
   double                      registrationGravity = 0.0; // g
   bool                        noBaseline = false;
+  bool                        truthOnly = false; // solve and write the truth, register nothing
+  std::string                 truthFrom;         // a --truth-only folder to read the truth from
   bool                        elastix = false;
   std::vector<std::string>    elastixParameters;
   std::string                 contrast = "preoperative";
@@ -181,185 +175,6 @@ ParseVariant(const std::string & variant, const std::string & option = "--varian
   return settings;
 }
 
-/** Runs `arguments` (arguments[0] found on PATH), its output into `log`;
- *  throws Error naming the program, its exit and the log's last lines. */
-void
-RunProgram(const std::vector<std::string> & arguments, const fs::path & log, const std::string & install)
-{
-  std::vector<char *> argv;
-  for (const std::string & argument : arguments)
-  {
-    argv.push_back(const_cast<char *>(argument.c_str()));
-  }
-  argv.push_back(nullptr);
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_adddup2(&actions, STDOUT_FILENO, STDERR_FILENO);
-  pid_t     child = 0;
-  const int spawned = posix_spawnp(&child, argv[0], &actions, nullptr, argv.data(), environ);
-  posix_spawn_file_actions_destroy(&actions);
-  if (spawned != 0)
-  {
-    throw Error("cannot run " + arguments[0] + " (" + std::strerror(spawned) + "); " + install);
-  }
-  int status = 0;
-  while (::waitpid(child, &status, 0) < 0 && errno == EINTR)
-  {
-  }
-  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
-  {
-    std::ifstream           file(log);
-    std::deque<std::string> tail;
-    for (std::string line; std::getline(file, line);)
-    {
-      if (line.find_first_not_of(" \t\r") == std::string::npos)
-      {
-        continue;
-      }
-      tail.push_back(line);
-      if (tail.size() > 8)
-      {
-        tail.pop_front();
-      }
-    }
-    std::string last; // one line, as every error of biomech
-    for (const std::string & line : tail)
-    {
-      last += (last.empty() ? " " : " | ") + line;
-    }
-    throw Error(arguments[0] + " failed (" +
-                (WIFEXITED(status) ? "exit status " + std::to_string(WEXITSTATUS(status))
-                                   : "signal " + std::to_string(WTERMSIG(status))) +
-                "); its log " + log.string() + " ends:" + last);
-  }
-}
-
-/** Whether `program` is an executable file in a folder of PATH. */
-bool
-OnPath(const std::string & program)
-{
-  const char *      path = std::getenv("PATH");
-  std::stringstream folders(path != nullptr ? path : "");
-  for (std::string folder; std::getline(folders, folder, ':');)
-  {
-    if (!folder.empty() && ::access((fs::path(folder) / program).c_str(), X_OK) == 0)
-    {
-      return true;
-    }
-  }
-  return false;
-}
-
-/** The elastix parameter files shipped with the module: installed beside the
- *  executable (share/BiomechanicalRegistration/elastix), else the source tree's. */
-std::vector<std::string>
-DefaultElastixParameters()
-{
-  std::error_code  ignored;
-  const fs::path   executable = fs::read_symlink("/proc/self/exe", ignored);
-  for (const fs::path & folder : { executable.parent_path().parent_path() / "share" / "BiomechanicalRegistration" / "elastix",
-                                   fs::path(BMR_ELASTIX_PARAMETERS_DIR) })
-  {
-    if (fs::exists(folder / "affine.txt") && fs::exists(folder / "bspline.txt"))
-    {
-      return { (folder / "affine.txt").string(), (folder / "bspline.txt").string() };
-    }
-  }
-  throw Error("the elastix parameter files (affine.txt, bspline.txt) are not installed; give them with "
-              "--elastix-parameters");
-}
-
-/** elastix's registration of the pair and what the study measures of it. */
-struct ElastixPeer
-{
-  itk::DisplacementFieldTransform<double, 3>::Pointer transform; // backward map over the preoperative grid
-  RegistrationImage::Pointer                          warpedOnFixedGrid;
-  double                                              seconds = 0.0;       // elastix alone
-  double                                              outputSeconds = 0.0; // transformix: field and warped image
-};
-
-/** elastix (the parameter files in turn) with the intraoperative image fixed,
- *  the preoperative one moving and the intraoperative brain mask; then
- *  transformix for the warped image on the fixed grid and for the
- *  deformation field on the preoperative grid, where errors are measured
- *  (outside a partial field of view too, as elastix's B-spline extends it). */
-ElastixPeer
-RegisterWithElastix(const fs::path & fixed, const fs::path & moving, const fs::path & fixedMask,
-                    const std::vector<std::string> & parameterFiles, const RegistrationImage * preoperativeGrid,
-                    const fs::path & folder, int threads)
-{
-  const std::string install = "install Debian's elastix (scripts/install-dependencies.sh) or leave out --elastix";
-  std::error_code   ignored;
-  fs::remove_all(folder, ignored);
-  CreateFolder(folder);
-  // Absolute: the last stage's parameters name the first's file by this folder.
-  const fs::path out = fs::absolute(folder);
-  std::vector<std::string> elastix{ "elastix", "-f", fixed.string(), "-m", moving.string(), "-fMask",
-                                    fixedMask.string(), "-out", out.string() };
-  for (const std::string & file : parameterFiles)
-  {
-    if (!fs::exists(file))
-    {
-      throw Error("elastix parameter file " + file + " does not exist");
-    }
-    elastix.insert(elastix.end(), { "-p", file });
-  }
-  std::vector<std::string> threading;
-  if (threads > 0)
-  {
-    threading = { "-threads", std::to_string(threads) };
-  }
-  elastix.insert(elastix.end(), threading.begin(), threading.end());
-  ElastixPeer peer;
-  auto        start = std::chrono::steady_clock::now();
-  RunProgram(elastix, out / "elastix-output.txt", install);
-  peer.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-
-  // The last stage's parameters hold the chain; a copy with the preoperative
-  // grid's origin, size and spacing gives the field there (same directions).
-  const fs::path transform = out / ("TransformParameters." + std::to_string(parameterFiles.size() - 1) + ".txt");
-  std::ifstream  in(transform);
-  std::string    text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  const auto     vector3 = [](const auto & values) {
-    std::ostringstream line;
-    line.precision(17);
-    line << values[0] << " " << values[1] << " " << values[2];
-    return line.str();
-  };
-  text = std::regex_replace(text, std::regex(R"(\(Size [^)]*\))"),
-                            "(Size " + vector3(preoperativeGrid->GetLargestPossibleRegion().GetSize()) + ")");
-  text = std::regex_replace(text, std::regex(R"(\(Spacing [^)]*\))"), "(Spacing " + vector3(preoperativeGrid->GetSpacing()) + ")");
-  text = std::regex_replace(text, std::regex(R"(\(Origin [^)]*\))"), "(Origin " + vector3(preoperativeGrid->GetOrigin()) + ")");
-  const fs::path onPreoperativeGrid = out / "TransformParameters.preoperative-grid.txt";
-  WriteTextFileAtomically(onPreoperativeGrid.string(), text);
-
-  start = std::chrono::steady_clock::now();
-  const auto transformix = [&](std::vector<std::string> command, const fs::path & output) {
-    CreateFolder(output);
-    command.insert(command.end(), { "-out", output.string() });
-    command.insert(command.end(), threading.begin(), threading.end());
-    RunProgram(command, output / "transformix-output.txt", install);
-  };
-  transformix({ "transformix", "-in", moving.string(), "-tp", transform.string() }, out / "warped");
-  transformix({ "transformix", "-def", "all", "-tp", onPreoperativeGrid.string() }, out / "field");
-  peer.outputSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-
-  peer.warpedOnFixedGrid = ReadImage<RegistrationImage>((out / "warped" / "result.nii").string(), "elastix's warped image");
-  using FieldType = itk::DisplacementFieldTransform<double, 3>::DisplacementFieldType;
-  using FloatFieldType = itk::Image<itk::Vector<float, 3>, 3>;
-  const auto floatField = ReadImage<FloatFieldType>((out / "field" / "deformationField.nii").string(),
-                                                    "elastix's deformation field");
-  auto cast = itk::CastImageFilter<FloatFieldType, FieldType>::New();
-  cast->SetInput(floatField);
-  cast->Update();
-  peer.transform = itk::DisplacementFieldTransform<double, 3>::New();
-  peer.transform->SetDisplacementField(cast->GetOutput());
-  // 85 MB on Colin27's grid; the transform parameter files make it again.
-  fs::remove(out / "field" / "deformationField.nii", ignored);
-  return peer;
-}
-
 int
 RunDemo(DemoOptions options)
 {
@@ -402,8 +217,17 @@ RunDemo(DemoOptions options)
     }
   }
   std::vector<ImageGridSettings> variants;
+  if (options.truthOnly)
+  {
+    options.variants.clear();
+    options.noBaseline = true;
+  }
   for (const std::string & variant : options.variants)
   {
+    if (variant == "none" && options.variants.size() == 1)
+    {
+      break; // the intensity registrations alone
+    }
     variants.push_back(ParseVariant(variant));
   }
   std::optional<ImageGridSettings> truthCheckGrid;
@@ -412,26 +236,46 @@ RunDemo(DemoOptions options)
     truthCheckGrid = ParseVariant(options.truthCheck, "--truth-check");
   }
 
+  // A cached truth brings its scene: the images it was made from and what the registration shares with it.
+  std::optional<TruthFiles> cached;
+  if (!options.truthFrom.empty())
+  {
+    cached = ReadTruthFiles(options.truthFrom);
+    const json & cachedTruth = cached->report;
+    const json & scene = cachedTruth["ground_truth"];
+    options.image = cachedTruth.value("preoperative_image", options.image);
+    options.mask = cachedTruth.value("brain_mask", options.mask);
+    const json & centre = scene.at("craniotomy_centre_mm");
+    options.truth.craniotomyCentre = Vector3(centre[0].get<double>(), centre[1].get<double>(), centre[2].get<double>());
+    options.truth.craniotomyRadius = scene.value("craniotomy_radius_mm", options.truth.craniotomyRadius);
+    options.truth.tumourStiffness = scene.value("tumour_stiffness", options.truth.tumourStiffness);
+    options.truth.csfPoissonRatio = scene.value("csf_poisson_ratio", options.truth.csfPoissonRatio);
+  }
   const RegistrationImage::Pointer      preoperative = ReadImage<RegistrationImage>(options.image, "preoperative image");
   const RegistrationLabelImage::Pointer brainMask = ReadMaskImage(options.mask, "brain mask");
 
   if (!options.quiet)
   {
-    std::cerr << "ground truth: " << ImageGridKindName(options.truth.grid.kind) << " " << options.truth.grid.elementSize
-              << " mm, " << options.truth.targetShift << " mm sag of the exposed surface, gravity "
-              << options.truth.gravity << " g\n";
+    if (!options.truthFrom.empty())
+    {
+      std::cerr << "ground truth: read from " << options.truthFrom << "\n";
+    }
+    else
+    {
+      std::cerr << "ground truth: " << ImageGridKindName(options.truth.grid.kind) << " "
+                << options.truth.grid.elementSize << " mm, " << options.truth.targetShift
+                << " mm sag of the exposed surface, gravity " << options.truth.gravity << " g\n";
+    }
   }
-  const SyntheticBrainShift truth = MakeSyntheticBrainShift(preoperative, brainMask, options.truth, stages);
+  const SyntheticBrainShift truth =
+    cached ? std::move(cached->truth) : MakeSyntheticBrainShift(preoperative, brainMask, options.truth, stages);
   const RegistrationImage *      intraoperative = truth.intraoperativeImage;
   const RegistrationLabelImage * intraoperativeMask = truth.intraoperativeBrainMask;
 
   CreateFolder(output);
   std::error_code ignored;
   fs::remove(output / "demo-report.json", ignored);
-  WriteImageAtomically(intraoperative, output / "intraoperative.nii.gz");
-  WriteImageAtomically(intraoperativeMask, output / "intraoperative-brain-mask.nii.gz");
-  WriteSurface((output / "exposed-surface.vtp").string(), truth.exposedSurface);
-  WriteSparseDisplacements((output / "tracked-points.csv").string(), truth.trackedPoints);
+  WriteTruthFiles(truth, output, options.truthOnly);
   // The epilepsy workflow: a grid on the shifted brain, seen in a CT; its
   // contacts, found and projected along gravity (the head's position in the
   // operating room tells its direction), load the registration.
@@ -467,13 +311,12 @@ RunDemo(DemoOptions options)
                 << " mm, measured displacements within " << errors.displacementMax << " mm\n";
     }
   }
-  itk::WriteBiomechanicalTransform(truth.truthTransform, (output / "ground-truth-transform.h5").string());
   const fs::path overlays = output / "overlays";
 
   // A second ground truth of the same scene on another discretization: how far
   // two truths differ is the smallest error a registration can be judged by.
-  json                           truthCheckReport;
-  RegistrationTransform::Pointer secondTruth;
+  json                           truthCheckReport = cached ? cached->report.value("ground_truth_check", json()) : json();
+  RegistrationTransform::Pointer secondTruth = cached ? cached->secondTruth : nullptr;
   if (truthCheckGrid)
   {
     SyntheticBrainShiftSettings checkSettings = options.truth;
@@ -525,10 +368,19 @@ RunDemo(DemoOptions options)
         MeasureDisplacementError(transform, secondTruth, truth.intraoperativeBrainOnPreoperativeGrid));
     }
   };
-
-  for (std::size_t k = 0; k < variants.size(); ++k)
   {
-    const ImageGridSettings & grid = variants[k];
+    // The preoperative image as it is, against the intraoperative one: what every method improves on.
+    MethodResult none;
+    none.name = "no registration";
+    score(nullptr, none);
+    const auto identity = itk::IdentityTransform<double, 3>::New();
+    none.edges = EvaluateEdges(intraoperative, WarpImage(preoperative, identity, intraoperative), intraoperativeMask);
+    methods.push_back(none);
+    WriteEdgeOverlays(none.edges, intraoperative, overlays.string(), "none", options.overlays);
+  }
+
+  for (const ImageGridSettings & grid : variants)
+  {
     if (!options.quiet)
     {
       std::cerr << "biomechanical registration: " << ImageGridKindName(grid.kind) << " " << grid.elementSize << " mm\n";
@@ -571,15 +423,6 @@ RunDemo(DemoOptions options)
     csf.poissonRatio = options.truth.csfPoissonRatio;
     settings.model.materials.classMaterials = DefaultClassMaterials(settings.model.classifier.classes, csf);
     const BrainShiftRegistrationResult result = RegisterBrainShift(inputs, settings, stages);
-    if (k == 0)
-    {
-      MethodResult none;
-      none.name = "no registration";
-      score(nullptr, none);
-      none.edges = result.unregistered;
-      methods.push_back(none);
-      WriteEdgeOverlays(result.unregistered, intraoperative, overlays.string(), "none", options.overlays);
-    }
     MethodResult method;
     method.name = "biomechanical " + std::string(ImageGridKindName(grid.kind)) + " " +
                   FormatNumber(grid.elementSize) + " mm" +
@@ -656,38 +499,49 @@ RunDemo(DemoOptions options)
   report["brain_mask"] = options.mask;
   report["load"] = options.load;
   report["surface_match"] = options.surfaceMatch;
-  report["ground_truth"] = {
-    { "grid", ImageGridKindName(options.truth.grid.kind) },
-    { "element_size_mm", options.truth.grid.elementSize },
-    { "nodes", truth.model.model.nodes.size() },
-    { "cells", truth.model.model.cells.size() },
-    { "craniotomy_centre_mm", { options.truth.craniotomyCentre.x(), options.truth.craniotomyCentre.y(),
-                                options.truth.craniotomyCentre.z() } },
-    { "craniotomy_radius_mm", options.truth.craniotomyRadius },
-    { "target_shift_mm", options.truth.targetShift },
-    { "free_rim", options.truth.freeRim },
-    { "skull_closing_mm", options.truth.skullClosing },
-    { "shift_mm", truth.shift },
-    { "gravity_mm_s2", { truth.gravity.x(), truth.gravity.y(), truth.gravity.z() } },
-    { "gravity_g", truth.gravity.norm() / 9810.0 },
-    { "solve_steps", truth.solve.steps },
-    { "solve_restarts", truth.solve.restarts },
-    { "solve_estimated_error_mm", truth.solve.estimatedError },
-    { "fit_max_residual_mm", truth.truthFitMaxResidual },
-    { "poisson_ratio", options.truth.poissonRatio },
-    { "csf_youngs_modulus_pa", options.truth.csfYoungsModulus },
-    { "csf_poisson_ratio", options.truth.csfPoissonRatio },
-    { "tumour_radius_mm", options.truth.tumourRadius },
-    { "tumour_stiffness", options.truth.tumourStiffness },
-    { "intraoperative_spacing_mm", { options.truth.intraoperativeSpacing.x(), options.truth.intraoperativeSpacing.y(),
-                                     options.truth.intraoperativeSpacing.z() } },
-    { "noise", options.truth.noise },
-    { "noise_model", options.noiseModel },
-    { "intraoperative_contrast", IntraoperativeContrastName(options.truth.contrast) },
-    { "bias_field", options.truth.biasField },
-    { "field_of_view_mm", options.truth.fieldOfView },
-    { "resection_cavity_radius_mm", truth.resectionCavityRadius },
-    { "seconds", truth.timer.Json() } };
+  if (!options.truthFrom.empty())
+  {
+    report["ground_truth"] = cached->report["ground_truth"];
+    report["ground_truth"]["read_from"] = options.truthFrom;
+    report["ground_truth"]["reusable"] = false; // this folder has the truth's common files only
+  }
+  else
+  {
+    report["ground_truth"] = {
+      { "grid", ImageGridKindName(options.truth.grid.kind) },
+      { "element_size_mm", options.truth.grid.elementSize },
+      { "nodes", truth.model.model.nodes.size() },
+      { "cells", truth.model.model.cells.size() },
+      { "craniotomy_centre_mm", { options.truth.craniotomyCentre.x(), options.truth.craniotomyCentre.y(),
+                                  options.truth.craniotomyCentre.z() } },
+      { "craniotomy_radius_mm", options.truth.craniotomyRadius },
+      { "target_shift_mm", options.truth.targetShift },
+      { "free_rim", options.truth.freeRim },
+      { "skull_closing_mm", options.truth.skullClosing },
+      { "shift_mm", truth.shift },
+      { "gravity_mm_s2", { truth.gravity.x(), truth.gravity.y(), truth.gravity.z() } },
+      { "gravity_g", truth.gravity.norm() / 9810.0 },
+      { "solve_steps", truth.solve.steps },
+      { "solve_restarts", truth.solve.restarts },
+      { "solve_estimated_error_mm", truth.solve.estimatedError },
+      { "fit_max_residual_mm", truth.truthFitMaxResidual },
+      { "poisson_ratio", options.truth.poissonRatio },
+      { "csf_youngs_modulus_pa", options.truth.csfYoungsModulus },
+      { "csf_poisson_ratio", options.truth.csfPoissonRatio },
+      { "tumour_radius_mm", options.truth.tumourRadius },
+      { "tumour_stiffness", options.truth.tumourStiffness },
+      { "intraoperative_spacing_mm", { options.truth.intraoperativeSpacing.x(), options.truth.intraoperativeSpacing.y(),
+                                       options.truth.intraoperativeSpacing.z() } },
+      { "noise", options.truth.noise },
+      { "noise_model", options.noiseModel },
+      { "intraoperative_contrast", IntraoperativeContrastName(options.truth.contrast) },
+      { "bias_field", options.truth.biasField },
+      { "field_of_view_mm", options.truth.fieldOfView },
+      { "resection_cavity_radius_mm", truth.resectionCavityRadius },
+      { "down", { truth.down.x(), truth.down.y(), truth.down.z() } },
+      { "reusable", options.truthOnly },
+      { "seconds", truth.timer.Json() } };
+  }
   if (!truthCheckReport.is_null())
   {
     report["ground_truth_check"] = truthCheckReport;
@@ -705,10 +559,13 @@ RunDemo(DemoOptions options)
 
   if (!options.quiet)
   {
-    std::printf("ground truth: %s %.1f mm (%zu nodes), shift %.2f mm, gravity %.2f g, %d steps, %.1f s\n",
-                ImageGridKindName(options.truth.grid.kind), options.truth.grid.elementSize,
-                truth.model.model.nodes.size(), truth.shift, truth.gravity.norm() / 9810.0, truth.solve.steps,
-                truth.timer.Json()["total"].get<double>());
+    // From the report, which a truth read from a folder carries over.
+    const json & made = report["ground_truth"];
+    std::printf("ground truth: %s %.1f mm (%zu nodes), shift %.2f mm, gravity %.2f g, %d steps, %.1f s%s\n",
+                made["grid"].get<std::string>().c_str(), made["element_size_mm"].get<double>(),
+                made["nodes"].get<std::size_t>(), made["shift_mm"].get<double>(), made["gravity_g"].get<double>(),
+                made["solve_steps"].get<int>(), made["seconds"]["total"].get<double>(),
+                options.truthFrom.empty() ? "" : (", read from " + options.truthFrom).c_str());
     PrintTable(methods);
     std::printf("\nwrote %s (report demo-report.json, images, transforms, overlays/)\n", output.string().c_str());
   }
@@ -796,7 +653,8 @@ AddDemoCommand(CLI::App & app)
                    "walls sag (needs --tumour-radius)")
     ->check(CLI::NonNegativeNumber);
   demo->add_option("--variant", options->variants,
-                   "Registration grid KIND:SIZE (hexahedra, tetrahedra, mixed, meshless); repeat for several")
+                   "Registration grid KIND:SIZE (hexahedra, tetrahedra, mixed, meshless); repeat for several; none: "
+                   "the intensity registrations only")
     ->capture_default_str();
   demo->add_option("--truth-check", options->truthCheck,
                    "Solve the ground truth a second time on this grid KIND:SIZE (e.g. tetrahedra:5 beside the "
@@ -828,6 +686,31 @@ AddDemoCommand(CLI::App & app)
   demo->add_option("--overlays", options->overlays, "Edge-overlay PNGs per method")->capture_default_str();
   demo->add_option("--threads", options->truth.threads, "Worker threads (0: all)");
   demo->add_flag("--quiet,-q", options->quiet, "Print nothing but warnings and errors");
+  // A study solves each scene's truth once and registers it in separate jobs (examples/validation).
+  CLI::Option * truthOnly =
+    demo->add_flag("--truth-only", options->truthOnly,
+                   "Solve the ground truth and write it (with the no-registration row) for --truth-from; register "
+                   "nothing");
+  CLI::Option * truthFrom =
+    demo->add_option("--truth-from", options->truthFrom,
+                     "Read the ground truth that --truth-only wrote into this folder instead of solving it; the "
+                     "scene (images, craniotomy, materials, intraoperative image) is the folder's")
+      ->check(CLI::ExistingDirectory);
+  for (const char * scene :
+       { "--image", "--mask", "--craniotomy-centre", "--craniotomy-radius", "--shift", "--free-rim", "--gravity",
+         "--poisson-ratio", "--csf-modulus", "--csf-poisson-ratio", "--tumour-centre", "--tumour-radius",
+         "--tumour-stiffness", "--truth-grid", "--truth-element-size", "--truth-max-steps", "--truth-skull-closing",
+         "--noise", "--noise-model", "--intraoperative-contrast", "--bias-field", "--intraoperative-spacing",
+         "--field-of-view", "--resection-margin", "--truth-check" })
+  {
+    truthFrom->excludes(demo->get_option(scene));
+  }
+  for (const char * registration : { "--variant", "--load", "--surface-match", "--registration-gravity", "--elastix",
+                                     "--elastix-parameters", "--baseline-shrink-factors", "--baseline-iterations",
+                                     "--truth-from" })
+  {
+    truthOnly->excludes(demo->get_option(registration));
+  }
   return [=]() -> int { return demo->parsed() ? RunDemo(*options) : -1; };
 }
 

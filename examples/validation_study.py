@@ -1,24 +1,31 @@
 #!/usr/bin/python3
 """Validation study: brain-shift registration against a known answer on Colin27.
 
-Runs `biomech demo` (ground truth from a finer model, registration from the
-tracked exposed-surface points, the ITK B-spline and elastix intensity
-registrations as peers) for a set of scenes, from the intensity registrations'
-ideal case (the same contrast, the whole head) to a realistic intraoperative
-image (T2-like contrast, bias field, Rician noise, thick slices, partial field
-of view, resection cavity) and shifts of 20 and 25 mm, then writes
+The scenes, the jobs and the report of the study that the Snakemake workflow
+examples/validation/Snakefile runs: for each scene one job solves the ground
+truth (`biomech demo --truth-only`: a finer model, gravity, skull contact) and
+one job per method registers it (`biomech demo --truth-from`: the
+biomechanical registration from the tracked exposed-surface points on each
+discretization, the ITK B-spline and elastix intensity registrations as
+peers). The scenes go from the intensity registrations' ideal case (the same
+contrast, the whole head) to a realistic intraoperative image (T2-like
+contrast, bias field, Rician noise, thick slices, partial field of view,
+resection cavity) and shifts of 15-25 mm. The report job writes
 docs/validation.md with a table, conclusions computed from it and an
 error-against-run-time plot (docs/validation-error-vs-time.png).
 
-    /usr/bin/python3 examples/validation_study.py            # full study (about 60 min on 2 cores)
-    /usr/bin/python3 examples/validation_study.py --reduced  # 1 scene, coarse, checked (a CTest case)
+    snakemake -s examples/validation/Snakefile -j2                       # full study, here (about 60 min on 2 cores)
+    snakemake -s examples/validation/Snakefile --profile examples/validation/profiles/slurm   # on a Slurm cluster
+    snakemake -s examples/validation/Snakefile -j2 --config reduced=1    # 1 scene, coarse, checked (a CTest case)
     /usr/bin/python3 examples/validation_study.py --truths   # 2 scenes, each truth solved twice (about 6 min)
+    /usr/bin/python3 examples/validation_study.py --from-json docs/validation.json   # rewrite the docs, run nothing
 """
 import argparse
+import glob
 import json
 import os
 import platform
-import shutil
+import socket
 import subprocess
 import sys
 import time
@@ -78,27 +85,17 @@ TRUTH_CHECKS = [
 # fraction of no registration's 95th percentile error.
 REDUCED_TRUTH_CHECK = "hexahedra:8"
 REDUCED_TRUTH_AGREEMENT = 0.25
-# Meshless is left out: the meshless Colin27 registration converges but takes about 5.6 minutes a scene
-# (docs/model-building.md).
-VARIANTS = ["hexahedra:5", "hexahedra:7", "mixed:5", "tetrahedra:7"]
+VARIANTS = ["hexahedra:5", "hexahedra:7", "mixed:5", "tetrahedra:7", "meshless:7"]
 # The reduced study's elastix (test/elastix-quick.txt: one B-spline stage, few iterations) must bring the 95th
 # percentile error below this fraction of no registration's.
 ELASTIX_QUICK_P95 = 0.8
 
 
-def run(name, centre, extra, variants, peers, output_root, quiet=True):
-    """One `biomech demo`; peers: also the intensity registrations (ITK B-spline, elastix)."""
-    folder = os.path.join(output_root, name)
-    command = [BIOMECH, "demo", "-o", folder, "--craniotomy-centre", *centre, *extra, "--overlays", "1"]
-    for variant in variants:
-        command += ["--variant", variant]
-    if peers:
-        command.append("--elastix")
-    else:
-        command.append("--no-baseline")
-    if quiet:
-        command.append("--quiet")
-    start = time.time()
+def run_demo(name, arguments, folder):
+    """One `biomech demo` with `arguments` writing into `folder`: the study's record of it (status, the error's
+    last line, seconds, the demo's report or None, the machine's load and host)."""
+    command = [BIOMECH, "demo", "-o", folder, *arguments, "--overlays", "1", "--quiet"]
+    start, load = time.time(), os.getloadavg()[0]
     result = subprocess.run(command, capture_output=True, text=True,
                             env=dict(os.environ, OMP_WAIT_POLICY=os.environ.get("OMP_WAIT_POLICY", "PASSIVE")))
     seconds = time.time() - start
@@ -109,7 +106,110 @@ def run(name, centre, extra, variants, peers, output_root, quiet=True):
             report = json.load(handle)
     error = result.stderr.strip().splitlines()[-1] if result.returncode != 0 and result.stderr.strip() else ""
     error = error.replace("biomech: error: ", "").split(". Likely cause")[0]
-    return {"name": name, "status": result.returncode, "error": error, "seconds": seconds, "report": report}
+    return {"name": name, "status": result.returncode, "error": error, "seconds": seconds, "report": report,
+            "host": socket.gethostname(), "cores": os.cpu_count(), "date": time.strftime("%Y-%m-%d %H:%M"),
+            "load": [load, os.getloadavg()[0]]}
+
+
+def run(name, centre, extra, variants, peers, output_root):
+    """One whole `biomech demo` (truth and methods in one process); peers: also the intensity registrations."""
+    arguments = ["--craniotomy-centre", *centre, *extra]
+    for variant in variants:
+        arguments += ["--variant", variant]
+    arguments.append("--elastix" if peers else "--no-baseline")
+    return run_demo(name, arguments, os.path.join(output_root, name))
+
+
+# The reduced study (CI): a coarser ground truth (6 mm), a second one (8 mm), a 7 mm registration and elastix in a
+# few iterations (test/elastix-quick.txt).
+REDUCED_TRUTH = ["--truth-element-size", "6", "--truth-check", REDUCED_TRUTH_CHECK]
+REDUCED_VARIANTS = ["hexahedra:7"]
+
+
+def scenes(reduced=False, only=None):
+    """The study's scenes as (name, craniotomy, truth arguments, methods); `only`: these names."""
+    table = []
+    for name, centre, extra, variants in (SCENES[:1] if reduced else SCENES):
+        if only and name not in only:
+            continue
+        truth = [*extra, *REDUCED_TRUTH] if reduced else extra
+        biomechanical = REDUCED_VARIANTS if reduced else (variants or VARIANTS)
+        methods = [variant.replace(":", "-") for variant in biomechanical] + (["elastix"] if reduced else
+                                                                               ["bspline", "elastix"])
+        table.append((name, centre, truth, methods))
+    return table
+
+
+def method_arguments(method, reduced=False):
+    """`biomech demo` arguments of one method: KIND-SIZE (a biomechanical registration), bspline or elastix."""
+    if method == "bspline":
+        return ["--variant", "none"]
+    if method == "elastix":
+        parameters = (["--elastix-parameters", os.path.join(ROOT, "test", "elastix-quick.txt")] if reduced
+                      else ["--elastix"])
+        return ["--variant", "none", "--no-baseline", *parameters]
+    kind, _, size = method.partition("-")
+    return ["--variant", kind + ":" + size, "--no-baseline"]
+
+
+def write_record(entry, path):
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with open(path + ".tmp", "w") as handle:
+        json.dump(entry, handle, indent=1)
+    os.replace(path + ".tmp", path)
+
+
+def truth_job(name, output, reduced=False, threads=0):
+    """Solves a scene's ground truth into OUTPUT/NAME/truth; its record (run.json) says whether it failed."""
+    (_, centre, truth, _), = scenes(reduced, [name])
+    folder = os.path.join(output, name, "truth")
+    entry = run_demo(name, ["--truth-only", "--craniotomy-centre", *centre, *truth, "--threads", str(threads)], folder)
+    write_record(entry, os.path.join(folder, "run.json"))
+
+
+def method_job(name, method, output, reduced=False, threads=0):
+    """Registers a scene's cached ground truth by one method into OUTPUT/NAME/METHOD (run.json)."""
+    truth = os.path.join(output, name, "truth")
+    folder = os.path.join(output, name, method)
+    with open(os.path.join(truth, "run.json")) as handle:
+        solved = json.load(handle)
+    if solved["status"] != 0:
+        entry = dict(solved, report=None, seconds=0.0, error="the ground truth failed: " + solved["error"])
+    else:
+        entry = run_demo(name, ["--truth-from", truth, *method_arguments(method, reduced), "--threads", str(threads)],
+                         folder)
+    write_record(entry, os.path.join(folder, "run.json"))
+
+
+def collect(output, reduced=False):
+    """The jobs' records merged into one run per scene (the truth's report with every method's row), in the order
+    of SCENES, and the machine line (hosts, dates and load averages over the jobs)."""
+    runs, jobs = [], []
+    for name, _, _, methods in scenes(reduced):
+        with open(os.path.join(output, name, "truth", "run.json")) as handle:
+            truth = json.load(handle)
+        jobs.append(truth)
+        entry = dict(truth, failed_methods=[])
+        if truth["report"]:
+            entry["report"] = dict(truth["report"], methods=list(truth["report"]["methods"]))
+        for method in methods:
+            with open(os.path.join(output, name, method, "run.json")) as handle:
+                record = json.load(handle)
+            jobs.append(record)
+            if record["report"]:
+                entry["report"]["methods"] += [row for row in record["report"]["methods"]
+                                               if row["name"] != "no registration"]
+            elif truth["report"]:
+                entry["failed_methods"].append((method, record["error"]))
+        runs.append(entry)
+    hosts = sorted({job.get("host", "?") for job in jobs})
+    loads = [value for job in jobs for value in job.get("load", [])]
+    dates = sorted(job.get("date", "") for job in jobs)
+    machine = "%s, %d cores, %s, %s to %s, load average %.1f to %.1f at the %d jobs' starts and ends" % (
+        platform.processor() or platform.machine(), jobs[0].get("cores") or os.cpu_count(),
+        "host " + hosts[0] if len(hosts) == 1 else "%d hosts" % len(hosts), dates[0], dates[-1],
+        min(loads or [0.0]), max(loads or [0.0]), len(jobs))
+    return runs, machine
 
 
 def plot(runs, path):
@@ -303,7 +403,7 @@ def time_budget_target(runs, methods):
 def busy(machine):
     """A sentence on the machine's load during the run, from the machine line's load averages."""
     import re
-    loads = [float(value) for pair in re.findall(r"load average ([0-9.]+) at the start and ([0-9.]+)", machine)
+    loads = [float(value) for pair in re.findall(r"load average ([0-9.]+) (?:at the start and|to) ([0-9.]+)", machine)
              for value in pair]
     if loads and max(loads) > 1.0:
         return (" This run's machine was busy (load average up to %.1f on 2 cores, other work beside it): its times "
@@ -313,8 +413,10 @@ def busy(machine):
 
 def markdown(runs, machine):
     lines = ["# Validation study: brain-shift registration against a known answer", "",
-             "Written by `examples/validation_study.py`. Each scene: `biomech demo` on Colin27 (`ch2.nii.gz`, "
-             "`ch2bet.nii.gz`). Ground truth: hexahedra of 4 mm (a grid not nested in the registration's; 5 mm ANP "
+             "Written by the Snakemake workflow `examples/validation/Snakefile` (`snakemake -s "
+             "examples/validation/Snakefile -j2`; the scenes and this report: `examples/validation_study.py`). Each "
+             "scene: one job solves the ground truth (`biomech demo --truth-only`) and one job per method registers "
+             "it (`biomech demo --truth-from`), on Colin27 (`ch2.nii.gz`, `ch2bet.nii.gz`). Ground truth: hexahedra of 4 mm (a grid not nested in the registration's; 5 mm ANP "
              "tetrahedra for 15, 20 and 25 mm), the exposed surface sunk by a smooth sag of the given "
              "size towards the brain's centroid (for 15, 20 and 25 mm only within 0.8 of the craniotomy's radius: the "
              "opening's outer fifth is left to the model), gravity 0.3 g on the rest, skull contact, CSF drained "
@@ -345,6 +447,8 @@ def markdown(runs, machine):
                 entry["name"], method["name"], method["seconds"], error["mean"], error["p95"], error["max"],
                 "%.2f" % hausdorff["p95"] if hausdorff else "-",
                 "%.1f%%" % (100 * fraction) if fraction is not None else "-"))
+        for method, error in entry.get("failed_methods", []):
+            lines.append("| %s | %s failed: %s | | | | | | |" % (entry["name"], method, Short(error)))
     lines += ["", "![error against run time](validation-error-vs-time.png)", reading(runs, machine),
               "How far two ground truths of the same scene on different discretizations differ, and the registrations "
               "scored against each, is in [ground-truth-agreement.md](ground-truth-agreement.md); how far a truth from "
@@ -433,35 +537,108 @@ def machine_line(load):
         os.getloadavg()[0])
 
 
+def check_reduced(runs):
+    """The reduced study is a check: registration must beat no registration by stated margins (measured on the
+    reduced scene: p95 1.9 against 4.1 mm, edges 84 % against 60 %), elastix, in a few iterations, must register at
+    all (its field read and measured on the right grid), and the two ground truths must agree."""
+    if not runs[0]["report"]:
+        return ["the ground truth failed: " + runs[0]["error"]]
+    if runs[0]["failed_methods"]:
+        return ["%s failed: %s" % failed for failed in runs[0]["failed_methods"]]
+    methods = {method["name"]: method for method in runs[0]["report"]["methods"]}
+    none, registered = methods["no registration"], methods["biomechanical hexahedra 7 mm"]
+    elastix = methods["elastix B-spline"]
+    problems = []
+    if not registered["details"]["solve"]["converged"]:
+        problems.append("the registration's solve did not converge")
+    if registered["displacement_error_mm"]["p95"] > 0.6 * none["displacement_error_mm"]["p95"]:
+        problems.append("95th percentile error %.2f mm is not below 0.6 x no registration's %.2f mm" % (
+            registered["displacement_error_mm"]["p95"], none["displacement_error_mm"]["p95"]))
+    if registered["fraction_within_1_7_mm"] < none["fraction_within_1_7_mm"] + 0.1:
+        problems.append("edges within 1.7 mm %.3f do not exceed no registration's %.3f by 0.1" % (
+            registered["fraction_within_1_7_mm"], none["fraction_within_1_7_mm"]))
+    if elastix["displacement_error_mm"]["p95"] > ELASTIX_QUICK_P95 * none["displacement_error_mm"]["p95"]:
+        problems.append("elastix's 95th percentile error %.2f mm is not below %.1f x no registration's %.2f mm" % (
+            elastix["displacement_error_mm"]["p95"], ELASTIX_QUICK_P95, none["displacement_error_mm"]["p95"]))
+    agreement = runs[0]["report"]["ground_truth_check"]["difference_from_truth_mm"]["p95"]
+    if not agreement < REDUCED_TRUTH_AGREEMENT * none["displacement_error_mm"]["p95"]:
+        problems.append("the second ground truth (%s) differs from the first by %.2f mm at the 95th percentile, "
+                        "not below %.2f x no registration's %.2f mm" % (
+                            REDUCED_TRUTH_CHECK, agreement, REDUCED_TRUTH_AGREEMENT,
+                            none["displacement_error_mm"]["p95"]))
+    # Pointwise |e_2 - e_1| <= |T_1 - T_2|, so the percentiles differ by at most the truths' largest difference.
+    largest = runs[0]["report"]["ground_truth_check"]["difference_from_truth_mm"]["max"]
+    against = registered["details"].get("displacement_error_against_second_truth_mm", {}).get("p95")
+    unregistered = none["details"].get("displacement_error_against_second_truth_mm", {}).get("p95")
+    if unregistered is None or unregistered == none["displacement_error_mm"]["p95"]:
+        problems.append("no registration's error against the second truth (%s mm) is missing or equals its error "
+                        "against the first: the second truth was not used" % unregistered)
+    if against is None or abs(against - registered["displacement_error_mm"]["p95"]) > largest:
+        problems.append("the registration's 95th percentile against the second truth (%s mm) is not within the "
+                        "truths' largest difference (%.2f mm) of its error against the first" % (against, largest))
+    if not problems:
+        print("validation_study --reduced: registered p95 %.2f mm (none %.2f, elastix %.2f), edges %.1f %% (none "
+              "%.1f %%), the two truths differ by %.2f mm (p95)"
+              % (registered["displacement_error_mm"]["p95"], none["displacement_error_mm"]["p95"],
+                 elastix["displacement_error_mm"]["p95"], 100 * registered["fraction_within_1_7_mm"],
+                 100 * none["fraction_within_1_7_mm"], agreement))
+    return problems
+
+
+def write_docs(runs, machine, docs):
+    """docs/validation.md, its plot and validation.json (the record --from-json rewrites the docs from)."""
+    os.makedirs(docs, exist_ok=True)
+    write_record({"runs": runs, "machine": machine}, os.path.join(docs, "validation.json"))
+    plot(runs, os.path.join(docs, "validation-error-vs-time.png"))
+    with open(os.path.join(docs, "validation.md"), "w") as handle:
+        handle.write(markdown(runs, machine))
+
+
 def main():
     global BIOMECH
-    parser = argparse.ArgumentParser(description=__doc__)
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--job", nargs="+", metavar=("truth|method", "SCENE"),
+                        help="one job of the workflow: 'truth SCENE' or 'method SCENE METHOD' (records run.json)")
+    parser.add_argument("--report", action="store_true",
+                        help="merge the jobs' records under --output into the docs (or, with --reduced, check them)")
     parser.add_argument("--reduced", action="store_true",
                         help="one scene, coarse, elastix with the quick parameters of test/elastix-quick.txt (CI)")
+    parser.add_argument("--threads", type=int, default=0, help="threads of a job's biomech (0: all)")
     parser.add_argument("--output", default=os.path.join(ROOT, "out", "validation"))
     parser.add_argument("--docs", default=os.path.join(ROOT, "docs"))
     parser.add_argument("--biomech", default=BIOMECH, help="the biomech executable")
-    parser.add_argument("--scenes", nargs="*",
-                        help="only these scenes (the docs are rewritten only with --update-json)")
-    parser.add_argument("--update-json", help="an earlier run's validation.json (a full run keeps one in "
-                        "docs/validation.json): replace its rows of --scenes, rewrite the docs from it")
     parser.add_argument("--from-json", help="rewrite the docs from an earlier run's validation.json, run nothing")
     parser.add_argument("--truths", action="store_true",
                         help="only the scenes with a second ground truth (TRUTH_CHECKS): writes "
                         "docs/ground-truth-agreement.md")
-    parser.add_argument("--large-shifts", action="store_true",
-                        help="only the 15, 20 and 25 mm scenes (as --scenes; with --update-json, merged into the docs)")
     arguments = parser.parse_args()
-    BIOMECH = arguments.biomech
-    if not os.path.exists(BIOMECH):
-        sys.exit("validation_study: build/apps/biomech is missing; run bash scripts/run-tests.sh first")
+    BIOMECH = os.path.abspath(arguments.biomech)
 
     if arguments.from_json:
         with open(arguments.from_json) as handle:
             earlier = json.load(handle)
-        plot(earlier["runs"], os.path.join(arguments.docs, "validation-error-vs-time.png"))
-        with open(os.path.join(arguments.docs, "validation.md"), "w") as handle:
-            handle.write(markdown(earlier["runs"], earlier.get("machine", "")))
+        write_docs(earlier["runs"], earlier.get("machine", ""), arguments.docs)
+        return
+    if arguments.report:
+        runs, machine = collect(arguments.output, arguments.reduced)
+        if arguments.reduced:
+            write_record({"runs": runs, "machine": machine}, os.path.join(arguments.output, "validation.json"))
+            problems = check_reduced(runs)
+            if problems:
+                sys.exit("validation_study --reduced: " + "; ".join(problems))
+            return
+        write_docs(runs, machine, arguments.docs)
+        return
+    if not os.path.exists(BIOMECH):
+        sys.exit("validation_study: %s is missing; run bash scripts/run-tests.sh first" % BIOMECH)
+    if arguments.job:
+        kind, name, *rest = arguments.job
+        if kind == "truth" and not rest:
+            truth_job(name, arguments.output, arguments.reduced, arguments.threads)
+        elif kind == "method" and len(rest) == 1:
+            method_job(name, rest[0], arguments.output, arguments.reduced, arguments.threads)
+        else:
+            sys.exit("validation_study --job: write 'truth SCENE' or 'method SCENE METHOD'")
         return
     if arguments.truths:
         load = os.getloadavg()[0]
@@ -475,88 +652,8 @@ def main():
         if failed:
             sys.exit("validation_study --truths: scenes failed: " + ", ".join(failed))
         return
-    if arguments.large_shifts:
-        arguments.scenes = LARGE_SCENES
-    scenes = SCENES[:1] if arguments.reduced else SCENES
-    if arguments.scenes:
-        scenes = [scene for scene in SCENES if scene[0] in arguments.scenes]
-    load = os.getloadavg()[0]
-    runs = []
-    for name, centre, extra, variants in scenes:
-        print("scene", name, flush=True)
-        if arguments.reduced:
-            # A coarser ground truth (6 mm), a second one (8 mm) and registration (7 mm); elastix in a few iterations.
-            extra = extra + ["--truth-element-size", "6", "--truth-check", REDUCED_TRUTH_CHECK, "--elastix-parameters",
-                             os.path.join(ROOT, "test", "elastix-quick.txt")]
-            variants = ["hexahedra:7"]
-        runs.append(run(name, centre, extra, variants or VARIANTS, not arguments.reduced, arguments.output))
-    machine = machine_line(load)
-    os.makedirs(arguments.output, exist_ok=True)
-    if arguments.update_json:
-        with open(arguments.update_json) as handle:
-            earlier = json.load(handle)
-        rerun = {entry["name"]: entry for entry in runs}
-        order = [scene[0] for scene in SCENES]
-        merged = {entry["name"]: entry for entry in earlier["runs"]}
-        merged.update(rerun)
-        runs = sorted(merged.values(), key=lambda entry: order.index(entry["name"]) if entry["name"] in order else 99)
-        machine = earlier.get("machine", "") + "; rerun of %s: %s" % (", ".join(sorted(rerun)), machine)
-    record = os.path.join(arguments.output, "validation.json")
-    with open(record, "w") as handle:
-        json.dump({"runs": runs, "machine": machine}, handle, indent=1)
-    if not arguments.reduced and (not arguments.scenes or arguments.update_json):
-        os.makedirs(arguments.docs, exist_ok=True)
-        # Kept beside the table, so that a later run of some scenes can be merged into it (--update-json).
-        shutil.copyfile(record, os.path.join(arguments.docs, "validation.json"))
-        plot(runs, os.path.join(arguments.docs, "validation-error-vs-time.png"))
-        with open(os.path.join(arguments.docs, "validation.md"), "w") as handle:
-            handle.write(markdown(runs, machine))
-    failed = [entry["name"] for entry in runs if entry["status"] != 0]
-    if failed:
-        sys.exit("validation_study: scenes failed: " + ", ".join(failed))
-    if arguments.reduced:
-        # The reduced study is a check: registration must beat no registration
-        # by stated margins (measured on the reduced scene: p95 1.9 against 4.1 mm,
-        # edges 84 % against 60 %), and elastix, in a few iterations, must
-        # register at all (its field read and measured on the right grid).
-        methods = {method["name"]: method for method in runs[0]["report"]["methods"]}
-        none, registered = methods["no registration"], methods["biomechanical hexahedra 7 mm"]
-        elastix = methods["elastix B-spline"]
-        problems = []
-        if not registered["details"]["solve"]["converged"]:
-            problems.append("the registration's solve did not converge")
-        if registered["displacement_error_mm"]["p95"] > 0.6 * none["displacement_error_mm"]["p95"]:
-            problems.append("95th percentile error %.2f mm is not below 0.6 x no registration's %.2f mm" % (
-                registered["displacement_error_mm"]["p95"], none["displacement_error_mm"]["p95"]))
-        if registered["fraction_within_1_7_mm"] < none["fraction_within_1_7_mm"] + 0.1:
-            problems.append("edges within 1.7 mm %.3f do not exceed no registration's %.3f by 0.1" % (
-                registered["fraction_within_1_7_mm"], none["fraction_within_1_7_mm"]))
-        if elastix["displacement_error_mm"]["p95"] > ELASTIX_QUICK_P95 * none["displacement_error_mm"]["p95"]:
-            problems.append("elastix's 95th percentile error %.2f mm is not below %.1f x no registration's %.2f mm" % (
-                elastix["displacement_error_mm"]["p95"], ELASTIX_QUICK_P95, none["displacement_error_mm"]["p95"]))
-        agreement = runs[0]["report"]["ground_truth_check"]["difference_from_truth_mm"]["p95"]
-        if not agreement < REDUCED_TRUTH_AGREEMENT * none["displacement_error_mm"]["p95"]:
-            problems.append("the second ground truth (%s) differs from the first by %.2f mm at the 95th percentile, "
-                            "not below %.2f x no registration's %.2f mm" % (
-                                REDUCED_TRUTH_CHECK, agreement, REDUCED_TRUTH_AGREEMENT,
-                                none["displacement_error_mm"]["p95"]))
-        # Pointwise |e_2 - e_1| <= |T_1 - T_2|, so the percentiles differ by at most the truths' largest difference.
-        largest = runs[0]["report"]["ground_truth_check"]["difference_from_truth_mm"]["max"]
-        against = registered["details"].get("displacement_error_against_second_truth_mm", {}).get("p95")
-        unregistered = none["details"].get("displacement_error_against_second_truth_mm", {}).get("p95")
-        if unregistered is None or unregistered == none["displacement_error_mm"]["p95"]:
-            problems.append("no registration's error against the second truth (%s mm) is missing or equals its error "
-                            "against the first: the second truth was not used" % unregistered)
-        if against is None or abs(against - registered["displacement_error_mm"]["p95"]) > largest:
-            problems.append("the registration's 95th percentile against the second truth (%s mm) is not within the "
-                            "truths' largest difference (%.2f mm) of its error against the first" % (against, largest))
-        if problems:
-            sys.exit("validation_study --reduced: " + "; ".join(problems))
-        print("validation_study --reduced: registered p95 %.2f mm (none %.2f, elastix %.2f), edges %.1f %% (none %.1f %%), "
-              "the two truths differ by %.2f mm (p95)"
-              % (registered["displacement_error_mm"]["p95"], none["displacement_error_mm"]["p95"],
-                 elastix["displacement_error_mm"]["p95"], 100 * registered["fraction_within_1_7_mm"],
-                 100 * none["fraction_within_1_7_mm"], agreement))
+    parser.error("give --job, --report, --truths or --from-json; the study runs as "
+                 "`snakemake -s examples/validation/Snakefile -j2`")
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ packages=(
   calculix-ccx mricron-data insighttoolkit5-examples elastix
   python3 python3-dev python3-numpy python3-matplotlib python3-pytest
   pybind11-dev python3-nbclient python3-nbformat python3-ipykernel
+  snakemake
 )
 
 missing=()

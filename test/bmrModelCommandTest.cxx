@@ -526,7 +526,7 @@ TEST_F(ModelCommandTest, DemoNamesAResectionWithoutTumourAndAMissingElastix)
   EXPECT_EQ(run.exitCode, 1) << run.err;
   EXPECT_NE(run.err.find("the ground-truth solve did not converge"), std::string::npos) << run.err;
   EXPECT_NE(run.err.find("after 5 steps"), std::string::npos) << run.err;
-  EXPECT_FALSE(fs::exists(output / "demo-report.json"));
+  EXPECT_EQ(FileCount(output), 0u);
 
   // A second ground truth written without its size: named before any solve.
   run = Biomech("demo --truth-check tetrahedra -o " + Quoted(output));
@@ -550,4 +550,75 @@ TEST_F(ModelCommandTest, DemoNamesAResectionWithoutTumourAndAMissingElastix)
   EXPECT_NE(run.err.find("biomech: error: elastix failed"), std::string::npos) << run.err;
   EXPECT_NE(run.err.find("elastix-output.txt ends:"), std::string::npos) << run.err;
   EXPECT_EQ(run.err.find('\n'), run.err.size() - 1) << run.err;
+}
+
+// The validation workflow's cached truths: `demo --truth-only` writes a truth
+// that `demo --truth-from` registers exactly as one `demo` that solves it and
+// registers it in the same process; a folder that is not such a truth, or
+// scene options beside --truth-from, are named errors that write nothing.
+TEST_F(ModelCommandTest, DemoRegistersACachedTruthAsTheWholeDemoDoes)
+{
+  if (!fs::exists(Colin27Folder / "ch2.nii.gz"))
+  {
+    GTEST_SKIP() << "Colin27 (mricron-data) is not installed";
+  }
+  const std::string scene = " --quiet --overlays 0 --truth-element-size 8";
+  const fs::path    truth = m_Folder / "truth", cached = m_Folder / "cached", whole = m_Folder / "whole";
+  CommandResult     run = Biomech("demo" + scene + " --truth-only -o " + Quoted(truth));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const json truthReport = json::parse(ReadText(truth / "demo-report.json"));
+  EXPECT_TRUE(truthReport["ground_truth"]["reusable"].get<bool>());
+  ASSERT_EQ(truthReport["methods"].size(), 1u);
+  EXPECT_EQ(truthReport["methods"][0]["name"], "no registration");
+  for (const char * file : { "ground-truth-transform.h5", "ground-truth-forward-transform.h5", "tracked-points.csv",
+                             "intraoperative-brain-on-preoperative-grid.nii.gz", "intraoperative.nii.gz" })
+  {
+    EXPECT_TRUE(fs::exists(truth / file)) << file;
+  }
+
+  run = Biomech("demo --quiet --overlays 0 --variant hexahedra:9 --no-baseline --truth-from " + Quoted(truth) + " -o " +
+                Quoted(cached));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  run = Biomech("demo" + scene + " --variant hexahedra:9 --no-baseline -o " + Quoted(whole));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const json cachedReport = json::parse(ReadText(cached / "demo-report.json"));
+  const json wholeReport = json::parse(ReadText(whole / "demo-report.json"));
+  EXPECT_EQ(cachedReport["ground_truth"]["nodes"], wholeReport["ground_truth"]["nodes"]);
+  EXPECT_EQ(cachedReport["ground_truth"]["read_from"], truth.string());
+  EXPECT_FALSE(cachedReport["ground_truth"]["reusable"].get<bool>());
+  ASSERT_EQ(cachedReport["methods"].size(), 2u);
+  ASSERT_EQ(wholeReport["methods"].size(), 2u);
+  for (std::size_t k = 0; k < 2; ++k)
+  {
+    const json & a = cachedReport["methods"][k];
+    const json & b = wholeReport["methods"][k];
+    EXPECT_EQ(a["name"], b["name"]);
+    for (const char * statistic : { "mean", "p95", "max" })
+    {
+      // The truth's transforms, images and points read back from their files: equal to 1e-4 mm.
+      EXPECT_NEAR(a["displacement_error_mm"][statistic].get<double>(),
+                  b["displacement_error_mm"][statistic].get<double>(), 1e-4)
+        << a["name"] << " " << statistic;
+    }
+    EXPECT_NEAR(a["fraction_within_1_7_mm"].get<double>(), b["fraction_within_1_7_mm"].get<double>(), 1e-3) << a["name"];
+  }
+  // The registration really ran: it beats no registration.
+  EXPECT_LT(cachedReport["methods"][1]["displacement_error_mm"]["p95"].get<double>(),
+            cachedReport["methods"][0]["displacement_error_mm"]["p95"].get<double>());
+
+  const fs::path output = m_Folder / "out";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+    { "demo --truth-from " + Quoted(cached), "not the report of a reusable ground truth" },
+    { "demo --truth-from " + Quoted(m_Folder), "demo-report.json is missing; make the folder with `biomech demo --truth-only" },
+    { "demo --truth-from " + Quoted(truth) + " --shift 5", "--shift" },
+    { "demo --truth-only --variant hexahedra:5", "--variant" },
+  };
+  for (const auto & [arguments, expected] : cases)
+  {
+    run = Biomech(arguments + " -o " + Quoted(output));
+    EXPECT_EQ(run.exitCode, 1) << arguments << "\n" << run.err;
+    EXPECT_NE(run.err.find(expected), std::string::npos) << "expected '" << expected << "' in: " << run.err;
+    EXPECT_EQ(FileCount(output), 0u) << arguments;
+    fs::remove_all(output);
+  }
 }
