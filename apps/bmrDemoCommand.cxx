@@ -240,6 +240,12 @@ RunDemo(DemoOptions options)
   std::optional<TruthFiles> cached;
   if (!options.truthFrom.empty())
   {
+    std::error_code same;
+    if (fs::weakly_canonical(options.truthFrom, same) == fs::weakly_canonical(output, same))
+    {
+      throw Error("--truth-from " + options.truthFrom + " is also the output folder: the registration would replace "
+                  "the truth's report; write it elsewhere with -o");
+    }
     cached = ReadTruthFiles(options.truthFrom);
     const json & cachedTruth = cached->report;
     const json & scene = cachedTruth["ground_truth"];

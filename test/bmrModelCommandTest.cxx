@@ -613,6 +613,11 @@ TEST_F(ModelCommandTest, DemoRegistersACachedTruthAsTheWholeDemoDoes)
     { "demo --truth-from " + Quoted(truth) + " --shift 5", "--shift" },
     { "demo --truth-only --variant hexahedra:5", "--variant" },
   };
+  // The truth's own folder as the output: refused before anything is written there.
+  run = Biomech("demo --truth-from " + Quoted(truth) + " -o " + Quoted(truth));
+  EXPECT_EQ(run.exitCode, 1) << run.err;
+  EXPECT_NE(run.err.find("is also the output folder"), std::string::npos) << run.err;
+  EXPECT_TRUE(json::parse(ReadText(truth / "demo-report.json"))["ground_truth"]["reusable"].get<bool>());
   for (const auto & [arguments, expected] : cases)
   {
     run = Biomech(arguments + " -o " + Quoted(output));
