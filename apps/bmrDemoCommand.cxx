@@ -247,15 +247,12 @@ RunDemo(DemoOptions options)
                   "the truth's report; write it elsewhere with -o");
     }
     cached = ReadTruthFiles(options.truthFrom);
-    const json & cachedTruth = cached->report;
-    const json & scene = cachedTruth["ground_truth"];
-    options.image = cachedTruth.value("preoperative_image", options.image);
-    options.mask = cachedTruth.value("brain_mask", options.mask);
-    const json & centre = scene.at("craniotomy_centre_mm");
-    options.truth.craniotomyCentre = Vector3(centre[0].get<double>(), centre[1].get<double>(), centre[2].get<double>());
-    options.truth.craniotomyRadius = scene.value("craniotomy_radius_mm", options.truth.craniotomyRadius);
-    options.truth.tumourStiffness = scene.value("tumour_stiffness", options.truth.tumourStiffness);
-    options.truth.csfPoissonRatio = scene.value("csf_poisson_ratio", options.truth.csfPoissonRatio);
+    options.image = cached->preoperativeImage;
+    options.mask = cached->brainMask;
+    options.truth.craniotomyCentre = cached->scene.craniotomyCentre;
+    options.truth.craniotomyRadius = cached->scene.craniotomyRadius;
+    options.truth.tumourStiffness = cached->scene.tumourStiffness;
+    options.truth.csfPoissonRatio = cached->scene.csfPoissonRatio;
   }
   const RegistrationImage::Pointer      preoperative = ReadImage<RegistrationImage>(options.image, "preoperative image");
   const RegistrationLabelImage::Pointer brainMask = ReadMaskImage(options.mask, "brain mask");

@@ -144,6 +144,18 @@ ReadTruthFiles(const fs::path & folder)
   truth.shift = block.value("shift_mm", 0.0);
   truth.truthFitMaxResidual = block.value("fit_max_residual_mm", 0.0);
   truth.resectionCavityRadius = block.value("resection_cavity_radius_mm", 0.0);
+  SyntheticBrainShiftSettings & scene = files.scene;
+  scene.craniotomyCentre = ReadVector(block, "craniotomy_centre_mm", reportPath);
+  scene.craniotomyRadius = block.value("craniotomy_radius_mm", scene.craniotomyRadius);
+  scene.tumourStiffness = block.value("tumour_stiffness", scene.tumourStiffness);
+  scene.csfPoissonRatio = block.value("csf_poisson_ratio", scene.csfPoissonRatio);
+  files.preoperativeImage = report.value("preoperative_image", std::string());
+  files.brainMask = report.value("brain_mask", std::string());
+  if (files.preoperativeImage.empty() || files.brainMask.empty())
+  {
+    throw Error("--truth-from: " + reportPath.string() +
+                " does not name its preoperative image and brain mask; rerun `biomech demo --truth-only`");
+  }
   if (report.contains("ground_truth_check"))
   {
     files.secondTruth = ReadTruthTransform(folder, kSecondTruthTransform);

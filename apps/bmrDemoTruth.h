@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include <filesystem>
+#include <string>
 
 namespace bmr
 {
@@ -27,11 +28,16 @@ WriteTruthFiles(const SyntheticBrainShift & truth, const std::filesystem::path &
 
 /** What `demo --truth-only` wrote: the truth (only what a registration and
  *  its scoring use: not the model, the solve or the timer, whose numbers the
- *  report holds), its report (demo-report.json), and the second truth of
+ *  report holds), the scene settings the registration shares with it
+ *  (craniotomy, tumour stiffness, CSF Poisson's ratio), the images it was
+ *  made from, its report (demo-report.json), and the second truth of
  *  --truth-check when there was one (else null). */
 struct TruthFiles
 {
   SyntheticBrainShift            truth;
+  SyntheticBrainShiftSettings    scene;
+  std::string                    preoperativeImage;
+  std::string                    brainMask;
   nlohmann::json                 report;
   RegistrationTransform::Pointer secondTruth;
 };
