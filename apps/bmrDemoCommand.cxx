@@ -20,6 +20,7 @@
 #include "bmrMeshIO.h"
 #include "bmrElectrodes.h"
 #include "bmrSyntheticBrainShift.h"
+#include "bmrUnits.h"
 
 #include <nlohmann/json.hpp>
 
@@ -59,6 +60,7 @@ struct DemoOptions
   std::string                 load = "points";
   std::string                 surfaceMatch = "closest";
   double                      registrationGravity = 0.0; // g
+  int                         gravityFitCandidates = 0;
   bool                        noBaseline = false;
   bool                        truthOnly = false; // solve and write the truth, register nothing
   std::string                 truthFrom;         // a --truth-only folder to read the truth from
@@ -419,17 +421,22 @@ RunDemo(DemoOptions options)
     settings.model.craniotomyCentre = options.truth.craniotomyCentre;
     settings.model.craniotomyRadius = options.truth.craniotomyRadius;
     // The head's position gives gravity's direction in the operating room; its effective size is a model choice.
-    settings.model.gravity = options.registrationGravity * 9810.0 * truth.down;
+    settings.model.gravity = options.registrationGravity * units::StandardGravity * truth.down;
     settings.model.materials.tumour.youngsModulus = options.truth.tumourStiffness * ParenchymaMaterial().youngsModulus;
-    // The registration's CSF has the ground truth's Poisson's ratio (its stiffness stays the default).
+    settings.gravityFitCandidates = options.gravityFitCandidates;
+    // The registration's CSF has the ground truth's Poisson's ratio (its stiffness stays the default) and, as
+    // the drained CSF it is, the ground truth's (almost no) weight.
     Material csf = CsfMaterial();
     csf.poissonRatio = options.truth.csfPoissonRatio;
+    csf.density = options.truth.csfDensity;
     settings.model.materials.classMaterials = DefaultClassMaterials(settings.model.classifier.classes, csf);
     const BrainShiftRegistrationResult result = RegisterBrainShift(inputs, settings, stages);
     MethodResult method;
     method.name = "biomechanical " + std::string(ImageGridKindName(grid.kind)) + " " +
                   FormatNumber(grid.elementSize) + " mm" +
-                  (options.registrationGravity > 0.0 ? " + " + FormatNumber(options.registrationGravity) + " g" : "");
+                  (options.gravityFitCandidates > 0 ? " + fitted gravity"
+                   : options.registrationGravity > 0.0 ? " + " + FormatNumber(options.registrationGravity) + " g"
+                                                       : "");
     method.stages = result.timer.Json();
     // The registration's time: everything but the evaluation, which needs the intraoperative image.
     method.seconds = method.stages["total"].get<double>() - result.timer.Seconds("evaluate");
@@ -523,7 +530,7 @@ RunDemo(DemoOptions options)
       { "skull_closing_mm", options.truth.skullClosing },
       { "shift_mm", truth.shift },
       { "gravity_mm_s2", { truth.gravity.x(), truth.gravity.y(), truth.gravity.z() } },
-      { "gravity_g", truth.gravity.norm() / 9810.0 },
+      { "gravity_g", truth.gravity.norm() / units::StandardGravity },
       { "solve_steps", truth.solve.steps },
       { "solve_restarts", truth.solve.restarts },
       { "solve_estimated_error_mm", truth.solve.estimatedError },
@@ -676,6 +683,11 @@ AddDemoCommand(CLI::App & app)
   demo->add_option("--registration-gravity", options->registrationGravity,
                    "Gravity in the registration's model (g, along the ground truth's direction); 0: surface only")
     ->capture_default_str();
+  demo->add_option("--gravity-fit-candidates", options->gravityFitCandidates,
+                   "Fit the registration's gravity to the intraoperative image: this many sizes from 0 to "
+                   "--registration-gravity solved, the best match (mutual information) kept (3 or more); 0: as given")
+    ->check(CLI::NonNegativeNumber)
+    ->needs("--registration-gravity");
   demo->add_flag("--no-baseline", options->noBaseline, "Skip the B-spline intensity registration");
   demo->add_flag("--elastix", options->elastix,
                  "Also register with elastix (Debian's elastix; affine then B-spline, Mattes mutual information; "
@@ -709,7 +721,8 @@ AddDemoCommand(CLI::App & app)
   {
     truthFrom->excludes(demo->get_option(scene));
   }
-  for (const char * registration : { "--variant", "--load", "--surface-match", "--registration-gravity", "--elastix",
+  for (const char * registration : { "--variant", "--load", "--surface-match", "--registration-gravity",
+                                     "--gravity-fit-candidates", "--elastix",
                                      "--elastix-parameters", "--baseline-shrink-factors", "--baseline-iterations",
                                      "--truth-from" })
   {

@@ -252,6 +252,18 @@ struct BrainShiftRegistrationSettings
     settings.tolerance = 0.01;
     return settings;
   }();
+  /** Gravity's size fitted to the intraoperative image; 0: gravity as given.
+   *  After CSF loss the brain sinks under a weight that depends on how much
+   *  CSF drained, which nothing measures; the head's position gives only its
+   *  direction. With gravity (model.gravity: its direction, and the largest
+   *  size tried) and an intraoperative image, this many sizes evenly spread
+   *  over [0, |gravity|] are solved, then the vertex of the parabola through
+   *  the best and its neighbours; the size whose registered preoperative
+   *  image has the highest Mattes mutual information with the intraoperative
+   *  image inside its brain (its brain mask, or the preoperative one) is
+   *  kept. One parameter, so contrast, noise and a resection cannot bend the
+   *  field the way they bend an intensity registration's. */
+  int gravityFitCandidates = 0;
   /** Transform fit: largest residual at the nodes, and the finest control-point spacing (mm). */
   double fitTolerance = 0.1;
   double minimumControlPointSpacing = 1.0;
@@ -306,6 +318,11 @@ struct BrainShiftRegistrationResult
 {
   BrainModel                     model;
   SolveResult                    solve;
+  /** The gravity fit (settings.gravityFitCandidates): the sizes solved
+   *  (mm/s^2) with the mutual information of each (higher: better), in the
+   *  order solved; empty without a fit. */
+  std::vector<std::pair<double, double>> gravityFit;
+  Vector3                        gravity = Vector3::Zero(); // the solve's body acceleration (mm/s^2)
   RegistrationTransform::Pointer transform;      // backward map
   double                         fitMaxResidual = 0.0, fitRmsResidual = 0.0; // mm, at the nodes
   int                            fitLevels = 0;

@@ -15,6 +15,7 @@ constexpr double PascalToInternal = 1e-6;            // Pa -> N/mm^2
 constexpr double InternalToPascal = 1e6;             // N/mm^2 -> Pa
 constexpr double DensityToInternal = 1e-12;          // kg/m^3 -> t/mm^3
 constexpr double InternalEnergyToJoule = 1e-3;       // N*mm -> J
+constexpr double StandardGravity = 9810.0;           // g -> mm/s^2
 } // namespace units
 } // namespace bmr
 

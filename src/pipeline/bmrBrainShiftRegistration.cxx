@@ -17,9 +17,11 @@
 #include "itkEdgeHausdorffDistanceImageFilter.h"
 #include "itkFuzzyCMeansClassifierImageFilter.h"
 #include "itkIdentityTransform.h"
+#include "itkRegistrationComponents.h"
 #include "itkTransformWarpImageFilter.h"
 
 #include "bmrScene.h"
+#include "bmrUnits.h"
 
 #include <omp.h>
 
@@ -29,6 +31,7 @@
 #include <future>
 #include <cmath>
 #include <iomanip>
+#include <limits>
 #include <sstream>
 
 namespace bmr
@@ -146,6 +149,88 @@ UpdateStage(TFilter * filter, const char * what)
   catch (const itk::ExceptionObject & exception)
   {
     throw Error(std::string(what) + ": " + itk::PlainDescription(exception.GetDescription()));
+  }
+}
+
+/** An acceleration (mm/s^2) in g, for messages. */
+std::string
+InG(double acceleration)
+{
+  std::ostringstream text;
+  text << std::setprecision(3) << acceleration / units::StandardGravity << " g";
+  return text.str();
+}
+
+using SamplePointSet = itk::FixedWorkUnitsMattesMetric<RegistrationImage>::FixedSampledPointSetType;
+
+/** The centres of the voxels of `image` inside `brain` (a mask on any grid):
+ *  every second voxel along each axis, then evenly thinned to at most
+ *  `largest`; the same samples score every candidate of a fit. */
+SamplePointSet::Pointer
+BrainSamplePoints(const RegistrationImage * image, const RegistrationLabelImage * brain, std::size_t largest = 50000)
+{
+  std::vector<RegistrationImage::PointType> inside;
+  const auto                                size = image->GetLargestPossibleRegion().GetSize();
+  const auto                                start = image->GetLargestPossibleRegion().GetIndex();
+  RegistrationImage::IndexType              index;
+  for (index[2] = start[2]; index[2] < start[2] + static_cast<long>(size[2]); index[2] += 2)
+  {
+    for (index[1] = start[1]; index[1] < start[1] + static_cast<long>(size[1]); index[1] += 2)
+    {
+      for (index[0] = start[0]; index[0] < start[0] + static_cast<long>(size[0]); index[0] += 2)
+      {
+        RegistrationImage::PointType point;
+        image->TransformIndexToPhysicalPoint(index, point);
+        RegistrationLabelImage::IndexType maskIndex;
+        if (brain->TransformPhysicalPointToIndex(point, maskIndex) && brain->GetPixel(maskIndex) > 0)
+        {
+          inside.push_back(point);
+        }
+      }
+    }
+  }
+  if (inside.empty())
+  {
+    throw Error("the gravity fit found no voxel of the intraoperative image inside the brain: give an "
+                "intraoperative brain mask that overlaps the image");
+  }
+  auto         samples = SamplePointSet::New();
+  const double step = std::max(1.0, static_cast<double>(inside.size()) / static_cast<double>(largest));
+  std::size_t  count = 0;
+  for (double position = 0.0; position < static_cast<double>(inside.size()); position += step)
+  {
+    samples->SetPoint(count++, inside[static_cast<std::size_t>(position)]);
+  }
+  return samples;
+}
+
+/** Mattes mutual information (32 bins, one work unit: the same for any
+ *  thread count) between `fixed` at `samples` and `moving` at their images
+ *  under `transform`; higher: a better match. */
+double
+MutualInformation(const RegistrationImage *      fixed,
+                  const RegistrationImage *      moving,
+                  const RegistrationTransform *  transform,
+                  const SamplePointSet *         samples)
+{
+  auto metric = itk::FixedWorkUnitsMattesMetric<RegistrationImage>::New();
+  metric->SetNumberOfHistogramBins(32);
+  metric->SetFixedNumberOfWorkUnits(1);
+  metric->SetUseMovingImageGradientFilter(false);
+  metric->SetUseFixedImageGradientFilter(false);
+  metric->SetFixedImage(fixed);
+  metric->SetMovingImage(moving);
+  metric->SetMovingTransform(const_cast<RegistrationTransform *>(transform));
+  metric->SetFixedSampledPointSet(samples);
+  metric->SetUseSampledPointSet(true);
+  try
+  {
+    metric->Initialize();
+    return -metric->GetValue();
+  }
+  catch (const itk::ExceptionObject & exception)
+  {
+    throw Error("the gravity fit could not compare the images: " + itk::PlainDescription(exception.GetDescription()));
   }
 }
 
@@ -606,6 +691,23 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
       throw Error("label map " + std::to_string(k) + " is empty: give a label image on the preoperative grid");
     }
   }
+  if (settings.gravityFitCandidates != 0)
+  {
+    if (settings.gravityFitCandidates < 3)
+    {
+      throw Error("gravity_fit_candidates is " + std::to_string(settings.gravityFitCandidates) +
+                  "; give 0 (gravity as given) or 3 or more sizes to try");
+    }
+    if (settings.model.gravity.isZero())
+    {
+      throw Error("a gravity fit needs gravity: give its direction and the largest size to try (--gravity)");
+    }
+    if (inputs.intraoperative.image.IsNull())
+    {
+      throw Error("a gravity fit compares the registered image with the intraoperative one: give the "
+                  "intraoperative image (--intraoperative-image)");
+    }
+  }
   BrainShiftRegistrationResult result;
   result.timer = StageTimer(stageCallback);
   StageTimer & timer = result.timer;
@@ -619,20 +721,121 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
   // output (the nodes carrying their displacements) is the fitter's input.
   using PointSetType = itk::DisplacementPointSetType<3>;
   using DeformationType = itk::BiomechanicalDeformationFilter<PointSetType>;
-  auto deformation = DeformationType::New();
-  deformation->SetModelInput(result.model.pipelineModel);
-  if (result.model.prescribedDisplacements.IsNotNull())
-  {
-    deformation->SetPrescribedDisplacements(result.model.prescribedDisplacements);
-  }
-  if (result.model.contactSurface.IsNotNull())
-  {
-    deformation->SetContactSurface(result.model.contactSurface);
-  }
-  deformation->SetSolverSettings(settings.solver);
   // 0: OpenMP's default (OMP_NUM_THREADS), as the solver's own default.
-  const int threads = settings.solver.threads != 0 ? settings.solver.threads : settings.model.threads;
-  deformation->SetNumberOfWorkUnits(static_cast<itk::ThreadIdType>(threads > 0 ? threads : omp_get_max_threads()));
+  const int  threads = settings.solver.threads != 0 ? settings.solver.threads : settings.model.threads;
+  const auto makeDeformation = [&](const itk::BiomechanicalModelObject * model) {
+    auto deformation = DeformationType::New();
+    deformation->SetModelInput(model);
+    if (result.model.prescribedDisplacements.IsNotNull())
+    {
+      deformation->SetPrescribedDisplacements(result.model.prescribedDisplacements);
+    }
+    if (result.model.contactSurface.IsNotNull())
+    {
+      deformation->SetContactSurface(result.model.contactSurface);
+    }
+    deformation->SetSolverSettings(settings.solver);
+    deformation->SetNumberOfWorkUnits(static_cast<itk::ThreadIdType>(threads > 0 ? threads : omp_get_max_threads()));
+    return deformation;
+  };
+  using FitterType = itk::DisplacementPointSetToBSplineTransformFilter<PointSetType>;
+  const auto fitTransform = [&](const DeformationType * deformation) {
+    auto fitter = FitterType::New();
+    fitter->SetInput(deformation->GetOutput());
+    fitter->SetReferenceImage(inputs.preoperativeImage);
+    fitter->SetTolerance(settings.fitTolerance);
+    fitter->SetMinimumControlPointSpacing(settings.minimumControlPointSpacing);
+    UpdateStage(fitter.GetPointer(), "fitting the transform failed");
+    return fitter;
+  };
+
+  auto deformation = makeDeformation(result.model.pipelineModel);
+  result.gravity = result.model.model.bodyAcceleration;
+  if (settings.gravityFitCandidates > 0)
+  {
+    timer.Run("gravity fit", [&] {
+      const Vector3 largest = result.model.model.bodyAcceleration;
+      // Every candidate's weight comes from the filter's gravity; zero: the model's own, here none.
+      Model weightless = result.model.pipelineModel->GetModel();
+      weightless.bodyAcceleration.setZero();
+      auto weightlessModel = itk::BiomechanicalModelObject::New();
+      weightlessModel->SetModel(std::move(weightless));
+      const auto samples = BrainSamplePoints(inputs.intraoperative.image,
+                                             inputs.intraoperative.imageBrainMask.IsNotNull()
+                                               ? inputs.intraoperative.imageBrainMask.GetPointer()
+                                               : itk::MakeImageFromBiomechanicalVolume<RegistrationLabelImage>(
+                                                   result.model.brainMask)
+                                                   .GetPointer());
+      double     bestInformation = -std::numeric_limits<double>::infinity();
+      double     bestSize = 0.0;
+      const auto evaluate = [&](double size) {
+        auto candidate = makeDeformation(weightlessModel);
+        const Vector3 gravity = size * largest.normalized();
+        candidate->SetGravity(DeformationType::VectorType(gravity.data()));
+        UpdateStage(candidate.GetPointer(), "the solve failed");
+        if (!candidate->GetConverged())
+        {
+          result.warnings.push_back("gravity fit: the solve at " + InG(size) + " did not converge (" +
+                                    candidate->GetSolveResult().message + ")");
+        }
+        const auto fitter = fitTransform(candidate);
+        const double information =
+          MutualInformation(inputs.intraoperative.image, inputs.preoperativeImage, fitter->GetTransform(), samples);
+        result.gravityFit.emplace_back(size, information);
+        if (information > bestInformation)
+        {
+          bestInformation = information;
+          bestSize = size;
+          deformation = candidate;
+        }
+      };
+      const int count = settings.gravityFitCandidates;
+      for (int k = 0; k < count; ++k)
+      {
+        evaluate(k * largest.norm() / (count - 1));
+      }
+      // Two steps of successive parabolic interpolation: the vertex of the
+      // parabola through the best size and its nearest neighbours each side.
+      for (int refinement = 0; refinement < 2; ++refinement)
+      {
+        std::vector<std::pair<double, double>> tried = result.gravityFit;
+        std::sort(tried.begin(), tried.end());
+        const auto best = static_cast<std::size_t>(
+          std::max_element(tried.begin(), tried.end(),
+                           [](const auto & a, const auto & b) { return a.second < b.second; }) -
+          tried.begin());
+        if (best == 0 || best + 1 == tried.size())
+        {
+          break;
+        }
+        const auto [x0, y0] = tried[best - 1];
+        const auto [x1, y1] = tried[best];
+        const auto [x2, y2] = tried[best + 1];
+        const double denominator = (x1 - x0) * (y1 - y2) - (x1 - x2) * (y1 - y0);
+        if (!(std::abs(denominator) > 0.0))
+        {
+          break;
+        }
+        const double vertex =
+          x1 - 0.5 * ((x1 - x0) * (x1 - x0) * (y1 - y2) - (x1 - x2) * (x1 - x2) * (y1 - y0)) / denominator;
+        // Nearer than 1 % of the range to a size already solved: nothing new to learn.
+        const double resolution = 0.01 * largest.norm();
+        if (!(vertex > x0 && vertex < x2) || std::abs(vertex - x0) < resolution ||
+            std::abs(vertex - x1) < resolution || std::abs(vertex - x2) < resolution)
+        {
+          break;
+        }
+        evaluate(vertex);
+      }
+      if (bestSize == largest.norm())
+      {
+        result.warnings.push_back("gravity fit: the best size is the largest tried (" + InG(largest.norm()) +
+                                  "); give a larger gravity to try larger sizes");
+      }
+      result.gravity = bestSize * largest.normalized();
+      result.model.model.bodyAcceleration = result.gravity;
+    });
+  }
   if (solverProgress)
   {
     deformation->AddObserver(itk::ProgressEvent(), [&](const itk::EventObject &) {
@@ -653,14 +856,8 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
                               "; the transform and the warped image come from the last state");
   }
 
-  using FitterType = itk::DisplacementPointSetToBSplineTransformFilter<PointSetType>;
   timer.Run("fit", [&] {
-    auto fitter = FitterType::New();
-    fitter->SetInput(deformation->GetOutput());
-    fitter->SetReferenceImage(inputs.preoperativeImage);
-    fitter->SetTolerance(settings.fitTolerance);
-    fitter->SetMinimumControlPointSpacing(settings.minimumControlPointSpacing);
-    UpdateStage(fitter.GetPointer(), "fitting the transform failed");
+    const auto fitter = fitTransform(deformation);
     result.transform = const_cast<RegistrationTransform *>(fitter->GetTransform());
     const itk::BSplineFitReport & report = fitter->GetReport();
     result.fitMaxResidual = report.maximumResidual;
@@ -846,6 +1043,17 @@ RegistrationReportJson(const BrainShiftRegistrationResult & result, const BrainS
                       { "contact_nodes", solve.contactNodes },
                       { "max_penetration_mm", solve.maxPenetration },
                       { "active_components", solve.activeComponents } };
+  report["gravity_mm_s2"] = { result.gravity.x(), result.gravity.y(), result.gravity.z() };
+  if (!result.gravityFit.empty())
+  {
+    nlohmann::json candidates = nlohmann::json::array();
+    for (const auto & [size, information] : result.gravityFit)
+    {
+      candidates.push_back({ { "gravity_g", size / units::StandardGravity }, { "mutual_information", information } });
+    }
+    report["gravity_fit"] = { { "gravity_g", result.gravity.norm() / units::StandardGravity },
+                              { "candidates", candidates } };
+  }
   report["fit"] = { { "max_residual_mm", result.fitMaxResidual },
                     { "rms_residual_mm", result.fitRmsResidual },
                     { "levels", result.fitLevels },

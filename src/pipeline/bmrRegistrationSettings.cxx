@@ -118,6 +118,15 @@ MakeFields()
                          csf.poissonRatio = v;
                          SetClassMaterials(s, csf);
                        }));
+  fields.push_back(Row("model", "csf_density", Kind::Number, "kg/m^3", 0.0, false, kInfinity, false,
+                       "density of the CSF class under gravity; drained CSF weighs almost nothing (1), and 10 Pa "
+                       "CSF cells cannot carry a fluid's weight (1000) without folding",
+                       [](const Settings & s) { return Csf(s).density; },
+                       [](Settings & s, double v) {
+                         Material csf = Csf(s);
+                         csf.density = v;
+                         SetClassMaterials(s, csf);
+                       }));
   fields.push_back(Row("model", "skull_gap", Kind::Number, "mm", 0.0, false, kInfinity, false,
                        "gap between the brain surface and the rigid skull made from it",
                        [](const Settings & s) { return s.model.skullGap; },
@@ -150,6 +159,12 @@ MakeFields()
                        "dynamic relaxation step limit; reaching it is reported as not converged",
                        [](const Settings & s) { return s.solver.maxSteps; },
                        [](Settings & s, double v) { s.solver.maxSteps = static_cast<int>(v); }));
+  fields.push_back(Row("solve", "gravity_fit_candidates", Kind::Integer, "", 0, false, 100, false,
+                       "with gravity and an intraoperative image: sizes of gravity from 0 to the given one solved "
+                       "(3 or more), the one whose registered image matches the intraoperative image best (mutual "
+                       "information) kept; 0: gravity as given",
+                       [](const Settings & s) { return s.gravityFitCandidates; },
+                       [](Settings & s, double v) { s.gravityFitCandidates = static_cast<int>(v); }));
   // The transform fit.
   fields.push_back(Row("fit", "fit_tolerance", Kind::Number, "mm", 0.0, true, kInfinity, false,
                        "largest residual of the B-spline transform at the nodes",

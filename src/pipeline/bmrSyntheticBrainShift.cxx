@@ -7,6 +7,8 @@
 #include "itkImageRegionConstIteratorWithIndex.h"
 #include "itkImageRegionIteratorWithIndex.h"
 
+#include "bmrUnits.h"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -438,7 +440,7 @@ MakeSyntheticBrainShiftModel(const RegistrationImage *           preoperativeIma
     contact.erase(std::remove_if(contact.begin(), contact.end(), [&](Index node) { return exposed[node] != 0; }),
                   contact.end());
   }
-  truth.gravity = settings.gravity * 9810.0 * down;
+  truth.gravity = settings.gravity * units::StandardGravity * down;
   model.bodyAcceleration = truth.gravity;
   return truth;
 }
