@@ -86,9 +86,24 @@ TRUTH_CHECKS = [
 REDUCED_TRUTH_CHECK = "hexahedra:8"
 REDUCED_TRUTH_AGREEMENT = 0.25
 VARIANTS = ["hexahedra:5", "hexahedra:7", "mixed:5", "tetrahedra:7", "meshless:7"]
+# Every scene also has the 5 mm hexahedra with gravity along the head's "down" and its size fitted to the
+# intraoperative image (`--gravity-fit-candidates`): five sizes from none to 1 g (the whole brain's weight, all CSF
+# drained), refined twice by parabolas. The truth's 0.3 g is not given to it.
+GRAVITY_FIT_METHOD = "hexahedra-5-gravity"
+GRAVITY_FIT = ["--registration-gravity", "1", "--gravity-fit-candidates", "5"]
 # The reduced study's elastix (test/elastix-quick.txt: one B-spline stage, few iterations) must bring the 95th
 # percentile error below this fraction of no registration's.
 ELASTIX_QUICK_P95 = 0.8
+
+
+def source_commit():
+    """The checkout's commit (short), with "+changes" when tracked files differ from it; None outside git."""
+    commit = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
+    if commit.returncode != 0:
+        return None
+    changed = subprocess.run(["git", "-C", ROOT, "status", "--porcelain", "--untracked-files=no"],
+                             capture_output=True, text=True)
+    return commit.stdout.strip() + ("+changes" if changed.stdout.strip() else "")
 
 
 def run_demo(name, arguments, folder):
@@ -108,7 +123,7 @@ def run_demo(name, arguments, folder):
     error = error.replace("biomech: error: ", "").split(". Likely cause")[0]
     return {"name": name, "status": result.returncode, "error": error, "seconds": seconds, "report": report,
             "host": socket.gethostname(), "cores": os.cpu_count(), "date": time.strftime("%Y-%m-%d %H:%M"),
-            "load": [load, os.getloadavg()[0]]}
+            "load": [load, os.getloadavg()[0]], "commit": source_commit()}
 
 
 def run(name, centre, extra, variants, peers, output_root):
@@ -135,19 +150,23 @@ def scenes(reduced=False, only=None):
         truth = [*extra, *REDUCED_TRUTH] if reduced else extra
         biomechanical = REDUCED_VARIANTS if reduced else (variants or VARIANTS)
         methods = [variant.replace(":", "-") for variant in biomechanical] + (["elastix"] if reduced else
-                                                                               ["bspline", "elastix"])
+                                                                               [GRAVITY_FIT_METHOD, "bspline",
+                                                                                "elastix"])
         table.append((name, centre, truth, methods))
     return table
 
 
 def method_arguments(method, reduced=False):
-    """`biomech demo` arguments of one method: KIND-SIZE (a biomechanical registration), bspline or elastix."""
+    """`biomech demo` arguments of one method: KIND-SIZE (a biomechanical registration), GRAVITY_FIT_METHOD (5 mm
+    hexahedra with gravity fitted to the intraoperative image), bspline or elastix."""
     if method == "bspline":
         return ["--variant", "none"]
     if method == "elastix":
         parameters = (["--elastix-parameters", os.path.join(ROOT, "test", "elastix-quick.txt")] if reduced
                       else ["--elastix"])
         return ["--variant", "none", "--no-baseline", *parameters]
+    if method == GRAVITY_FIT_METHOD:
+        return ["--variant", "hexahedra:5", *GRAVITY_FIT, "--no-baseline"]
     kind, _, size = method.partition("-")
     return ["--variant", kind + ":" + size, "--no-baseline"]
 
@@ -205,12 +224,18 @@ def collect(output, reduced=False):
     hosts = sorted({job.get("host", "?") for job in jobs})
     loads = [value for job in jobs for value in job.get("load", [])]
     dates = sorted(job.get("date", "") for job in jobs)
-    commit = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
-    machine = "%s, %d cores, %s, %s to %s, load average %.1f to %.1f at the %d jobs' starts and ends%s" % (
-        platform.processor() or platform.machine(), jobs[0].get("cores") or os.cpu_count(),
-        "host " + hosts[0] if len(hosts) == 1 else "%d hosts" % len(hosts), dates[0], dates[-1],
-        min(loads or [0.0]), max(loads or [0.0]), len(jobs),
-        "; biomech built from commit " + commit.stdout.strip() if commit.returncode == 0 else "")
+    # Jobs cached from an earlier run keep the commit they ran with (a job's record names it).
+    commits = {}
+    for job in jobs:
+        commit = job.get("commit") or "unrecorded"
+        commits[commit] = commits.get(commit, 0) + 1
+    built = ", ".join("%s (%d jobs)" % item for item in sorted(commits.items()))
+    machine = "%s, %d cores, %s, %s to %s, load average %.1f to %.1f at the %d jobs' starts and ends; biomech " \
+              "built from commit %s" % (
+                  platform.processor() or platform.machine(), jobs[0].get("cores") or os.cpu_count(),
+                  "host " + hosts[0] if len(hosts) == 1 else "%d hosts" % len(hosts), dates[0], dates[-1],
+                  min(loads or [0.0]), max(loads or [0.0]), len(jobs),
+                  built if len(commits) > 1 else next(iter(commits)))
     return runs, machine
 
 
@@ -262,15 +287,21 @@ def reading(runs, machine=""):
     if not any("meshless" in name for entry in runs for name in methods(entry)):
         lines.append("* **Meshless** is not among this run's variants; what it does on Colin27 (its time, and the "
                      "large shifts it does not converge for yet) is in docs/model-building.md, Limits.")
-    ten = [(entry["name"], methods(entry).get("biomechanical hexahedra 5 mm")) for entry in runs
-           if "10mm" in entry["name"]]
-    ten = [(name, method) for name, method in ten if method]
-    if ten:
-        values = [p95(method) for _, method in ten]
+    for row, why in ((PLAIN_ROW, "from the exposed surface's displacements alone: the ground truth's gravity "
+                                 "moves tissue that the exposed surface does not show (docs/registration.md)"),
+                     (GRAVITY_FIT_ROW, "with gravity along the head's down and its size fitted to the "
+                                       "intraoperative image")):
+        ten = [methods(entry).get(row) for entry in runs if "10mm" in entry["name"]]
+        values = [p95(method) for method in ten if method]
+        if not values:
+            continue
         verdict = "met" if max(values) < 1.0 else "missed by up to %.2f mm" % (max(values) - 1.0)
-        lines.append("* **Target: 95th percentile under 1 mm for a 10 mm shift (5 mm hexahedra): %s** "
-                     "(%.2f-%.2f mm over %d scenes). The ground truth's gravity (0.3 g) moves tissue that the exposed "
-                     "surface does not show (docs/registration.md)." % (verdict, min(values), max(values), len(values)))
+        fitted = [fitted_gravity(method) for method in ten if method and fitted_gravity(method) is not None]
+        lines.append("* **Target: 95th percentile under 1 mm for a 10 mm shift (%s): %s** (%.2f-%.2f mm over %d "
+                     "scenes), %s%s." % (row.replace("biomechanical ", ""), verdict, min(values), max(values),
+                                         len(values), why,
+                                         (": %.2f-%.2f g fitted (the truths: %s g)" % (
+                                             min(fitted), max(fitted), truth_gravities(runs))) if fitted else ""))
     wins, compared, rows = 0, 0, []
     for entry in runs:
         found = methods(entry)
@@ -302,7 +333,9 @@ def reading(runs, machine=""):
                      "ground truth, only the intraoperative image differs), 95th percentile: %s." % "; ".join(changes))
     spreads = []
     for entry in runs:
-        values = [p95(method) for name, method in methods(entry).items() if name.startswith("biomechanical")]
+        # Discretizations of the same model: the rows with gravity are another model.
+        values = [p95(method) for name, method in methods(entry).items()
+                  if name.startswith("biomechanical") and " + " not in name]
         if len(values) > 1:
             spreads.append((max(values) - min(values), entry["name"]))
     if spreads:
@@ -319,6 +352,22 @@ def reading(runs, machine=""):
         lines.append("* **%s** (free rim, tetrahedral ground truth): 95th percentile %s." % (
             entry["name"], ", ".join(described)))
     return "\n".join(lines) + "\n"
+
+
+PLAIN_ROW = "biomechanical hexahedra 5 mm"
+GRAVITY_FIT_ROW = "biomechanical hexahedra 5 mm + fitted gravity"
+
+
+def fitted_gravity(method):
+    """The gravity (g) a registration fitted to the intraoperative image, or None."""
+    return ((method.get("details") or {}).get("gravity_fit") or {}).get("gravity_g")
+
+
+def truth_gravities(runs):
+    """The ground truths' gravity (g), as a range when they differ."""
+    values = sorted({round(entry["report"]["ground_truth"]["gravity_g"], 3) for entry in runs
+                     if entry["report"] and "gravity_g" in entry["report"].get("ground_truth", {})})
+    return "%g" % values[0] if len(values) == 1 else "%g-%g" % (values[0], values[-1])
 
 
 IMAGE_CHANGES = ("-t2", "-resection", "-realistic")
@@ -377,9 +426,9 @@ def image_change_target(runs, methods, p95):
             "every intensity peer and at least as many edges within 1.7 mm: met on %d of %d scenes.** %s.%s" % (
                 len(met), len(verdicts), "; ".join(details),
                 (" The same truth with only the image changed (95th percentile, best of each kind): %s. The "
-                 "biomechanical registration does not read the intraoperative image; what it misses is what the "
-                 "exposed surface's displacements cannot show (the ground truth's 0.3 g gravity under the intact "
-                 "skull, docs/registration.md)." % "; ".join(why)) if why else "")]
+                 "biomechanical registrations read the intraoperative image for one number at most (gravity's "
+                 "size), so a change of contrast moves their error only through it." % "; ".join(why))
+                if why else "")]
 
 
 def time_budget_target(runs, methods):

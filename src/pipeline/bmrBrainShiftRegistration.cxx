@@ -772,7 +772,18 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
         auto candidate = makeDeformation(weightlessModel);
         const Vector3 gravity = size * largest.normalized();
         candidate->SetGravity(DeformationType::VectorType(gravity.data()));
-        UpdateStage(candidate.GetPointer(), "the solve failed");
+        try
+        {
+          UpdateStage(candidate.GetPointer(), "the solve failed");
+        }
+        catch (const Error & error)
+        {
+          // A weight under which the model folds is not the brain's: left out, and said.
+          result.warnings.push_back("gravity fit: the solve at " + InG(size) + " failed and was left out (" +
+                                    error.what() + ")");
+          result.gravityFit.emplace_back(size, -std::numeric_limits<double>::infinity());
+          return;
+        }
         if (!candidate->GetConverged())
         {
           result.warnings.push_back("gravity fit: the solve at " + InG(size) + " did not converge (" +
@@ -826,6 +837,11 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
           break;
         }
         evaluate(vertex);
+      }
+      if (!std::isfinite(bestInformation))
+      {
+        throw Error("gravity fit: every size's solve failed (" + result.warnings.back() +
+                    "); give a smaller gravity or a finer mesh");
       }
       if (bestSize == largest.norm())
       {
@@ -1049,7 +1065,10 @@ RegistrationReportJson(const BrainShiftRegistrationResult & result, const BrainS
     nlohmann::json candidates = nlohmann::json::array();
     for (const auto & [size, information] : result.gravityFit)
     {
-      candidates.push_back({ { "gravity_g", size / units::StandardGravity }, { "mutual_information", information } });
+      // A size whose solve failed has no information (null).
+      candidates.push_back({ { "gravity_g", size / units::StandardGravity },
+                             { "mutual_information",
+                               std::isfinite(information) ? nlohmann::json(information) : nlohmann::json() } });
     }
     report["gravity_fit"] = { { "gravity_g", result.gravity.norm() / units::StandardGravity },
                               { "candidates", candidates } };
