@@ -97,12 +97,12 @@ ELASTIX_QUICK_P95 = 0.8
 
 
 def source_commit():
-    """The checkout's commit (short), with "+changes" when tracked files differ from it; None outside git."""
+    """The checkout's commit (short), with "+changes" when biomech's sources differ from it; None outside git."""
     commit = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
     if commit.returncode != 0:
         return None
-    changed = subprocess.run(["git", "-C", ROOT, "status", "--porcelain", "--untracked-files=no"],
-                             capture_output=True, text=True)
+    changed = subprocess.run(["git", "-C", ROOT, "status", "--porcelain", "--untracked-files=no", "--",
+                              "apps", "src", "include", "CMakeLists.txt"], capture_output=True, text=True)
     return commit.stdout.strip() + ("+changes" if changed.stdout.strip() else "")
 
 
@@ -479,7 +479,10 @@ def markdown(runs, machine):
              "opening's outer fifth is left to the model), gravity 0.3 g on the rest, skull contact, CSF drained "
              "(weightless), "
              "dynamic relaxation to 0.01 mm. The registration is given only the displacements of tracked points of the "
-             "exposed surface (one per 5 mm cube within the 30 mm craniotomy). The intraoperative image is Colin27 "
+             "exposed surface (one per 5 mm cube within the 30 mm craniotomy); `+ fitted gravity`: also gravity along "
+             "the head's down, its size fitted to the intraoperative image (five sizes from 0 to 1 g and two "
+             "parabolic refinements, the best Mattes mutual information kept; docs/registration.md), its CSF drained "
+             "as the truth's. The intraoperative image is Colin27 "
              "warped by the ground truth on a 0.86 x 0.86 x 2.5 mm grid with 2% Gaussian noise; `-t2`: in a T2-like "
              "contrast; `-resection`: the 12 mm tumour and a 5 mm margin removed (a fluid-filled cavity whose walls "
              "sag, left out of the brain where errors are measured); `-realistic`: resection, T2-like contrast, a 20% "
