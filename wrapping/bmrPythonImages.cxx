@@ -614,6 +614,13 @@ BindRegistration(py::module_ & module)
                                            "Everything `biomech register` writes, in memory.")
     .def_readonly("brain_model", &BrainShiftRegistrationResult::model)
     .def_readonly("solve", &BrainShiftRegistrationResult::solve)
+    .def_property_readonly("gravity",
+                           [](const BrainShiftRegistrationResult & result) {
+                             return py::make_tuple(result.gravity.x(), result.gravity.y(), result.gravity.z());
+                           },
+                           "The solve's body acceleration (mm/s^2): the given gravity, or the fitted one.")
+    .def_readonly("gravity_fit", &BrainShiftRegistrationResult::gravityFit,
+                  "With gravity_fit_candidates: every size solved (mm/s^2) and its mutual information.")
     .def_property_readonly("transform",
                            [](const BrainShiftRegistrationResult & result) {
                              return PythonTransform{ result.transform.GetPointer() };

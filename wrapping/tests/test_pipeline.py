@@ -387,6 +387,14 @@ def test_register_bad_arguments_are_named(colin27):
                      **CRANIOTOMY)
     with pytest.raises(bmr.Error):
         bmr.register(image, brain_mask=mask, **CRANIOTOMY)
+    # The gravity fit's settings are checked before the model is built.
+    assert bmr.default_registration_settings()["gravity_fit_candidates"] == 0
+    with pytest.raises(bmr.Error, match="3 or more sizes"):
+        bmr.register(image, brain_mask=mask, sparse_points=points, sparse_displacements=displacements,
+                     gravity=(0, 0, -9810), gravity_fit_candidates=2, **CRANIOTOMY)
+    with pytest.raises(bmr.Error, match="give the intraoperative image"):
+        bmr.register(image, brain_mask=mask, sparse_points=points, sparse_displacements=displacements,
+                     gravity=(0, 0, -9810), gravity_fit_candidates=5, **CRANIOTOMY)
 
 
 def test_install_command_installs_an_importable_package(tmp_path):
