@@ -966,8 +966,9 @@ AddModelCommands(CLI::App & app)
                               "Label maps on the image grid to warp (nearest neighbour); repeat for several");
   registration->measurements.Add(registerCommand);
   registerCommand->add_option("--intraoperative-image", registration->intraoperativeImage,
-                              "Intraoperative image: evaluation (edge-based Hausdorff), and the exposed surface when "
-                              "no surface or sparse displacements are given");
+                              "Intraoperative image: evaluation (edge-based Hausdorff), the gravity fit "
+                              "(--gravity-fit-candidates), and the exposed surface when no surface or sparse "
+                              "displacements are given");
   registerCommand->add_option("--intraoperative-mask", registration->intraoperativeMask,
                               "Brain mask of the intraoperative image (default: atlas skull stripping when its "
                               "surface is needed; the registered preoperative mask for the evaluation)");

@@ -497,6 +497,44 @@ TEST_F(RegisterCommandTest, SparseDisplacementsOnColin27)
   EXPECT_GT(preoperative[2] - top[2], 2.0); // the backward map looks up higher, preoperative tissue
 }
 
+// The gravity fit from the command line: the intraoperative image is the
+// preoperative one, which shows no sinking, so of 0, 0.5 and 1 g (and the
+// parabola's vertices) the fit keeps next to none; the report lists every
+// size with its mutual information, the best kept.
+TEST_F(RegisterCommandTest, GravityFitFromTheCommandLine)
+{
+  if (!HaveColin27())
+  {
+    GTEST_SKIP() << "Colin27 (mricron-data) is not installed";
+  }
+  const fs::path output = m_Folder / "fit";
+  const auto     run = bmr::test::RunBiomech(
+    m_Folder, "register " + Quoted(Colin27Folder / "ch2.nii.gz") + " --mask " + Quoted(Colin27Folder / "ch2bet.nii.gz") +
+                " --craniotomy-centre -11 43 84 --craniotomy-radius 30 --sparse-displacements " +
+                Quoted(fs::path(BMR_SOURCE_DIR) / "examples" / "data" / "colin27-superior-craniotomy.csv") +
+                " --intraoperative-image " + Quoted(Colin27Folder / "ch2.nii.gz") + " --intraoperative-mask " +
+                Quoted(Colin27Folder / "ch2bet.nii.gz") +
+                " --gravity 0 0 -9810 --gravity-fit-candidates 3 --csf-density 1 --element-size 8 -o " + Quoted(output));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_NE(run.out.find("gravity fit"), std::string::npos) << run.out;
+  const json report = json::parse(bmr::test::ReadText(output / "registration-report.json"));
+  const json & fit = report["gravity_fit"];
+  ASSERT_GE(fit["candidates"].size(), 3u);
+  double best = -1.0, bestInformation = -1e300;
+  for (const json & candidate : fit["candidates"])
+  {
+    if (candidate["mutual_information"].is_number() && candidate["mutual_information"].get<double>() > bestInformation)
+    {
+      bestInformation = candidate["mutual_information"].get<double>();
+      best = candidate["gravity_g"].get<double>();
+    }
+  }
+  EXPECT_EQ(fit["gravity_g"].get<double>(), best);
+  EXPECT_LT(fit["gravity_g"].get<double>(), 0.1);
+  EXPECT_NEAR(-report["gravity_mm_s2"][2].get<double>(), 9810.0 * fit["gravity_g"].get<double>(), 1e-6);
+  EXPECT_TRUE(report["seconds"].contains("gravity fit"));
+}
+
 /** The meshless path of the literature, end to end on Colin27: 7 mm MTLED with
  *  skull contact converges and agrees with 5 mm hexahedra (an independent
  *  discretization of the same scene) where the brain moves. Before the cloud's

@@ -1104,6 +1104,11 @@ FormatRegistrationTable(const BrainShiftRegistrationResult & result)
   }
   text << "\n  loads             " << result.model.load.nodes.size() << " of " << result.model.exposedNodes.size()
        << " exposed nodes, correspondence up to " << result.model.loadReport.maxCorrespondenceDistance << " mm\n";
+  if (!result.gravityFit.empty())
+  {
+    text << "  gravity fit       " << InG(result.gravity.norm()) << " of " << result.gravityFit.size()
+         << " sizes tried (the best mutual information with the intraoperative image)\n";
+  }
   text << "  solve             " << SolveState(result.solve) << ", " << result.solve.steps << " steps, estimated error "
        << std::setprecision(4) << result.solve.estimatedError << std::setprecision(2) << " mm, max displacement "
        << result.solve.maxDisplacement << " mm\n";
