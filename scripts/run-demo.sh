@@ -44,5 +44,6 @@ fi
 output_dir=out/demo
 echo
 echo "== biomech demo -o ${output_dir} (Colin27 from mricron-data)"
-"${biomech}" demo -o "${output_dir}" --load surface --registration-gravity 1 --gravity-fit-candidates 5 --elastix
+"${biomech}" demo -o "${output_dir}" --load surface --variant hexahedra:5 --variant mixed:5 \
+  --registration-gravity 1 --gravity-fit-candidates 5 --elastix
 /usr/bin/python3 scripts/plot-demo.py "${output_dir}/demo-report.json" "${output_dir}/error-vs-time.png"
