@@ -24,6 +24,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -121,13 +122,19 @@ MethodJson(const MethodResult & method)
 void
 PrintTable(const std::vector<MethodResult> & methods)
 {
-  std::printf("\n%-26s %9s | %27s | %27s | %9s\n", "", "time", "displacement error (mm)", "edge Hausdorff (mm)",
+  // The name column as wide as the longest name ("biomechanical mixed 5 mm + fitted gravity").
+  int width = 26;
+  for (const MethodResult & method : methods)
+  {
+    width = std::max(width, static_cast<int>(method.name.size()));
+  }
+  std::printf("\n%-*s %9s | %27s | %27s | %9s\n", width, "", "time", "displacement error (mm)", "edge Hausdorff (mm)",
               "edges");
-  std::printf("%-26s %9s | %8s %8s %9s | %8s %8s %9s | %9s\n", "method", "s", "mean", "p95", "max", "p50", "p90",
+  std::printf("%-*s %9s | %8s %8s %9s | %8s %8s %9s | %9s\n", width, "method", "s", "mean", "p95", "max", "p50", "p90",
               "p95", "<1.7 mm");
   for (const MethodResult & method : methods)
   {
-    std::printf("%-26s %9.2f | %8.2f %8.2f %9.2f | %8.2f %8.2f %9.2f | %8.1f%%\n", method.name.c_str(),
+    std::printf("%-*s %9.2f | %8.2f %8.2f %9.2f | %8.2f %8.2f %9.2f | %8.1f%%\n", width, method.name.c_str(),
                 method.seconds, method.error.mean, method.error.p95, method.error.max, method.edges.Percentile(50),
                 method.edges.Percentile(90), method.edges.Percentile(95), 100.0 * method.edges.fractionWithinThreshold);
   }
@@ -138,7 +145,7 @@ PrintTable(const std::vector<MethodResult> & methods)
     {
       continue;
     }
-    std::printf("  %-26s", method.name.c_str());
+    std::printf("  %-*s", width, method.name.c_str());
     for (const auto & [stage, seconds] : method.stages.items())
     {
       std::printf(" %s %.2f", stage.c_str(), seconds.get<double>());
