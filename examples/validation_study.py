@@ -88,7 +88,7 @@ REDUCED_TRUTH_AGREEMENT = 0.25
 VARIANTS = ["hexahedra:5", "hexahedra:7", "mixed:5", "tetrahedra:7", "meshless:7"]
 # Every scene also has the 5 mm hexahedra and mixed cells with gravity along the head's "down" and its size fitted to
 # the intraoperative image (`--gravity-fit-candidates`): five sizes from none to 1 g (the whole brain's weight, all CSF
-# drained), refined twice by parabolas. The truth's 0.3 g is not given to them. (Tetrahedra and meshless clouds of
+# drained), then up to three refinements. The truth's 0.3 g is not given to them. (Tetrahedra and meshless clouds of
 # 7 mm take 5-8 s a solve: seven solves would not fit the clinical budget.)
 GRAVITY_FIT_METHODS = ["hexahedra-5-gravity", "mixed-5-gravity"]
 GRAVITY_FIT = ["--registration-gravity", "1", "--gravity-fit-candidates", "5"]
@@ -547,8 +547,8 @@ def markdown(runs, machine):
              "dynamic relaxation to 0.01 mm. The registration is given only the displacements of tracked points of the "
              "exposed surface (one per 5 mm cube within the 30 mm craniotomy); `+ fitted gravity` (5 mm hexahedra and mixed "
              "cells): also gravity along "
-             "the head's down, its size fitted to the intraoperative image (five sizes from 0 to 1 g and two "
-             "parabolic refinements, the best Mattes mutual information kept; docs/registration.md), its CSF drained "
+             "the head's down, its size fitted to the intraoperative image (five sizes from 0 to 1 g and up to "
+             "three refinements, the best Mattes mutual information kept; docs/registration.md), its CSF drained "
              "as the truth's. The intraoperative image is Colin27 "
              "warped by the ground truth on a 0.86 x 0.86 x 2.5 mm grid with 2% Gaussian noise; `-t2`: in a T2-like "
              "contrast; `-resection`: the 12 mm tumour and a 5 mm margin removed (a fluid-filled cavity whose walls "

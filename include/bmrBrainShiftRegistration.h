@@ -257,8 +257,9 @@ struct BrainShiftRegistrationSettings
    *  CSF drained, which nothing measures; the head's position gives only its
    *  direction. With gravity (model.gravity: its direction, and the largest
    *  size tried) and an intraoperative image, this many sizes evenly spread
-   *  over [0, |gravity|] are solved, then the vertex of the parabola through
-   *  the best and its neighbours; the size whose registered preoperative
+   *  over [0, |gravity|] are solved, then up to three more towards the best
+   *  (a parabola's vertex, or a midpoint at an end of the range); the size
+   *  whose registered preoperative
    *  image has the highest Mattes mutual information with the intraoperative
    *  image inside its brain (its brain mask, or the preoperative one) is
    *  kept. One parameter, so contrast, noise and a resection cannot bend the

@@ -805,9 +805,13 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
       {
         evaluate(k * largest.norm() / (count - 1));
       }
-      // Two steps of successive parabolic interpolation: the vertex of the
-      // parabola through the best size and its nearest neighbours each side.
-      for (int refinement = 0; refinement < 2; ++refinement)
+      // Three steps towards the best size: the vertex of the parabola through
+      // the best and its nearest neighbours each side (successive parabolic
+      // interpolation), or, when the best is at an end of the range, the
+      // midpoint between it and its neighbour (a coarse grid's best at 0 g
+      // may hide a better size below the next one).
+      const double resolution = 0.01 * largest.norm(); // sizes nearer than this to a solved one teach nothing
+      for (int refinement = 0; refinement < 3; ++refinement)
       {
         std::vector<std::pair<double, double>> tried = result.gravityFit;
         std::sort(tried.begin(), tried.end());
@@ -815,28 +819,26 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
           std::max_element(tried.begin(), tried.end(),
                            [](const auto & a, const auto & b) { return a.second < b.second; }) -
           tried.begin());
-        if (best == 0 || best + 1 == tried.size())
+        double next = 0.5 * (tried[best].first + tried[best == 0 ? 1 : best - 1].first);
+        if (best > 0 && best + 1 < tried.size())
+        {
+          const auto [x0, y0] = tried[best - 1];
+          const auto [x1, y1] = tried[best];
+          const auto [x2, y2] = tried[best + 1];
+          const double denominator = (x1 - x0) * (y1 - y2) - (x1 - x2) * (y1 - y0);
+          next = x1 - 0.5 * ((x1 - x0) * (x1 - x0) * (y1 - y2) - (x1 - x2) * (x1 - x2) * (y1 - y0)) / denominator;
+          if (!(next > x0 && next < x2)) // flat, or a failed neighbour: no vertex between them
+          {
+            break;
+          }
+        }
+        const bool known = std::any_of(tried.begin(), tried.end(),
+                                       [&](const auto & size) { return std::abs(size.first - next) < resolution; });
+        if (known)
         {
           break;
         }
-        const auto [x0, y0] = tried[best - 1];
-        const auto [x1, y1] = tried[best];
-        const auto [x2, y2] = tried[best + 1];
-        const double denominator = (x1 - x0) * (y1 - y2) - (x1 - x2) * (y1 - y0);
-        if (!(std::abs(denominator) > 0.0))
-        {
-          break;
-        }
-        const double vertex =
-          x1 - 0.5 * ((x1 - x0) * (x1 - x0) * (y1 - y2) - (x1 - x2) * (x1 - x2) * (y1 - y0)) / denominator;
-        // Nearer than 1 % of the range to a size already solved: nothing new to learn.
-        const double resolution = 0.01 * largest.norm();
-        if (!(vertex > x0 && vertex < x2) || std::abs(vertex - x0) < resolution ||
-            std::abs(vertex - x1) < resolution || std::abs(vertex - x2) < resolution)
-        {
-          break;
-        }
-        evaluate(vertex);
+        evaluate(next);
       }
       if (!std::isfinite(bestInformation))
       {
