@@ -74,12 +74,12 @@ SCENES = [
 LARGE_SCENES = [scene[0] for scene in SCENES if scene[2][-len(LARGE):] == LARGE]
 # Two ground truths of one scene on different discretizations (`biomech demo --truth-check`): how far they
 # differ is how precisely a registration can be judged against either. Written to docs/ground-truth-agreement.md
-# by `--truths`. (name, craniotomy, demo arguments, registration variants)
+# by `--truths`. (name, craniotomy, demo arguments, registration variants, with the intensity peers)
 TRUTH_CHECKS = [
-    ("parietal-10mm", PARIETAL, ["--shift", "10", "--truth-check", "tetrahedra:5"], ["hexahedra:5"]),
+    ("parietal-10mm", PARIETAL, ["--shift", "10", "--truth-check", "tetrahedra:5"], ["hexahedra:5"], False),
     # Hexahedra of 4 mm fold at 20 mm, mixed cells of 4 mm invert at the first step and a meshless truth of 5 mm
     # had not converged after 6 minutes (2026-11-26): the second truth is a coarser, not nested tetrahedral mesh.
-    ("parietal-20mm", PARIETAL, ["--shift", "20", *LARGE, "--truth-check", "tetrahedra:6"], LARGE_VARIANTS),
+    ("parietal-20mm", PARIETAL, ["--shift", "20", *LARGE, "--truth-check", "tetrahedra:6"], LARGE_VARIANTS, False),
 ]
 # The reduced study's second truth (CI): 8 mm hexahedra beside the 6 mm truth must agree with it within this
 # fraction of no registration's 95th percentile error.
@@ -92,6 +92,10 @@ VARIANTS = ["hexahedra:5", "hexahedra:7", "mixed:5", "tetrahedra:7", "meshless:7
 # 7 mm take 5-8 s a solve: seven solves would not fit the clinical budget.)
 GRAVITY_FIT_METHODS = ["hexahedra-5-gravity", "mixed-5-gravity"]
 GRAVITY_FIT = ["--registration-gravity", "1", "--gravity-fit-candidates", "5"]
+# The same two scenes registered with fitted gravity (the study's best rows) and by the intensity peers: whether
+# their ranking holds against a truth on another discretization.
+TRUTH_CHECKS += [(name + "-gravity-fit", centre, [*arguments, *GRAVITY_FIT], ["hexahedra:5", "mixed:5"], True)
+                 for name, centre, arguments, _, _ in TRUTH_CHECKS]
 # The reduced study's elastix (test/elastix-quick.txt: one B-spline stage, few iterations) must bring the 95th
 # percentile error below this fraction of no registration's.
 ELASTIX_QUICK_P95 = 0.8
@@ -774,8 +778,8 @@ def main():
         return
     if arguments.truths:
         load = os.getloadavg()[0]
-        runs = [run(name, centre, extra, variants, False, os.path.join(arguments.output, "truths"))
-                for name, centre, extra, variants in TRUTH_CHECKS]
+        runs = [run(name, centre, extra, variants, peers, os.path.join(arguments.output, "truths"))
+                for name, centre, extra, variants, peers in TRUTH_CHECKS]
         machine = machine_line(load)
         os.makedirs(arguments.docs, exist_ok=True)
         with open(os.path.join(arguments.docs, "ground-truth-agreement.md"), "w") as handle:

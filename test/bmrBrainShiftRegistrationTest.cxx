@@ -167,6 +167,9 @@ TEST(BrainShiftRegistration, GravityFitFindsTheWeightTheImageShows)
     const auto best = std::max_element(fitted.gravityFit.begin(), fitted.gravityFit.end(),
                                        [](const auto & a, const auto & b) { return a.second < b.second; });
     EXPECT_EQ(fitted.gravity.norm(), best->first);
+    // The model the result reports is the one solved.
+    EXPECT_EQ(fitted.model.model.bodyAcceleration, fitted.gravity);
+    EXPECT_EQ(fitted.model.pipelineModel->GetModel().bodyAcceleration, fitted.gravity);
     if (!fitted.gravity.isZero())
     {
       EXPECT_NEAR(fitted.gravity.normalized().dot(truth.down), 1.0, 1e-12);

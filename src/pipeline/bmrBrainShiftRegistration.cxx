@@ -851,7 +851,12 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
                                   "); give a larger gravity to try larger sizes");
       }
       result.gravity = bestSize * largest.normalized();
+      // The model the result reports is the one solved: with the fitted gravity.
       result.model.model.bodyAcceleration = result.gravity;
+      Model fitted = weightlessModel->GetModel();
+      fitted.bodyAcceleration = result.gravity;
+      result.model.pipelineModel = itk::BiomechanicalModelObject::New();
+      result.model.pipelineModel->SetModel(std::move(fitted));
     });
   }
   if (solverProgress)
