@@ -511,8 +511,8 @@ TEST_F(RegisterCommandTest, GravityFitFromTheCommandLine)
   {
     GTEST_SKIP() << "Colin27 (mricron-data) is not installed";
   }
-  const auto registerWith = [&](int threads) {
-    const fs::path output = m_Folder / ("fit-" + std::to_string(threads));
+  const auto registerWith = [&](int threads, const std::string & csfDensity = " --csf-density 1") {
+    const fs::path output = m_Folder / ("fit-" + std::to_string(threads) + (csfDensity.empty() ? "-csf" : ""));
     const auto     run = bmr::test::RunBiomech(
       m_Folder, "register " + Quoted(Colin27Folder / "ch2.nii.gz") + " --mask " +
                   Quoted(Colin27Folder / "ch2bet.nii.gz") +
@@ -520,7 +520,7 @@ TEST_F(RegisterCommandTest, GravityFitFromTheCommandLine)
                   Quoted(fs::path(BMR_SOURCE_DIR) / "examples" / "data" / "colin27-superior-craniotomy.csv") +
                   " --intraoperative-image " + Quoted(Colin27Folder / "ch2.nii.gz") + " --intraoperative-mask " +
                   Quoted(Colin27Folder / "ch2bet.nii.gz") +
-                  " --gravity 0 0 -9810 --gravity-fit-candidates 3 --csf-density 1 --element-size 8 --threads " +
+                  " --gravity 0 0 -9810 --gravity-fit-candidates 3" + csfDensity + " --element-size 8 --threads " +
                   std::to_string(threads) + " -o " + Quoted(output));
     EXPECT_EQ(run.exitCode, 0) << run.err;
     EXPECT_NE(run.out.find("gravity fit"), std::string::npos) << run.out;
@@ -529,6 +529,14 @@ TEST_F(RegisterCommandTest, GravityFitFromTheCommandLine)
   const json report = registerWith(2);
   // Every size's solve and score are the same for any thread count, to the last bit.
   EXPECT_EQ(registerWith(1)["gravity_fit"], report["gravity_fit"]);
+  // Drained CSF (--csf-density 1) is no warning; a fluid's weight on 10 Pa cells is.
+  const auto csfWarning = [](const json & warnings) {
+    return std::any_of(warnings.begin(), warnings.end(), [](const json & warning) {
+      return warning.get<std::string>().find("csf_density") != std::string::npos;
+    });
+  };
+  EXPECT_FALSE(csfWarning(report["warnings"]));
+  EXPECT_TRUE(csfWarning(registerWith(2, "")["warnings"]));
   const json & fit = report["gravity_fit"];
   ASSERT_GE(fit["candidates"].size(), 3u);
   double best = -1.0, bestInformation = -1e300;

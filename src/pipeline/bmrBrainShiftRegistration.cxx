@@ -715,6 +715,20 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
   result.model = BuildBrainModel(inputs.preoperativeImage, inputs.brainMask, inputs.tumourMask, inputs.skullSurface,
                                  &inputs.intraoperative, settings.model, timer);
   result.warnings = result.model.warnings;
+  if (!settings.model.gravity.isZero())
+  {
+    // Soft CSF cells cannot carry a fluid's weight: they are crushed and the brain sinks through them.
+    const auto &   classes = settings.model.materials.classMaterials;
+    const Material csf = classes.empty() ? CsfMaterial() : classes.front();
+    if (csf.density >= 100.0 && csf.youngsModulus < ParenchymaMaterial().youngsModulus)
+    {
+      std::ostringstream warning;
+      warning << "gravity acts on the CSF class with " << csf.density << " kg/m^3 on " << csf.youngsModulus
+              << " Pa cells, which cannot carry a fluid's weight; after CSF loss the CSF is drained: give "
+                 "csf_density 1 (--csf-density 1)";
+      result.warnings.push_back(warning.str());
+    }
+  }
 
   // The solve and the fit continue the model's pipeline: the deformation
   // filter takes the regions' model, the loads' point set and the skull; its
