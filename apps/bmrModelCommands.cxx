@@ -535,7 +535,7 @@ RunModel(const ModelOptions & options)
                         { "exposed_nodes", exposed.size() },
                         { "skull_base_nodes", model.NodeSet("skull_base").size() } };
   report["skull_gap_mm"] = settings.skullGap;
-  const Material csf = settings.materials.classMaterials.empty() ? CsfMaterial() : settings.materials.classMaterials.front();
+  const Material csf = CsfClassMaterial(settings.materials);
   report["csf"] = { { "youngs_modulus_pa", csf.youngsModulus }, { "poisson_ratio", csf.poissonRatio } };
   if (settings.csfDrainedDepth)
   {

@@ -259,10 +259,9 @@ struct BrainShiftRegistrationSettings
    *  size tried) and an intraoperative image, this many sizes evenly spread
    *  over [0, |gravity|] are solved, then up to three more towards the best
    *  (a parabola's vertex, or a midpoint at an end of the range); the size
-   *  whose registered preoperative
-   *  image has the highest Mattes mutual information with the intraoperative
-   *  image inside its brain (its brain mask, or the preoperative one) is
-   *  kept. One parameter, so contrast, noise and a resection cannot bend the
+   *  whose registered preoperative image has the highest Mattes mutual
+   *  information with the intraoperative image inside its brain (its brain
+   *  mask, or the preoperative one) is kept. One parameter, so contrast, noise and a resection cannot bend the
    *  field the way they bend an intensity registration's. */
   int gravityFitCandidates = 0;
   /** Transform fit: largest residual at the nodes, and the finest control-point spacing (mm). */

@@ -68,6 +68,11 @@ struct MaterialMappingSettings
   MaterialSampling sampling;
 };
 
+/** The CSF class's material of these settings: the first class material
+ *  (ascending centroid), or CsfMaterial() when the classes take the defaults. */
+Material
+CsfClassMaterial(const MaterialMappingSettings & settings);
+
 /** Sets model.materials and each cell's material (and, for a meshless model,
  *  model.meshless.integrationMaterials) from a membership image (components =
  *  classes, 0 outside the mask, as ClassifyTissue writes it).

@@ -481,6 +481,12 @@ TumourMaterial()
   return Material{ "tumour", 6000.0, 0.49, 1000.0 };
 }
 
+Material
+CsfClassMaterial(const MaterialMappingSettings & settings)
+{
+  return settings.classMaterials.empty() ? CsfMaterial() : settings.classMaterials.front();
+}
+
 std::vector<Material>
 DefaultClassMaterials(int classes, const Material & csf, const Material & parenchyma)
 {

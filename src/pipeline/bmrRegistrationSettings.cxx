@@ -45,18 +45,25 @@ Text(const char * group, const char * name, const char * meaning, std::function<
   return field;
 }
 
-/** The CSF class's material: the first class material (ascending centroid), or the default. */
-Material
-Csf(const Settings & s)
-{
-  return s.model.materials.classMaterials.empty() ? CsfMaterial() : s.model.materials.classMaterials.front();
-}
-
 /** The class materials for the number of classes and this CSF (the other classes parenchyma). */
 void
 SetClassMaterials(Settings & s, const Material & csf)
 {
   s.model.materials.classMaterials = DefaultClassMaterials(s.model.classifier.classes, csf);
+}
+
+/** A row of one value of the CSF class's material (CsfClassMaterial). */
+Field
+CsfRow(const char * name, const char * unit, double lowest, bool lowestOpen, double highest, bool highestOpen,
+       const char * meaning, double Material::*value)
+{
+  return Row("model", name, Kind::Number, unit, lowest, lowestOpen, highest, highestOpen, meaning,
+             [value](const Settings & s) { return CsfClassMaterial(s.model.materials).*value; },
+             [value](Settings & s, double v) {
+               Material csf = CsfClassMaterial(s.model.materials);
+               csf.*value = v;
+               SetClassMaterials(s, csf);
+             });
 }
 
 std::vector<Field>
@@ -68,7 +75,7 @@ MakeFields()
                        "tissue classes of fuzzy c-means (2: CSF and parenchyma; 3: CSF, grey, white)",
                        [](const Settings & s) { return s.model.classifier.classes; },
                        [](Settings & s, double v) {
-                         const Material csf = Csf(s);
+                         const Material csf = CsfClassMaterial(s.model.materials);
                          s.model.classifier.classes = static_cast<int>(v);
                          SetClassMaterials(s, csf);
                        }));
@@ -102,31 +109,16 @@ MakeFields()
                        "element edge, or the meshless nodal spacing",
                        [](const Settings & s) { return s.model.grid.elementSize; },
                        [](Settings & s, double v) { s.model.grid.elementSize = v; }));
-  fields.push_back(Row("model", "csf_modulus", Kind::Number, "Pa", 0.0, true, kInfinity, false,
-                       "Young's modulus of the CSF class", [](const Settings & s) { return Csf(s).youngsModulus; },
-                       [](Settings & s, double v) {
-                         Material csf = Csf(s);
-                         csf.youngsModulus = v;
-                         SetClassMaterials(s, csf);
-                       }));
-  fields.push_back(Row("model", "csf_poisson_ratio", Kind::Number, "", 0.0, false, 0.5, true,
-                       "Poisson's ratio of the CSF class; 0.49: fluid-like, keeps CSF cells from being crushed by "
-                       "shifts of 20 mm and more",
-                       [](const Settings & s) { return Csf(s).poissonRatio; },
-                       [](Settings & s, double v) {
-                         Material csf = Csf(s);
-                         csf.poissonRatio = v;
-                         SetClassMaterials(s, csf);
-                       }));
-  fields.push_back(Row("model", "csf_density", Kind::Number, "kg/m^3", 0.0, false, kInfinity, false,
-                       "density of the CSF class under gravity; drained CSF weighs almost nothing (1), and 10 Pa "
-                       "CSF cells cannot carry a fluid's weight (1000) without folding",
-                       [](const Settings & s) { return Csf(s).density; },
-                       [](Settings & s, double v) {
-                         Material csf = Csf(s);
-                         csf.density = v;
-                         SetClassMaterials(s, csf);
-                       }));
+  fields.push_back(CsfRow("csf_modulus", "Pa", 0.0, true, kInfinity, false, "Young's modulus of the CSF class",
+                         &Material::youngsModulus));
+  fields.push_back(CsfRow("csf_poisson_ratio", "", 0.0, false, 0.5, true,
+                          "Poisson's ratio of the CSF class; 0.49: fluid-like, keeps CSF cells from being crushed by "
+                          "shifts of 20 mm and more",
+                          &Material::poissonRatio));
+  fields.push_back(CsfRow("csf_density", "kg/m^3", 0.0, false, kInfinity, false,
+                          "density of the CSF class under gravity; drained CSF weighs almost nothing (1), and 10 Pa "
+                          "CSF cells cannot carry a fluid's weight (1000) without folding",
+                          &Material::density));
   fields.push_back(Row("model", "skull_gap", Kind::Number, "mm", 0.0, false, kInfinity, false,
                        "gap between the brain surface and the rigid skull made from it",
                        [](const Settings & s) { return s.model.skullGap; },
