@@ -718,8 +718,7 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
   if (!settings.model.gravity.isZero())
   {
     // Soft CSF cells cannot carry a fluid's weight: they are crushed and the brain sinks through them.
-    const auto &   classes = settings.model.materials.classMaterials;
-    const Material csf = classes.empty() ? CsfMaterial() : classes.front();
+    const Material csf = CsfClassMaterial(settings.model.materials);
     if (csf.density >= 100.0 && csf.youngsModulus < ParenchymaMaterial().youngsModulus)
     {
       std::ostringstream warning;
@@ -764,6 +763,7 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
   };
 
   auto deformation = makeDeformation(result.model.pipelineModel);
+  FitterType::Pointer fitted; // the gravity fit's best transform: its solve and fit are the registration's
   result.gravity = result.model.model.bodyAcceleration;
   if (settings.gravityFitCandidates > 0)
   {
@@ -812,6 +812,7 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
           bestInformation = information;
           bestSize = size;
           deformation = candidate;
+          fitted = fitter;
         }
       };
       const int count = settings.gravityFitCandidates;
@@ -894,7 +895,7 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
   }
 
   timer.Run("fit", [&] {
-    const auto fitter = fitTransform(deformation);
+    const auto fitter = fitted ? fitted : fitTransform(deformation);
     result.transform = const_cast<RegistrationTransform *>(fitter->GetTransform());
     const itk::BSplineFitReport & report = fitter->GetReport();
     result.fitMaxResidual = report.maximumResidual;
@@ -1040,8 +1041,7 @@ nlohmann::json
 RegistrationReportJson(const BrainShiftRegistrationResult & result, const BrainShiftRegistrationSettings & settings)
 {
   const ModelCounts counts = CountModel(result.model.model);
-  const auto &      classMaterials = settings.model.materials.classMaterials;
-  const Material    csf = classMaterials.empty() ? CsfMaterial() : classMaterials.front();
+  const Material    csf = CsfClassMaterial(settings.model.materials);
   nlohmann::json    report;
   report["seconds"] = result.timer.Json();
   report["model"] = { { "grid", ImageGridKindName(settings.model.grid.kind) },
