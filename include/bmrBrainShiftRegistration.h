@@ -109,10 +109,10 @@ AtlasBrainMask(const RegistrationImage * image, const AtlasSettings & settings =
  *  (itk::BrainSurfaceMeshSource); its warnings are appended to `warnings`. */
 BrainSurfaces
 BrainSurfacesOfMask(const RegistrationLabelImage * mask, double skullGap, std::vector<std::string> & warnings,
-                    bool skull = true, double skullClosing = 0.0);
+                    bool skull = true, double skullClosing = BrainSurfaceSettings{}.skullClosing);
 BrainSurfaces
 BrainSurfacesOfMask(const LabelVolume & mask, double skullGap, std::vector<std::string> & warnings, bool skull = true,
-                    double skullClosing = 0.0);
+                    double skullClosing = BrainSurfaceSettings{}.skullClosing);
 
 /** The smooth surface (level 0) of a brain mask alone, without a skull: the
  *  cortex that a surface scan images (BrainSurfacesOfMask without the skull).

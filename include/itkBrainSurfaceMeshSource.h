@@ -52,7 +52,7 @@ namespace itk
  * smooths and optionally decimates the two level sets (VTK).
  *
  * Parameters: SkullGap (mm, default 1.5: the CSF layer between brain and
- * skull is about 1-3 mm), SkullClosing (mm, default 0), SmoothingIterations (default 20), SmoothingPassBand
+ * skull is about 1-3 mm), SkullClosing (mm, default 1), SmoothingIterations (default 20), SmoothingPassBand
  * (default 0.1), TargetEdgeLength (mm, default 0 = no decimation),
  * ComputeSkull (default on; off leaves output 1 empty and saves the skull's
  * exact-distance band and isosurface).
@@ -149,8 +149,8 @@ protected:
   PrintSelf(std::ostream & os, Indent indent) const override;
 
 private:
-  double             m_SkullGap{ 1.5 };
-  double             m_SkullClosing{ 0.0 };
+  double             m_SkullGap{ bmr::BrainSurfaceSettings{}.skullGap };
+  double             m_SkullClosing{ bmr::BrainSurfaceSettings{}.skullClosing };
   int                m_SmoothingIterations{ 20 };
   double             m_SmoothingPassBand{ 0.1 };
   double             m_TargetEdgeLength{ 0.0 };

@@ -46,7 +46,7 @@ BrainSurfaceMeshSource<TMaskImage, TOutputMesh>::GenerateData()
   }
   if (!(m_SkullClosing >= 0.0) || !std::isfinite(m_SkullClosing))
   {
-    itkExceptionMacro("SkullClosing " << m_SkullClosing << " mm must be a finite number >= 0 (default 0: no closing)");
+    itkExceptionMacro("SkullClosing " << m_SkullClosing << " mm must be a finite number >= 0 (default 1; 0: no closing)");
   }
 
   // The mask's bounding box padded with background: ceil((gap + closing) / spacing) + 2

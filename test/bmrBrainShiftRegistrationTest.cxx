@@ -736,9 +736,11 @@ TEST(BrainShiftRegistration, ObliqueScannerGeometryGivesTheSameModelRegions)
   // With a 1e-9 voxel tolerance the file's rounding decided: the skull
   // enclosed 1.1 % less (1,886,952 against 1,908,612 mm^3) and the
   // registration differed by 0.65 mm; now 1e-6 (marching cubes still meets
-  // voxel values on the level: 148,908 against 148,946 vertices).
+  // voxel values on the level: 148,908 against 148,946 vertices). The skull
+  // closed by 1 mm (the default) passes through a second isosurface and
+  // exact-distance band: 1.1e-5 apart (22 mm^3, 0.0003 mm over the surface).
   const double skullVolume = bmr::EnclosedVolume(plain.surfaces.skull);
-  EXPECT_NEAR(bmr::EnclosedVolume(oblique.surfaces.skull), skullVolume, 1e-5 * skullVolume);
+  EXPECT_NEAR(bmr::EnclosedVolume(oblique.surfaces.skull), skullVolume, 2e-5 * skullVolume);
 }
 
 // Scanner geometry, the rest of it: Colin27 resampled (linear) onto an

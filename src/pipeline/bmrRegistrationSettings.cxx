@@ -117,7 +117,7 @@ MakeFields()
                           &Material::poissonRatio));
   fields.push_back(CsfRow("csf_density", "kg/m^3", 0.0, false, kInfinity, false,
                           "density of the CSF class under gravity; drained CSF weighs almost nothing (1), and 10 Pa "
-                          "CSF cells cannot carry a fluid's weight (1000) without folding",
+                          "CSF cells cannot carry a fluid's weight (1000): they are crushed and the brain sinks through them",
                           &Material::density));
   fields.push_back(Row("model", "skull_gap", Kind::Number, "mm", 0.0, false, kInfinity, false,
                        "gap between the brain surface and the rigid skull made from it",
@@ -125,7 +125,8 @@ MakeFields()
                        [](Settings & s, double v) { s.model.skullGap = v; }));
   fields.push_back(Row("model", "skull_closing", Kind::Number, "mm", 0.0, false, kInfinity, false,
                        "radius of a closing of the brain before the skull is made: the skull stays out of fissures "
-                       "narrower than twice (radius + gap), where it would be a thin rigid blade; 0: follows every fold",
+                       "narrower than twice (radius + gap), where it would be a thin rigid blade, and its creases are "
+                       "rounded to the radius, where contact nodes would cycle in and out; 0: follows every fold",
                        [](const Settings & s) { return s.model.skullClosing; },
                        [](Settings & s, double v) { s.model.skullClosing = v; }));
   fields.push_back(Row("model", "skull_base_height", Kind::Number, "mm", 0.0, false, kInfinity, false,
