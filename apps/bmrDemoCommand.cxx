@@ -637,9 +637,9 @@ AddDemoCommand(CLI::App & app)
     ->check(CLI::NonNegativeNumber);
   demo->add_option("--truth-skull-closing", options->truth.skullClosing,
                    "Radius (mm) of the closing of the ground truth's brain before its skull is made: the skull stays "
-                   "out of fissures narrower than twice (radius + gap) and its creases are rounded to the radius; 0: it "
-                   "follows every fold (1 or more for a meshless truth under gravity at large shifts: "
-                   "docs/model-building.md)")
+                   "out of fissures narrower than twice (radius + gap) and its creases are rounded to the radius, as the "
+                   "registration's skull_closing; 0: it follows every fold (a meshless truth under gravity at large "
+                   "shifts then cycles in its contact: docs/model-building.md)")
     ->capture_default_str()
     ->check(CLI::NonNegativeNumber);
   demo->add_option("--noise", options->truth.noise, "Noise of the intraoperative image (fraction of the bright level)")

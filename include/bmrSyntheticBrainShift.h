@@ -107,11 +107,10 @@ struct SyntheticBrainShiftSettings
   double solverTolerance = 0.01; // mm
   int    solverMaxSteps = 0;      // dynamic-relaxation steps before the truth's solve gives up; 0: the solver's default
   /** Closing radius of the ground truth's body before its skull is made (mm;
-   *  BrainModelSettings::skullClosing; 0: the skull follows every fold, e.g.
-   *  the Sylvian fissure as a thin sheet, unlike the registration's 1 mm
-   *  default, so the truth's skull is not the registration's).
-   *  `biomech demo --truth-skull-closing`. */
-  double skullClosing = 0.0;
+   *  BrainModelSettings::skullClosing; 1 mm by default, as the registration's:
+   *  the dura does not follow sulci; 0: the skull follows every fold, e.g. the
+   *  Sylvian fissure as a thin sheet). `biomech demo --truth-skull-closing`. */
+  double skullClosing = BrainSurfaceSettings{}.skullClosing;
 
   /** Materials: Poisson's ratio of parenchyma (and tumour), Young's modulus
    *  of the CSF class (ventricles; 10 Pa by default, "very soft" below). */
