@@ -653,8 +653,8 @@ def truth_agreement(runs, machine):
               "script): hexahedra of 4 mm fold a cell at 20 mm, mixed cells of 4 mm invert a tetrahedron at the first "
               "step, and a meshless truth of 5 mm had not converged after 6 minutes (issue 17: meshless with skull "
               "contact at large shifts; since 2026-11-29 a meshless truth under gravity converges at 25 mm when its "
-              "skull is closed by 1 mm or more, docs/model-building.md, but the study's truths keep the skull that follows "
-              "every fold).",
+              "skull is closed by 1 mm or more, docs/model-building.md, as the study's truths have been since then; a "
+              "meshless second truth of this scene was not tried again).",
               "* A third truth, from CalculiX (C3D10 on a conforming tetrahedral mesh, penalty skull contact, "
               "started cold and settled by proximal steps), for both scenes: "
               "[calculix-ground-truth.md](calculix-ground-truth.md), written by "
