@@ -14,7 +14,6 @@
 #include "itkImage.h"
 #include "itkImageRegionIteratorWithIndex.h"
 
-#include <optional>
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
@@ -72,15 +71,12 @@ MakeMask(const std::array<int, 3> & size, const Vector3 & origin, const Eigen::M
 }
 
 SurfaceSource::Pointer
-RunSource(const MaskImage * mask, double gap, std::optional<double> closing = std::nullopt)
+RunSource(const MaskImage * mask, double gap, double closing = bmr::BrainSurfaceSettings{}.skullClosing)
 {
   auto source = SurfaceSource::New();
   source->SetInput(mask);
   source->SetSkullGap(gap);
-  if (closing)
-  {
-    source->SetSkullClosing(*closing);
-  }
+  source->SetSkullClosing(closing);
   source->Update();
   return source;
 }
@@ -247,11 +243,7 @@ TEST(BrainSurface, SkullClosingBridgesAFissureAndKeepsTheGapElsewhere)
   // No closing: the default 1 mm, nominally bridging folds narrower than 5 mm,
   // bridges this 6 mm one too on 1 mm voxels.
   const auto open = RunSource(mask, gap, 0.0);
-  auto       closed = SurfaceSource::New();
-  closed->SetInput(mask);
-  closed->SetSkullGap(gap);
-  closed->SetSkullClosing(closing);
-  closed->Update();
+  const auto closed = RunSource(mask, gap, closing);
   const bmr::ContactSurface & blade = open->GetSkullSurface();
   const bmr::ContactSurface & bridged = closed->GetSkullSurface();
   ASSERT_TRUE(bmr::IsClosedOrientedSurface(bridged));

@@ -868,10 +868,10 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
       result.gravity = bestSize * largest.normalized();
       // The model the result reports is the one solved: with the fitted gravity.
       result.model.model.bodyAcceleration = result.gravity;
-      Model fitted = weightlessModel->GetModel();
-      fitted.bodyAcceleration = result.gravity;
+      Model solved = weightlessModel->GetModel();
+      solved.bodyAcceleration = result.gravity;
       result.model.pipelineModel = itk::BiomechanicalModelObject::New();
-      result.model.pipelineModel->SetModel(std::move(fitted));
+      result.model.pipelineModel->SetModel(std::move(solved));
     });
   }
   if (solverProgress)
