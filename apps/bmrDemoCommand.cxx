@@ -63,6 +63,7 @@ struct DemoOptions
   double                      registrationGravity = 0.0; // g
   int                         gravityFitCandidates = 0;
   bool                        noBaseline = false;
+  bool                        noRegistrationResection = false; // the registration is not told the planned resection
   bool                        truthOnly = false; // solve and write the truth, register nothing
   std::string                 truthFrom;         // a --truth-only folder to read the truth from
   bool                        elastix = false;
@@ -430,6 +431,11 @@ RunDemo(DemoOptions options)
     // The head's position gives gravity's direction in the operating room; its effective size is a model choice.
     settings.model.gravity = options.registrationGravity * units::StandardGravity * truth.down;
     settings.model.materials.tumour.youngsModulus = options.truth.tumourStiffness * ParenchymaMaterial().youngsModulus;
+    // The surgeon's plan (the tumour and its margin) says what was removed; fluid fills it, as in the truth.
+    if (!options.noRegistrationResection)
+    {
+      settings.model.resectionMask = truth.resectionMask;
+    }
     settings.gravityFitCandidates = options.gravityFitCandidates;
     // The registration's CSF has the ground truth's Poisson's ratio (its stiffness stays the default) and, as
     // the drained CSF it is, the ground truth's (almost no) weight.
@@ -696,6 +702,9 @@ AddDemoCommand(CLI::App & app)
     ->check(CLI::NonNegativeNumber)
     ->needs("--registration-gravity");
   demo->add_flag("--no-baseline", options->noBaseline, "Skip the B-spline intensity registration");
+  demo->add_flag("--no-registration-resection", options->noRegistrationResection,
+                 "On a scene with a resection, do not give the biomechanical registration the planned resection "
+                 "(the tumour and its margin, filled with fluid in its model)");
   demo->add_flag("--elastix", options->elastix,
                  "Also register with elastix (Debian's elastix; affine then B-spline, Mattes mutual information; "
                  "the parameter files in examples/elastix)");
@@ -729,7 +738,7 @@ AddDemoCommand(CLI::App & app)
     truthFrom->excludes(demo->get_option(scene));
   }
   for (const char * registration : { "--variant", "--load", "--surface-match", "--registration-gravity",
-                                     "--gravity-fit-candidates", "--elastix",
+                                     "--gravity-fit-candidates", "--no-registration-resection", "--elastix",
                                      "--elastix-parameters", "--baseline-shrink-factors", "--baseline-iterations",
                                      "--truth-from" })
   {

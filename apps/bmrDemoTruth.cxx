@@ -30,6 +30,7 @@ const char * const kTruthTransform = "ground-truth-transform.h5";
 const char * const kForwardTransform = "ground-truth-forward-transform.h5";
 const char * const kBrainOnPreoperativeGrid = "intraoperative-brain-on-preoperative-grid.nii.gz";
 const char * const kTumourMask = "tumour-mask.nii.gz";
+const char * const kResectionMask = "resection-mask.nii.gz";
 const char * const kSecondTruthTransform = "ground-truth-check-transform.h5"; // --truth-check
 const char * const kReport = "demo-report.json";
 
@@ -101,6 +102,11 @@ WriteTruthFiles(const SyntheticBrainShift & truth, const fs::path & folder, bool
   {
     WriteImageAtomically(truth.tumourMask.GetPointer(), folder / kTumourMask);
   }
+  fs::remove(folder / kResectionMask, ignored);
+  if (truth.resectionMask.IsNotNull())
+  {
+    WriteImageAtomically(truth.resectionMask.GetPointer(), folder / kResectionMask);
+  }
 }
 
 TruthFiles
@@ -144,6 +150,10 @@ ReadTruthFiles(const fs::path & folder)
   truth.shift = block.value("shift_mm", 0.0);
   truth.truthFitMaxResidual = block.value("fit_max_residual_mm", 0.0);
   truth.resectionCavityRadius = block.value("resection_cavity_radius_mm", 0.0);
+  if (truth.resectionCavityRadius > 0.0)
+  {
+    truth.resectionMask = ReadMaskImage(TruthFile(folder, kResectionMask), "resection mask");
+  }
   SyntheticBrainShiftSettings & scene = files.scene;
   scene.craniotomyCentre = ReadVector(block, "craniotomy_centre_mm", reportPath);
   scene.craniotomyRadius = block.value("craniotomy_radius_mm", scene.craniotomyRadius);

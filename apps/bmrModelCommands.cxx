@@ -343,6 +343,7 @@ struct PatientModelOptions
   std::string         image;
   std::string         mask;
   std::string         tumourMask;
+  std::string         resectionMask;
   std::string         skullSurface;
   SettingOptions      settings{ { "model" } };
   RegionOptions       regions;
@@ -355,6 +356,9 @@ struct PatientModelOptions
     command->add_option("image", image, "Preoperative T1 MRI (.nii.gz, .nrrd, .mha, ...)")->required();
     command->add_option("--mask", mask, "Brain mask on the image grid (voxels > 0); default: atlas skull stripping");
     command->add_option("--tumour-mask", tumourMask, "Tumour mask on the image grid (voxels > 0)");
+    command->add_option("--resection-mask", resectionMask,
+                        "Tissue removed by the surgery, e.g. the planned resection, on the image grid (voxels > 0): "
+                        "fluid (the CSF class's material) fills it, so that the cavity's walls can sag");
     command->add_option("--skull-surface", skullSurface,
                         "Rigid skull surface (.stl, .obj, .vtp, .vtk) to use instead of the body dilated by --skull-gap");
     settings.Add(command);
@@ -385,10 +389,14 @@ struct PatientModelOptions
     {
       model.csfDrainedDepth = csfDrainedDepth;
     }
+    if (!resectionMask.empty())
+    {
+      model.resectionMask = ReadMaskImage(resectionMask, "resection mask");
+    }
     return registration;
   }
 
-  /** The settings of bmr::BuildBrainModel (reads the craniotomy mask when one is given). */
+  /** The settings of bmr::BuildBrainModel (reads the craniotomy and resection masks when they are given). */
   BrainModelSettings Settings() const { return RegistrationSettings().model; }
 
   /** The image, and the masks and skull surface that were given (null or empty otherwise). */

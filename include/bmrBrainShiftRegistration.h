@@ -166,6 +166,11 @@ struct BrainModelSettings
   Vector3                             craniotomyCentre = Vector3::Zero();
   double                              craniotomyRadius = 0.0;
   RegistrationLabelImage::ConstPointer craniotomyMask;
+  /** Tissue removed by the surgery (voxels > 0, on the image grid; null:
+   *  none), e.g. the planned resection: the fluid that fills the cavity takes
+   *  its place (the CSF class's material, bmr::MapMaterialsFromMemberships),
+   *  so that the cavity's walls can sag into it. */
+  RegistrationLabelImage::ConstPointer resectionMask;
   /** Brain-skull contact of every surface node that is neither fixed nor exposed (itk::BiomechanicalRegionsFilter). */
   bool contact = true;
   /** Body acceleration (mm/s^2); zero: none (registration loads by displacements only). */
@@ -204,6 +209,8 @@ struct BrainModel
   /** The classifier's fit (centroids, iterations, convergence). */
   FuzzyCMeansResult        classificationFit;
   LabelVolume              brainMask;
+  /** Brain removed by settings.resectionMask (mm^3; 0 without one). */
+  double                   resectedVolume = 0.0;
   GridQuality              gridQuality;
   std::vector<Index>       exposedNodes;
   PrescribedDisplacement   load;

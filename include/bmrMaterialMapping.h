@@ -80,7 +80,10 @@ CsfClassMaterial(const MaterialMappingSettings & settings);
  *  Per cell (or integration point) the memberships are averaged over the cell
  *  (or the point's neighbourhood cube, see MaterialSampling) with trilinear
  *  interpolation of the membership image; voxels of `tumourMask` (same grid,
- *  non-zero = tumour) count as membership 1 in an extra tumour class. Samples
+ *  non-zero = tumour) count as membership 1 in an extra tumour class, and
+ *  voxels of `resectionMask` (same grid, non-zero = tissue removed by the
+ *  surgery, e.g. the planned resection) as membership 1 in the first class,
+ *  the CSF, whose fluid fills the cavity (they override the tumour). Samples
  *  outside the image or the mask contribute nothing: the average is
  *  sum(u) / sum(sum_k u_k) over the samples, so it sums to 1. A cell with no
  *  sample inside the mask takes the memberships of the mask voxel nearest its
@@ -98,15 +101,16 @@ CsfClassMaterial(const MaterialMappingSettings & settings);
  *  Throws bmr::Error for: a model without cells (finite elements) or without
  *  integration points (meshless); an empty membership image or one with a
  *  negative or non-finite membership; classMaterials
- *  whose count differs from the image's components; a tumour mask on another
- *  grid; a membership image with no voxel inside the mask; a cell or point
+ *  whose count differs from the image's components; a tumour or resection
+ *  mask on another grid; a membership image with no voxel inside the mask; a cell or point
  *  entirely outside the image (the model is not in the image's physical space). */
 void
 MapMaterialsFromMemberships(Model &                         model,
                             const ScalarVolume &            memberships,
                             const MaterialMappingSettings & settings = {},
                             const LabelVolume *             tumourMask = nullptr,
-                            std::vector<std::string> *      warnings = nullptr);
+                            std::vector<std::string> *      warnings = nullptr,
+                            const LabelVolume *             resectionMask = nullptr);
 
 /** Sets the same outputs from a hard label map: each cell (or integration
  *  point) takes the material of the label covering most of its samples

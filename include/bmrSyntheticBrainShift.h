@@ -183,6 +183,10 @@ struct SyntheticBrainShift
   SparseDisplacements             trackedPoints;
   RegistrationLabelImage::Pointer tumourMask; // preoperative grid; null without a tumour
   double                          resectionCavityRadius = 0.0; // mm around the tumour's centre; 0: no resection
+  /** The planned resection on the preoperative grid (the brain within
+   *  resectionCavityRadius of the tumour's centre), what a registration may be
+   *  given (BrainModelSettings::resectionMask); null without a resection. */
+  RegistrationLabelImage::Pointer resectionMask;
   StageTimer                      timer;
 };
 

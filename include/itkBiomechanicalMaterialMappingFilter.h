@@ -29,7 +29,10 @@ namespace itk
  *    (ascending centroid), 0 outside the brain, e.g. the output of
  *    FuzzyCMeansClassifierImageFilter;
  *  - "TumourMask" (optional): a mask on the memberships' grid (non-zero =
- *    tumour), an extra class of full membership there.
+ *    tumour), an extra class of full membership there;
+ *  - "ResectionMask" (optional): a mask on the memberships' grid (non-zero =
+ *    tissue removed by the surgery), full membership in the first class (the
+ *    CSF, whose fluid fills the cavity) there, over the tumour's.
  *
  * Settings: ClassMaterials (one per class; empty, the default:
  * bmr::DefaultClassMaterials, the darkest class CSF and the others
@@ -72,6 +75,8 @@ public:
   itkGetInputMacro(Memberships, MembershipImageType);
   itkSetInputMacro(TumourMask, MaskImageType);
   itkGetInputMacro(TumourMask, MaskImageType);
+  itkSetInputMacro(ResectionMask, MaskImageType);
+  itkGetInputMacro(ResectionMask, MaskImageType);
 
   /** One material per class (ascending centroid); empty: bmr::DefaultClassMaterials. */
   void
@@ -122,6 +127,7 @@ protected:
     this->SetPrimaryInputName("ModelInput");
     this->AddRequiredInputName("Memberships");
     this->AddOptionalInputName("TumourMask");
+    this->AddOptionalInputName("ResectionMask");
     this->SetNumberOfRequiredOutputs(1);
     this->SetNthOutput(0, this->MakeOutput(0));
   }
@@ -159,13 +165,17 @@ protected:
       {
         settings.classMaterials = bmr::DefaultClassMaterials(volume.components);
       }
-      bmr::LabelVolume tumour;
+      bmr::LabelVolume tumour, resection;
       if (const MaskImageType * mask = this->GetTumourMask())
       {
         tumour = MakeBiomechanicalVolume<std::uint8_t>(mask);
       }
+      if (const MaskImageType * mask = this->GetResectionMask())
+      {
+        resection = MakeBiomechanicalVolume<std::uint8_t>(mask);
+      }
       bmr::MapMaterialsFromMemberships(model, volume, settings, tumour.values.empty() ? nullptr : &tumour,
-                                       &m_Warnings);
+                                       &m_Warnings, resection.values.empty() ? nullptr : &resection);
     }
     catch (const bmr::Error & error)
     {

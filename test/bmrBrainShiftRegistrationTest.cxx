@@ -1078,6 +1078,54 @@ TEST(BrainShiftRegistration, ResectionCavityAndFieldOfViewInTheIntraoperativeIma
   EXPECT_GT(image->GetPixel(index), 1.3 * brain[brain.size() / 2]);
   EXPECT_EQ(resected.intraoperativeBrainMask->GetPixel(index), 0);
 
+  // The planned resection given to a registration: the brain within the cavity's radius of the tumour's centre.
+  ASSERT_TRUE(resected.resectionMask.IsNotNull());
+  EXPECT_TRUE(intact.resectionMask.IsNull());
+  EXPECT_NEAR(voxels(resected.resectionMask), sphere, 0.02 * sphere);
+
+  // The registration that knows the resection lets the cavity's walls sag as the truth's do: near the cavity
+  // (within 10 mm of its wall) it errs less than the one that keeps the tumour in place.
+  const auto nearCavity = bmr::RegistrationLabelImage::New();
+  nearCavity->CopyInformation(resected.intraoperativeBrainOnPreoperativeGrid);
+  nearCavity->SetRegions(resected.intraoperativeBrainOnPreoperativeGrid->GetLargestPossibleRegion());
+  nearCavity->Allocate();
+  for (itk::ImageRegionConstIteratorWithIndex<bmr::RegistrationLabelImage> it(
+         resected.intraoperativeBrainOnPreoperativeGrid, nearCavity->GetLargestPossibleRegion());
+       !it.IsAtEnd(); ++it)
+  {
+    bmr::RegistrationLabelImage::PointType point;
+    nearCavity->TransformIndexToPhysicalPoint(it.GetIndex(), point);
+    const bool near = (bmr::Vector3(point[0], point[1], point[2]) - scene.tumourCentre).norm() <= 25.0;
+    nearCavity->SetPixel(it.GetIndex(), near && it.Get() > 0 ? 1 : 0);
+  }
+  scene.tumourRadius = 12.0;
+  const auto registerResected = [&](bool knowsTheResection) {
+    const auto result = RegisterFromTrackedPoints(resected, scene, 7.0, bmr::ImageGridKind::Hexahedra, 0, [&](auto & settings) {
+      settings.model.gravity = resected.gravity;
+      bmr::Material csf = bmr::CsfMaterial();
+      csf.density = scene.csfDensity;
+      settings.model.materials.classMaterials = bmr::DefaultClassMaterials(settings.model.classifier.classes, csf);
+      settings.model.materials.tumour.youngsModulus = scene.tumourStiffness * bmr::ParenchymaMaterial().youngsModulus;
+      if (knowsTheResection)
+      {
+        settings.model.resectionMask = resected.resectionMask;
+      }
+    });
+    EXPECT_TRUE(result.solve.converged) << result.solve.message;
+    return result;
+  };
+  const auto kept = registerResected(false);
+  const auto removed = registerResected(true);
+  EXPECT_EQ(kept.model.resectedVolume, 0.0);
+  EXPECT_NEAR(removed.model.resectedVolume, sphere, 0.02 * sphere);
+  const auto keptError = bmr::MeasureDisplacementError(kept.transform, resected.truthTransform, nearCavity, 1);
+  const auto removedError = bmr::MeasureDisplacementError(removed.transform, resected.truthTransform, nearCavity, 1);
+  std::cout << "near the cavity (" << keptError.samples << " voxels): tumour kept p95 " << keptError.p95 << " mean "
+            << keptError.mean << " mm, resection modelled p95 " << removedError.p95 << " mean " << removedError.mean
+            << " mm\n";
+  EXPECT_LT(removedError.p95, 0.8 * keptError.p95);
+  EXPECT_LT(removedError.mean, 0.8 * keptError.mean);
+
   // Bad input: a resection without a tumour; a free rim that is not a fraction of the radius (named, before any work).
   scene.tumourRadius = 0.0;
   EXPECT_THROW(bmr::MakeSyntheticBrainShift(colin.image, colin.mask, scene), bmr::Error);

@@ -688,6 +688,56 @@ TEST(MaterialMappingMemberships, TumourMaskOverridesMemberships)
   EXPECT_NE(message.find("tumour mask is not on"), std::string::npos) << message;
 }
 
+TEST(MaterialMappingMemberships, ResectedTissueIsTheFirstClassFluidOverTheTumour)
+{
+  const bmr::ScalarVolume memberships = LinearMemberships();
+  bmr::LabelVolume        tumour = FullMask(memberships.geometry);
+  bmr::LabelVolume        resection = FullMask(memberships.geometry);
+  for (int k = 0; k < 32; ++k)
+    for (int j = 0; j < 32; ++j)
+      for (int i = 0; i < 32; ++i)
+      {
+        tumour.At(i, j, k) = i >= 20 ? 1 : 0;
+        resection.At(i, j, k) = i >= 10 && i <= 25 ? 1 : 0;
+      }
+  // Cells of 5 mm from x = 5: [5,10] [10,15] [15,20] [20,25] [25,30].
+  bmr::Model model =
+    bmr::MakeBlockMesh(Vector3(25, 10, 10), { 5, 2, 2 }, bmr::GridCells::Hexahedra, bmr::Material{}, Vector3(5, 5, 5));
+  bmr::MaterialMappingSettings settings;
+  settings.classMaterials = { { "fluid", 1.0, 0.2, 1.0 }, bmr::ParenchymaMaterial() };
+  bmr::MapMaterialsFromMemberships(model, memberships, settings, &tumour, nullptr, &resection);
+  for (std::size_t c = 0; c < model.cells.size(); ++c)
+  {
+    const bmr::Material & material = model.materials[model.cells[c].material];
+    const double          x = Centroid(model, model.cells[c]).x();
+    if (x > 10.0 && x < 25.0) // resected, also where the tumour was: exactly the first class's values
+    {
+      EXPECT_EQ(material.name, "fluid") << "x " << x;
+      EXPECT_EQ(material.youngsModulus, 1.0);
+      EXPECT_EQ(material.poissonRatio, 0.2);
+      EXPECT_EQ(material.density, 1.0);
+    }
+    else if (x < 10.0)
+    {
+      // [5,10]: six midpoint samples along x; the last (9.58) gives 0.58 of its weight to resected voxel 10,
+      // 0.097 of the cell's, which takes the fluid's 1 Pa instead of voxel 10's mixture (2033 Pa): 197 Pa
+      // softer than the linear mixture's average (stated tolerance 20 Pa for the sampling's rounding).
+      const double mixture = 7.5 / 31.0 * 1.0 + (1.0 - 7.5 / 31.0) * 3000.0;
+      EXPECT_NEAR(material.youngsModulus, mixture - 197.0, 20.0) << material.name;
+    }
+    else // [25,30]: the tumour the resection left, but for the first sample's 0.58 of resected voxel 25
+    {
+      EXPECT_NEAR(material.youngsModulus, 6000.0 - 0.0972 * 5999.0, 20.0) << material.name;
+    }
+  }
+  // A resection mask on another grid is refused, by name.
+  bmr::LabelVolume shifted = resection;
+  shifted.geometry.origin = Vector3(0.5, 0, 0);
+  const std::string message =
+    ErrorMessage([&] { bmr::MapMaterialsFromMemberships(model, memberships, settings, &tumour, nullptr, &shifted); });
+  EXPECT_NE(message.find("resection mask is not on"), std::string::npos) << message;
+}
+
 TEST(MaterialMappingMemberships, OutsideMaskTakesNearestVoxelAndOutsideImageFails)
 {
   // Memberships only for x < 16 (mask), zero beyond.

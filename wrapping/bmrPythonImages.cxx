@@ -452,6 +452,7 @@ DefaultRegistrationSettings()
   settings["craniotomy_centre"] = py::none();
   settings["craniotomy_radius"] = 0.0;
   settings["craniotomy_mask"] = py::none();
+  settings["resection_mask"] = py::none();
   settings["gravity"] = py::make_tuple(0.0, 0.0, 0.0);
   settings["csf_drained_depth"] = py::none();
   settings["max_distance"] = IntraoperativeData{}.maxDistance;
@@ -513,6 +514,10 @@ RegistrationSettingsFrom(const py::dict & values)
   if (!mask.is_none())
   {
     model.craniotomyMask = ItkLabelImage(mask, "craniotomy_mask");
+  }
+  if (const py::object resection = get("resection_mask"); !resection.is_none())
+  {
+    model.resectionMask = ItkLabelImage(resection, "resection_mask");
   }
   model.gravity = VectorFromObject(get("gravity"), "gravity");
   if (const py::object depth = get("csf_drained_depth"); !depth.is_none())
@@ -580,6 +585,7 @@ BindRegistration(py::module_ & module)
                            })
     .def_property_readonly("centroids", [](const BrainModel & model) { return model.classificationFit.centroids; })
     .def_property_readonly("brain_mask", [](const BrainModel & model) { return ImageFromVolume(model.brainMask); })
+    .def_readonly("resected_volume", &BrainModel::resectedVolume, "mm^3 of brain the resection_mask removed (0: none)")
     .def_property_readonly("exposed_nodes", [](const BrainModel & model) { return ArrayFromIndices(model.exposedNodes); })
     .def_readonly("load", &BrainModel::load)
     .def_property_readonly("load_report", [](const BrainModel & model) { return LoadReportDict(model.loadReport); })

@@ -40,6 +40,12 @@ BindSyntheticBrainShift(py::module_ & module)
                              return py::make_tuple(truth.down.x(), truth.down.y(), truth.down.z());
                            },
                            "Unit vector from the craniotomy towards the brain's centroid: gravity's direction.")
+    .def_property_readonly("tumour_mask", [](const SyntheticBrainShift & truth) { return PythonImage(truth.tumourMask.GetPointer()); },
+                           "The tumour on the preoperative grid; None without a tumour.")
+    .def_property_readonly("resection_mask",
+                           [](const SyntheticBrainShift & truth) { return PythonImage(truth.resectionMask.GetPointer()); },
+                           "The planned resection (the tumour and its margin) on the preoperative grid, for "
+                           "register(resection_mask=); None without a resection.")
     .def_readonly("exposed_surface", &SyntheticBrainShift::exposedSurface)
     .def_property_readonly("tracked_points", [](const SyntheticBrainShift & truth) { return ArrayFromPoints(truth.trackedPoints.points); })
     .def_property_readonly("tracked_displacements",

@@ -14,6 +14,7 @@
 #include <cstdlib>
 #include <limits>
 #include <memory>
+#include <numeric>
 #include <set>
 #include <sstream>
 #include <tuple>
@@ -504,7 +505,8 @@ MapMaterialsFromMemberships(Model &                         model,
                             const ScalarVolume &            memberships,
                             const MaterialMappingSettings & settings,
                             const LabelVolume *             tumourMask,
-                            std::vector<std::string> *      warnings)
+                            std::vector<std::string> *      warnings,
+                            const LabelVolume *             resectionMask)
 {
   const char *          who = "material mapping";
   const ImageGeometry & geometry = memberships.geometry;
@@ -534,11 +536,14 @@ MapMaterialsFromMemberships(Model &                         model,
     throw Error(std::string(who) + ": " + std::to_string(materials.size()) + " class materials for a membership image of " +
                 std::to_string(classes) + " classes; give one material per class (ascending centroid) or none for the defaults");
   }
-  if (tumourMask && (!tumourMask->geometry.SameGridAs(geometry) || tumourMask->values.size() != voxels))
+  for (const auto & [mask, name] : { std::pair{ tumourMask, "tumour mask" }, std::pair{ resectionMask, "resection mask" } })
   {
-    throw Error(std::string(who) + ": the tumour mask is not on the membership image's grid: tumour mask " +
-                tumourMask->geometry.Describe() + ", memberships " + geometry.Describe() +
-                "; resample the tumour mask onto the image grid");
+    if (mask && (!mask->geometry.SameGridAs(geometry) || mask->values.size() != voxels))
+    {
+      throw Error(std::string(who) + ": the " + name + " is not on the membership image's grid: " + name + " " +
+                  mask->geometry.Describe() + ", memberships " + geometry.Describe() + "; resample the " + name +
+                  " onto the image grid");
+    }
   }
   CheckNodes(model, who);
   const Sites sites(model, settings.sampling, geometry, who);
@@ -570,14 +575,24 @@ MapMaterialsFromMemberships(Model &                         model,
   const int groups = static_cast<int>(groupFirst.size());
 
   auto isTumour = [&](std::size_t offset) { return tumourMask && tumourMask->values[offset] != 0; };
-  // Memberships of a voxel with the tumour as an extra class.
+  auto isResected = [&](std::size_t offset) { return resectionMask && resectionMask->values[offset] != 0; };
+  // Memberships of a voxel with the tumour as an extra class; removed tissue
+  // (inside the brain: where the memberships or the tumour are) is the CSF class's fluid.
   auto addVoxel = [&](std::size_t offset, double weight, double * sum) {
+    const float * u = &memberships.values[offset * classes];
+    if (isResected(offset))
+    {
+      if (isTumour(offset) || std::accumulate(u, u + classes, 0.0) > 0.0)
+      {
+        sum[0] += weight;
+      }
+      return;
+    }
     if (isTumour(offset))
     {
       sum[classes] += weight;
       return;
     }
-    const float * u = &memberships.values[offset * classes];
     for (int k = 0; k < classes; ++k)
     {
       sum[k] += weight * u[k];

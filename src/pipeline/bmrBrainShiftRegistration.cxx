@@ -114,6 +114,24 @@ CheckIntraoperativeData(const IntraoperativeData & data)
   }
 }
 
+/** The volume (mm^3) of brain a resection removes; a mask with no voxel
+ *  inside the brain is a mistake, not a no-op. */
+double
+ResectedVolume(const LabelVolume & resection, const LabelVolume & brain)
+{
+  std::size_t inside = 0;
+  for (std::size_t voxel = 0; voxel < resection.values.size(); ++voxel)
+  {
+    inside += resection.values[voxel] != 0 && brain.values[voxel] != 0;
+  }
+  if (inside == 0)
+  {
+    throw Error("the resection mask has no voxel inside the brain mask: give the removed tissue as a mask on the "
+                "preoperative image's grid (voxels > 0), or no resection mask");
+  }
+  return static_cast<double>(inside) * brain.geometry.VoxelVolume();
+}
+
 /** The exposed surface of an intraoperative image: the smooth surface of its
  *  brain mask (given, or from atlas skull stripping), made as the cortex it
  *  is matched to (CortexSurfaceOfMask of the preoperative mask), so that both
@@ -390,6 +408,11 @@ BuildBrainModel(const RegistrationImage *      image,
   {
     tumour = MaskVolume(tumourMask, "tumour mask", &geometry);
   }
+  if (settings.resectionMask.IsNotNull())
+  {
+    result.resectedVolume = ResectedVolume(MaskVolume(settings.resectionMask, "resection mask", &geometry),
+                                           result.brainMask);
+  }
 
   using ClassifierType = itk::FuzzyCMeansClassifierImageFilter<RegistrationImage, RegistrationLabelImage>;
   auto classifier = ClassifierType::New();
@@ -431,6 +454,10 @@ BuildBrainModel(const RegistrationImage *      image,
   if (tumourMask != nullptr)
   {
     materials->SetTumourMask(tumourMask);
+  }
+  if (settings.resectionMask.IsNotNull())
+  {
+    materials->SetResectionMask(settings.resectionMask);
   }
   materials->SetClassMaterials(settings.materials.classMaterials);
   materials->SetTumourMaterial(settings.materials.tumour);
@@ -1063,6 +1090,10 @@ RegistrationReportJson(const BrainShiftRegistrationResult & result, const BrainS
   if (settings.model.csfDrainedDepth)
   {
     report["model"]["csf"]["drained_depth_mm"] = *settings.model.csfDrainedDepth;
+  }
+  if (settings.model.resectionMask.IsNotNull())
+  {
+    report["model"]["resected_volume_mm3"] = result.model.resectedVolume;
   }
   const LoadReport & load = result.model.loadReport;
   report["loads"] = { { "used", load.usedPoints },

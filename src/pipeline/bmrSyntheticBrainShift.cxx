@@ -387,6 +387,7 @@ MakeSyntheticBrainShiftModel(const RegistrationImage *           preoperativeIma
   {
     // The cavity's cells hold drained fluid: the CSF's material, weightless.
     truth.resectionCavityRadius = settings.tumourRadius + settings.resectionMargin;
+    truth.resectionMask = SphereMask(brainMask, settings.tumourCentre, truth.resectionCavityRadius);
     Material cavity = csf;
     cavity.name = "resection cavity";
     model.materials.push_back(cavity);

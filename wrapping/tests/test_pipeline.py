@@ -276,6 +276,46 @@ def test_register_gives_what_biomech_register_writes(tmp_path, biomech, colin27)
     assert "NOT CONVERGED" not in result.table()
 
 
+def test_resection_mask_from_python_and_the_command_line(tmp_path, biomech, colin27):
+    """The planned resection (a 20 mm ball of brain under the craniotomy) given to register() and to
+    `biomech register --resection-mask`: the same model and transform; a mask outside the brain is named."""
+    image, mask = colin27
+    brain = bmr.array_from_image(mask) > 0
+    index = np.round(mask.point_to_index((-11, 40, 55))).astype(int)  # (x, y, z); arrays are [z, y, x]
+    z, y, x = np.indices(brain.shape)
+    ball = (x - index[0]) ** 2 + (y - index[1]) ** 2 + (z - index[2]) ** 2 <= 10 ** 2
+    resection = bmr.image_from_array((ball & brain).astype(np.uint8), mask.spacing, mask.origin, mask.direction)
+    bmr.imwrite(resection, tmp_path / "resection.nii.gz")
+    output = tmp_path / "registration"
+    run = biomech("register", COLIN27 / "ch2.nii.gz", "--mask", COLIN27 / "ch2bet.nii.gz", "--craniotomy-centre",
+                  -11, 43, 84, "--craniotomy-radius", 30, "--sparse-displacements", sparse_csv(), "--element-size", 8,
+                  "--resection-mask", tmp_path / "resection.nii.gz", "-o", output, "-q")
+    assert run.returncode == 0, run.stderr
+    report = json.loads((output / "registration-report.json").read_text())
+    points, displacements = bmr.read_sparse_displacements(sparse_csv())
+    result = bmr.register(image, brain_mask=mask, sparse_points=points, sparse_displacements=displacements,
+                          resection_mask=resection, **CRANIOTOMY)
+    volume = float((ball & brain).sum()) * float(np.prod(mask.spacing))
+    assert result.report["model"]["resected_volume_mm3"] == pytest.approx(volume, rel=1e-12)
+    assert report["model"]["resected_volume_mm3"] == result.report["model"]["resected_volume_mm3"]
+    samples = grid_points(-60, 60, 9)
+    np.testing.assert_array_equal(result.transform.transform_points(samples),
+                                  bmr.read_transform(output / "transform.h5").transform_points(samples))
+    # The fluid's cells are CSF-soft: more of the model's materials are the CSF class's than without.
+    plain = bmr.register(image, brain_mask=mask, sparse_points=points, sparse_displacements=displacements, **CRANIOTOMY)
+    assert "resected_volume_mm3" not in plain.report["model"]
+    softest = lambda model: sum(1 for cell in model.cell_materials if model.materials[cell].youngs_modulus <= 10.0)
+    assert softest(result.brain_model.model) > softest(plain.brain_model.model)
+    assert result.brain_model.resected_volume == result.report["model"]["resected_volume_mm3"]
+    assert plain.brain_model.resected_volume == 0.0
+    corner = np.zeros(brain.shape, dtype=np.uint8)
+    corner[:5, :5, :5] = 1  # the image's corner, outside the head
+    outside = bmr.image_from_array(corner, mask.spacing, mask.origin, mask.direction)
+    with pytest.raises(bmr.Error, match="resection mask has no voxel inside the brain"):
+        bmr.register(image, brain_mask=mask, sparse_points=points, sparse_displacements=displacements,
+                     resection_mask=outside, **CRANIOTOMY)
+
+
 def test_build_brain_model_then_solve_reproduces_register(colin27):
     image, mask = colin27
     points, displacements = bmr.read_sparse_displacements(sparse_csv())
