@@ -755,6 +755,13 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
       result.warnings.push_back(warning.str());
     }
   }
+  else if (settings.model.resectionMask.IsNotNull())
+  {
+    // Measured in the validation study: 5 mm hexahedra without gravity 1.56 -> 1.95 mm p95 with the resection.
+    result.warnings.push_back("the resection mask frees the cavity's walls, but without gravity nothing makes them "
+                              "sag and the soft cavity takes up part of the exposed surface's sag instead; give "
+                              "gravity (--gravity, and --gravity-fit-candidates with an intraoperative image)");
+  }
 
   // The solve and the fit continue the model's pipeline: the deformation
   // filter takes the regions' model, the loads' point set and the skull; its

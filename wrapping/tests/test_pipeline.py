@@ -308,6 +308,9 @@ def test_resection_mask_from_python_and_the_command_line(tmp_path, biomech, coli
     assert softest(result.brain_model.model) > softest(plain.brain_model.model)
     assert result.brain_model.resected_volume == result.report["model"]["resected_volume_mm3"]
     assert plain.brain_model.resected_volume == 0.0
+    # Without gravity nothing makes the walls sag: a warning says to give it.
+    assert any("without gravity nothing makes them sag" in warning for warning in result.warnings)
+    assert not any("resection" in warning for warning in plain.warnings)
     corner = np.zeros(brain.shape, dtype=np.uint8)
     corner[:5, :5, :5] = 1  # the image's corner, outside the head
     outside = bmr.image_from_array(corner, mask.spacing, mask.origin, mask.direction)
