@@ -90,8 +90,8 @@ VARIANTS = ["hexahedra:5", "hexahedra:7", "mixed:5", "tetrahedra:7", "meshless:7
 # the intraoperative image (`--gravity-fit-candidates`): five sizes from none to 1 g (the whole brain's weight, all CSF
 # drained), then up to three refinements. The truth's 0.3 g is not given to them. The 15-25 mm scenes also have 7 mm
 # tetrahedra with fitted gravity: against their tetrahedral truths the hexahedra and mixed cells sink 0.5-1.1 mm less
-# along gravity far from the craniotomy (measured 2026-11-29), and the tetrahedra do not; at 6-9 s a solve their fit
-# takes 45-60 s, over the clinical budget, which the report says.
+# along gravity far from the craniotomy (measured 2026-11-29), and the tetrahedra do not; their fit took 30-54 s
+# (2026-11-29), mostly over the clinical budget, which the report says.
 GRAVITY_FIT_METHODS = ["hexahedra-5-gravity", "mixed-5-gravity"]
 LARGE_GRAVITY_FIT_METHODS = ["tetrahedra-7-gravity"]
 GRAVITY_FIT = ["--registration-gravity", "1", "--gravity-fit-candidates", "5"]
