@@ -524,7 +524,8 @@ def time_budget_target(runs, methods):
     return ["* **Target (issue 19): every discretization's registration within the clinical budget of %.0f s: %s.** "
             "Slowest scene of each: %s.%s" % (
                 CLINICAL_BUDGET_S, verdict, "; ".join(described),
-                " Times on a busy machine are upper bounds (first item)." if over else "")]
+                " Times on a busy machine are upper bounds (first item); where the time of the gravity fits goes: "
+                "docs/registration.md, \"Gravity fitted to the intraoperative image\"." if over else "")]
 
 
 def busy(machine):
