@@ -549,6 +549,10 @@ RunModel(const ModelOptions & options)
   {
     report["csf"]["drained_depth_mm"] = *settings.csfDrainedDepth;
   }
+  if (settings.resectionMask.IsNotNull())
+  {
+    report["resected_volume_mm3"] = brain.resectedVolume;
+  }
   report["warnings"] = warnings;
 
   timer.Run("write", [&] {

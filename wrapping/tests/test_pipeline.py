@@ -292,6 +292,11 @@ def test_resection_mask_from_python_and_the_command_line(tmp_path, biomech, coli
                   "--resection-mask", tmp_path / "resection.nii.gz", "-o", output, "-q")
     assert run.returncode == 0, run.stderr
     report = json.loads((output / "registration-report.json").read_text())
+    model = biomech("model", COLIN27 / "ch2.nii.gz", "--mask", COLIN27 / "ch2bet.nii.gz", "--element-size", 8,
+                    "--resection-mask", tmp_path / "resection.nii.gz", "-o", tmp_path / "model", "-q")
+    assert model.returncode == 0, model.stderr
+    model_report = json.loads((tmp_path / "model" / "model-report.json").read_text())
+    assert model_report["resected_volume_mm3"] == report["model"]["resected_volume_mm3"]
     points, displacements = bmr.read_sparse_displacements(sparse_csv())
     result = bmr.register(image, brain_mask=mask, sparse_points=points, sparse_displacements=displacements,
                           resection_mask=resection, **CRANIOTOMY)
