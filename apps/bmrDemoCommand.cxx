@@ -46,6 +46,8 @@ namespace
 
 // The largest brain shift the module is built for (mm): the cut-off of matches along gravity.
 constexpr double kLargestExpectedShift = 25.0;
+// The error near a tumour or a resection cavity is measured within this distance (mm) of it.
+constexpr double kNearTumourDistance = 10.0;
 
 struct DemoOptions
 {
@@ -84,6 +86,7 @@ struct MethodResult
   double            seconds = 0.0;
   json              stages = json::object();
   DisplacementError error;
+  std::optional<DisplacementError> nearTumourError; // within kNearTumourDistance of the tumour or the cavity
   EdgeEvaluation    edges;
   json              details = json::object();
 };
@@ -103,6 +106,10 @@ MethodJson(const MethodResult & method)
                   { "stages", method.stages },
                   { "displacement_error_mm", DisplacementErrorJson(method.error) },
                   { "details", method.details } };
+  if (method.nearTumourError)
+  {
+    result["displacement_error_near_tumour_mm"] = DisplacementErrorJson(*method.nearTumourError);
+  }
   if (method.edges.valid)
   {
     result["hausdorff_mm"] = { { "p50", method.edges.Percentile(50) },
@@ -372,9 +379,19 @@ RunDemo(DemoOptions options)
   }
 
   std::vector<MethodResult> methods;
-  // A method's error against the ground truth, and against the second truth when there is one.
+  // Near the tumour, or the cavity's walls after a resection: the brain within kNearTumourDistance of it.
+  const RegistrationLabelImage * structure =
+    truth.resectionMask.IsNotNull() ? truth.resectionMask.GetPointer() : truth.tumourMask.GetPointer();
+  const RegistrationLabelImage::Pointer nearTumour =
+    structure != nullptr ? RegionNear(structure, truth.intraoperativeBrainOnPreoperativeGrid, kNearTumourDistance)
+                         : nullptr;
+  // A method's error against the ground truth (also near the tumour), and against the second truth when there is one.
   const auto score = [&](const itk::Transform<double, 3, 3> * transform, MethodResult & method) {
     method.error = MeasureDisplacementError(transform, truth.truthTransform, truth.intraoperativeBrainOnPreoperativeGrid);
+    if (nearTumour)
+    {
+      method.nearTumourError = MeasureDisplacementError(transform, truth.truthTransform, nearTumour);
+    }
     if (secondTruth)
     {
       method.details["displacement_error_against_second_truth_mm"] = DisplacementErrorJson(
@@ -568,6 +585,13 @@ RunDemo(DemoOptions options)
   if (!truthCheckReport.is_null())
   {
     report["ground_truth_check"] = truthCheckReport;
+  }
+  if (nearTumour)
+  {
+    // What the methods' displacement_error_near_tumour_mm measures.
+    report["near_tumour"] = { { "structure", truth.resectionMask.IsNotNull() ? "resection cavity" : "tumour" },
+                              { "distance_mm", kNearTumourDistance },
+                              { "region", "the intraoperative brain within the distance of the structure" } };
   }
   if (!electrodeReport.is_null())
   {

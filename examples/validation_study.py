@@ -252,6 +252,26 @@ def method_job(name, method, output, reduced=False, threads=0):
     write_record(entry, os.path.join(folder, "run.json"))
 
 
+def near_tumour_table(runs):
+    """The displacement error near the tumour (or the resection cavity's walls) of the scenes that have one."""
+    rows = []
+    for entry in runs:
+        near = (entry["report"] or {}).get("near_tumour")
+        for method in (entry["report"] or {}).get("methods", []):
+            error = method.get("displacement_error_near_tumour_mm")
+            if near and error:
+                rows.append("| %s | %s | %s | %.2f | %.2f | %.2f |" % (
+                    entry["name"], method["name"], near["structure"], error["mean"], error["p95"], error["max"]))
+    if not rows:
+        return []
+    distance = next(entry["report"]["near_tumour"]["distance_mm"] for entry in runs
+                    if (entry["report"] or {}).get("near_tumour"))
+    return ["", "Near the tumour, or the resection cavity's walls: the same displacement error on the intraoperative "
+                "brain within %g mm of it (`displacement_error_near_tumour_mm` of `biomech demo`'s report)." % distance,
+            "", "| scene | method | near | error mean mm | error p95 mm | error max mm |", "|---|---|---|---|---|---|",
+            *rows]
+
+
 def collect(output, reduced=False):
     """The jobs' records merged into one run per scene (the truth's report with every method's row), in the order
     of SCENES, and the machine line (hosts, dates and load averages over the jobs)."""
@@ -589,6 +609,7 @@ def markdown(runs, machine):
                 "%.1f%%" % (100 * fraction) if fraction is not None else "-"))
         for method, error in entry.get("failed_methods", []):
             lines.append("| %s | %s failed: %s | | | | | | |" % (entry["name"], method, Short(error)))
+    lines += near_tumour_table(runs)
     lines += ["", "![error against run time](validation-error-vs-time.png)", reading(runs, machine),
               "How far two ground truths of the same scene on different discretizations differ, and the registrations "
               "scored against each, is in [ground-truth-agreement.md](ground-truth-agreement.md); how far a truth from "

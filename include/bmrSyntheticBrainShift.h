@@ -223,6 +223,14 @@ MeasureDisplacementError(const itk::Transform<double, 3, 3> * transform,
                          const RegistrationLabelImage *       region,
                          int                                  stride = 2);
 
+/** The voxels of `region` (e.g. the intraoperative brain on the preoperative
+ *  grid) within `distance` mm of `structure` (a tumour or a resection cavity,
+ *  voxels > 0, on the same grid): where the error near a tumour or a cavity
+ *  is measured. Throws bmr::Error for masks on different grids, an empty
+ *  structure, or no voxel of the region that near. */
+RegistrationLabelImage::Pointer
+RegionNear(const RegistrationLabelImage * structure, const RegistrationLabelImage * region, double distance);
+
 /** The intensity-based baseline (itk::BSplineIntensityRegistrationFilter with
  *  its defaults: translation, then B-spline 80 -> 40 -> 20 mm, Mattes mutual
  *  information, L-BFGS-B): `fixed` is the intraoperative image, `moving` the

@@ -558,15 +558,19 @@ TEST_F(ModelCommandTest, DemoNamesAResectionWithoutTumourAndAMissingElastix)
 
 // The validation workflow's cached truths: `demo --truth-only` writes a truth
 // that `demo --truth-from` registers exactly as one `demo` that solves it and
-// registers it in the same process; a folder that is not such a truth, or
-// scene options beside --truth-from, are named errors that write nothing.
+// registers it in the same process (here with a resection: the planned
+// resection travels with the truth, the registration is given it, and the
+// error near the cavity is measured the same way); a folder that is not such
+// a truth, or scene options beside --truth-from, are named errors that write
+// nothing.
 TEST_F(ModelCommandTest, DemoRegistersACachedTruthAsTheWholeDemoDoes)
 {
   if (!fs::exists(Colin27Folder / "ch2.nii.gz"))
   {
     GTEST_SKIP() << "Colin27 (mricron-data) is not installed";
   }
-  const std::string scene = " --quiet --overlays 0 --truth-element-size 8";
+  const std::string scene =
+    " --quiet --overlays 0 --truth-element-size 8 --tumour-centre -11 40 55 --tumour-radius 12 --resection-margin 5";
   const fs::path    truth = m_Folder / "truth", cached = m_Folder / "cached", whole = m_Folder / "whole";
   CommandResult     run = Biomech("demo" + scene + " --truth-only -o " + Quoted(truth));
   ASSERT_EQ(run.exitCode, 0) << run.err;
@@ -575,7 +579,8 @@ TEST_F(ModelCommandTest, DemoRegistersACachedTruthAsTheWholeDemoDoes)
   ASSERT_EQ(truthReport["methods"].size(), 1u);
   EXPECT_EQ(truthReport["methods"][0]["name"], "no registration");
   for (const char * file : { "ground-truth-transform.h5", "ground-truth-forward-transform.h5", "tracked-points.csv",
-                             "intraoperative-brain-on-preoperative-grid.nii.gz", "intraoperative.nii.gz" })
+                             "intraoperative-brain-on-preoperative-grid.nii.gz", "intraoperative.nii.gz",
+                             "tumour-mask.nii.gz", "resection-mask.nii.gz" })
   {
     EXPECT_TRUE(fs::exists(truth / file)) << file;
   }
@@ -605,7 +610,25 @@ TEST_F(ModelCommandTest, DemoRegistersACachedTruthAsTheWholeDemoDoes)
         << a["name"] << " " << statistic;
     }
     EXPECT_NEAR(a["fraction_within_1_7_mm"].get<double>(), b["fraction_within_1_7_mm"].get<double>(), 1e-3) << a["name"];
+    // Near the cavity (the brain within 10 mm of it): fewer samples, measured the same way.
+    ASSERT_TRUE(a.contains("displacement_error_near_tumour_mm")) << a["name"];
+    EXPECT_NEAR(a["displacement_error_near_tumour_mm"]["p95"].get<double>(),
+                b["displacement_error_near_tumour_mm"]["p95"].get<double>(), 1e-4)
+      << a["name"];
+    EXPECT_GT(a["displacement_error_near_tumour_mm"]["samples"].get<std::size_t>(), 100u);
+    EXPECT_LT(a["displacement_error_near_tumour_mm"]["samples"].get<std::size_t>(),
+              a["displacement_error_mm"]["samples"].get<std::size_t>() / 5);
   }
+  for (const json * report : { &cachedReport, &wholeReport })
+  {
+    EXPECT_EQ((*report)["near_tumour"]["structure"], "resection cavity");
+    // The registration was given the planned resection (a 17 mm sphere: about 20,600 mm^3 of brain at most).
+    const double resected = (*report)["methods"][1]["details"]["model"]["resected_volume_mm3"].get<double>();
+    EXPECT_GT(resected, 10000.0);
+    EXPECT_LT(resected, 4.0 / 3.0 * M_PI * 17.0 * 17.0 * 17.0);
+  }
+  // No registration errs near the cavity, where the walls sag.
+  EXPECT_GT(cachedReport["methods"][0]["displacement_error_near_tumour_mm"]["p95"].get<double>(), 0.5);
   // The registration really ran: it beats no registration.
   EXPECT_LT(cachedReport["methods"][1]["displacement_error_mm"]["p95"].get<double>(),
             cachedReport["methods"][0]["displacement_error_mm"]["p95"].get<double>());

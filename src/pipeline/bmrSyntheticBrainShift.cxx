@@ -6,6 +6,7 @@
 #include "itkDisplacementPointSetToBSplineTransformFilter.h"
 #include "itkImageRegionConstIteratorWithIndex.h"
 #include "itkImageRegionIteratorWithIndex.h"
+#include "itkSignedMaurerDistanceMapImageFilter.h"
 
 #include "bmrUnits.h"
 
@@ -612,6 +613,49 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
     }
   });
   return truth;
+}
+
+RegistrationLabelImage::Pointer
+RegionNear(const RegistrationLabelImage * structure, const RegistrationLabelImage * region, double distance)
+{
+  if (structure == nullptr || region == nullptr || !(distance >= 0.0))
+  {
+    throw Error("RegionNear: give the structure's mask, the region and a distance >= 0 mm");
+  }
+  const ImageGeometry grid = itk::MakeBiomechanicalGeometry(region);
+  if (!itk::MakeBiomechanicalGeometry(structure).SameGridAs(grid))
+  {
+    throw Error("RegionNear: the structure's mask is not on the region's grid; resample it onto that grid");
+  }
+  using DistanceImage = itk::Image<float, 3>;
+  auto distanceMap = itk::SignedMaurerDistanceMapImageFilter<RegistrationLabelImage, DistanceImage>::New();
+  distanceMap->SetInput(structure);
+  distanceMap->SetBackgroundValue(0);
+  distanceMap->SetUseImageSpacing(true);
+  distanceMap->SetSquaredDistance(false);
+  distanceMap->SetInsideIsPositive(false);
+  distanceMap->Update();
+  auto near = RegistrationLabelImage::New();
+  near->CopyInformation(region);
+  near->SetRegions(region->GetBufferedRegion());
+  near->Allocate();
+  const std::size_t voxels = region->GetBufferedRegion().GetNumberOfPixels();
+  const float *     distances = distanceMap->GetOutput()->GetBufferPointer();
+  std::size_t       inside = 0, count = 0;
+  for (std::size_t n = 0; n < voxels; ++n)
+  {
+    inside += structure->GetBufferPointer()[n] > 0;
+    const bool take = region->GetBufferPointer()[n] > 0 && distances[n] <= distance;
+    near->GetBufferPointer()[n] = take ? 1 : 0;
+    count += take;
+  }
+  if (inside == 0 || count == 0)
+  {
+    throw Error(inside == 0 ? "RegionNear: the structure's mask has no voxel"
+                            : "RegionNear: no voxel of the region lies within " + std::to_string(distance) +
+                                " mm of the structure");
+  }
+  return near;
 }
 
 DisplacementError
