@@ -87,6 +87,7 @@ struct MethodResult
   json              stages = json::object();
   DisplacementError error;
   std::optional<DisplacementError> nearTumourError; // within kNearTumourDistance of the tumour or the cavity
+  std::optional<double>            tumourSurfaceDistance; // 95th percentile, mm (SurfaceDistance95)
   EdgeEvaluation    edges;
   json              details = json::object();
 };
@@ -109,6 +110,10 @@ MethodJson(const MethodResult & method)
   if (method.nearTumourError)
   {
     result["displacement_error_near_tumour_mm"] = DisplacementErrorJson(*method.nearTumourError);
+  }
+  if (method.tumourSurfaceDistance)
+  {
+    result["tumour_surface_distance_p95_mm"] = *method.tumourSurfaceDistance;
   }
   if (method.edges.valid)
   {
@@ -391,6 +396,7 @@ RunDemo(DemoOptions options)
     if (nearTumour)
     {
       method.nearTumourError = MeasureDisplacementError(transform, truth.truthTransform, nearTumour);
+      method.tumourSurfaceDistance = SurfaceDistance95(transform, truth.truthTransform, structure, intraoperative);
     }
     if (secondTruth)
     {
@@ -591,7 +597,9 @@ RunDemo(DemoOptions options)
     // What the methods' displacement_error_near_tumour_mm measures.
     report["near_tumour"] = { { "structure", truth.resectionMask.IsNotNull() ? "resection cavity" : "tumour" },
                               { "distance_mm", kNearTumourDistance },
-                              { "region", "the intraoperative brain within the distance of the structure" } };
+                              { "region", "the intraoperative brain within the distance of the structure" },
+                              { "surface_distance", "95th percentile of the symmetric distances between the "
+                                                    "structure's boundary moved by the method and by the truth" } };
   }
   if (!electrodeReport.is_null())
   {

@@ -231,6 +231,21 @@ MeasureDisplacementError(const itk::Transform<double, 3, 3> * transform,
 RegistrationLabelImage::Pointer
 RegionNear(const RegistrationLabelImage * structure, const RegistrationLabelImage * region, double distance);
 
+/** How far a registration puts a structure's surface from where it truly
+ *  is: `structure` (voxels > 0, on the preoperative grid, e.g. the tumour)
+ *  warped onto `grid` (the intraoperative image's) by the backward map
+ *  `transform` (null: no registration, the identity) and by `truth`; the 95th
+ *  percentile (mm) of the distances from each warped mask's boundary voxels
+ *  to the other's boundary, both ways (a symmetric Hausdorff percentile; the
+ *  boundaries are the masks' voxels with a 6-neighbour outside, distances
+ *  from ITK's Maurer map, to voxel centres). Throws bmr::Error when either
+ *  warped mask is empty on `grid`. */
+double
+SurfaceDistance95(const itk::Transform<double, 3, 3> * transform,
+                  const itk::Transform<double, 3, 3> * truth,
+                  const RegistrationLabelImage *       structure,
+                  const itk::ImageBase<3> *            grid);
+
 /** The intensity-based baseline (itk::BSplineIntensityRegistrationFilter with
  *  its defaults: translation, then B-spline 80 -> 40 -> 20 mm, Mattes mutual
  *  information, L-BFGS-B): `fixed` is the intraoperative image, `moving` the

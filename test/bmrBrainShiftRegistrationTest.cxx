@@ -14,6 +14,9 @@
 #include "itkBiomechanicalImageIO.h"
 #include "itkBiomechanicalTransformIO.h"
 #include "itkAffineTransform.h"
+#include "itkIdentityTransform.h"
+#include "itkImageRegionIteratorWithIndex.h"
+#include "itkTranslationTransform.h"
 #include "itkImageRegionConstIteratorWithIndex.h"
 #include "itkResampleImageFilter.h"
 
@@ -906,6 +909,40 @@ UniformImage(unsigned int size, float value)
 // The intraoperative contrast maps the three tissue classes' centres to their
 // new levels (bmrSyntheticBrainShift.h): on an image of exactly three
 // intensities, fuzzy c-means finds them, and each maps to its target.
+// The surface distance of a structure moved by a registration against the
+// truth: a 10 mm ball moved 3 mm along x against the identity. A point of
+// the sphere at angle theta from x is 3 |cos theta| mm from the moved sphere
+// (to first order), and |cos theta| is uniform over the sphere's area
+// (Archimedes), so the 95th percentile is 0.95 x 3 = 2.85 mm; voxels of
+// 1 mm allow 0.6 mm. Identical maps give exactly 0.
+TEST(SyntheticBrainShift, SurfaceDistanceOfAMovedBallIsItsAnalyticPercentile)
+{
+  auto ball = bmr::RegistrationLabelImage::New();
+  bmr::RegistrationLabelImage::SizeType size;
+  size.Fill(64);
+  ball->SetRegions(size);
+  ball->Allocate(true);
+  for (itk::ImageRegionIteratorWithIndex<bmr::RegistrationLabelImage> it(ball, ball->GetBufferedRegion()); !it.IsAtEnd();
+       ++it)
+  {
+    bmr::Vector3 x(it.GetIndex()[0] - 32.0, it.GetIndex()[1] - 32.0, it.GetIndex()[2] - 32.0);
+    it.Set(x.norm() <= 10.0 ? 1 : 0);
+  }
+  const auto identity = itk::IdentityTransform<double, 3>::New();
+  auto       moved = itk::TranslationTransform<double, 3>::New();
+  itk::TranslationTransform<double, 3>::OutputVectorType offset;
+  offset[0] = 3.0;
+  offset[1] = offset[2] = 0.0;
+  moved->SetOffset(offset);
+  EXPECT_EQ(bmr::SurfaceDistance95(identity, identity, ball, ball), 0.0);
+  EXPECT_NEAR(bmr::SurfaceDistance95(moved, identity, ball, ball), 2.85, 0.6);
+  EXPECT_NEAR(bmr::SurfaceDistance95(nullptr, moved, ball, ball), 2.85, 0.6);
+  auto empty = bmr::RegistrationLabelImage::New();
+  empty->SetRegions(size);
+  empty->Allocate(true);
+  EXPECT_THROW(bmr::SurfaceDistance95(identity, identity, empty, ball), bmr::Error);
+}
+
 TEST(SyntheticIntraoperativeImage, ContrastMapsTheTissueClassCentres)
 {
   const auto image = UniformImage(24, 0.0f);

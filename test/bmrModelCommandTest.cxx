@@ -627,8 +627,16 @@ TEST_F(ModelCommandTest, DemoRegistersACachedTruthAsTheWholeDemoDoes)
     EXPECT_GT(resected, 10000.0);
     EXPECT_LT(resected, 4.0 / 3.0 * M_PI * 17.0 * 17.0 * 17.0);
   }
-  // No registration errs near the cavity, where the walls sag.
+  // No registration errs near the cavity, where the walls sag, and leaves the cavity's surface farther from
+  // where it is than the registration does.
   EXPECT_GT(cachedReport["methods"][0]["displacement_error_near_tumour_mm"]["p95"].get<double>(), 0.5);
+  for (std::size_t k = 0; k < 2; ++k)
+  {
+    EXPECT_NEAR(cachedReport["methods"][k]["tumour_surface_distance_p95_mm"].get<double>(),
+                wholeReport["methods"][k]["tumour_surface_distance_p95_mm"].get<double>(), 1e-6);
+  }
+  EXPECT_LT(cachedReport["methods"][1]["tumour_surface_distance_p95_mm"].get<double>(),
+            cachedReport["methods"][0]["tumour_surface_distance_p95_mm"].get<double>());
   // The registration really ran: it beats no registration.
   EXPECT_LT(cachedReport["methods"][1]["displacement_error_mm"]["p95"].get<double>(),
             cachedReport["methods"][0]["displacement_error_mm"]["p95"].get<double>());

@@ -5,6 +5,7 @@
 #include "itkBiomechanicalImageConversion.h"
 #include "itkDisplacementPointSetToBSplineTransformFilter.h"
 #include "itkImageRegionConstIteratorWithIndex.h"
+#include "itkIdentityTransform.h"
 #include "itkImageRegionIteratorWithIndex.h"
 #include "itkSignedMaurerDistanceMapImageFilter.h"
 
@@ -12,6 +13,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <limits>
 #include <cmath>
 #include <random>
 #include <set>
@@ -656,6 +658,123 @@ RegionNear(const RegistrationLabelImage * structure, const RegistrationLabelImag
                                 " mm of the structure");
   }
   return near;
+}
+
+double
+SurfaceDistance95(const itk::Transform<double, 3, 3> * transform,
+                  const itk::Transform<double, 3, 3> * truth,
+                  const RegistrationLabelImage *       structure,
+                  const itk::ImageBase<3> *            grid)
+{
+  if (truth == nullptr || structure == nullptr || grid == nullptr)
+  {
+    throw Error("SurfaceDistance95: give the ground-truth transform, the structure's mask and the grid");
+  }
+  // Only the part of the grid the structure can reach: its box and kSurfaceDistanceMargin around it.
+  constexpr double kSurfaceDistanceMargin = 30.0; // mm: more than the largest shift the module is built for
+  itk::ContinuousIndex<double, 3> low, high;
+  low.Fill(std::numeric_limits<double>::max());
+  high.Fill(std::numeric_limits<double>::lowest());
+  for (itk::ImageRegionConstIteratorWithIndex<RegistrationLabelImage> it(structure, structure->GetBufferedRegion());
+       !it.IsAtEnd(); ++it)
+  {
+    if (it.Get() == 0)
+    {
+      continue;
+    }
+    RegistrationLabelImage::PointType point;
+    structure->TransformIndexToPhysicalPoint(it.GetIndex(), point);
+    for (int corner = 0; corner < 8; ++corner)
+    {
+      RegistrationLabelImage::PointType shifted = point;
+      for (unsigned int axis = 0; axis < 3; ++axis)
+      {
+        shifted[axis] += ((corner >> axis) & 1 ? 1.0 : -1.0) * kSurfaceDistanceMargin;
+      }
+      const auto index = grid->TransformPhysicalPointToContinuousIndex<double, double>(shifted);
+      for (unsigned int axis = 0; axis < 3; ++axis)
+      {
+        low[axis] = std::min(low[axis], index[axis]);
+        high[axis] = std::max(high[axis], index[axis]);
+      }
+    }
+  }
+  if (!(low[0] <= high[0]))
+  {
+    throw Error("SurfaceDistance95: the structure's mask has no voxel");
+  }
+  const auto whole = grid->GetLargestPossibleRegion();
+  auto       cropped = RegistrationLabelImage::New();
+  cropped->CopyInformation(grid);
+  RegistrationLabelImage::RegionType region;
+  for (unsigned int axis = 0; axis < 3; ++axis)
+  {
+    const auto first = whole.GetIndex()[axis];
+    const auto last = first + static_cast<itk::IndexValueType>(whole.GetSize()[axis]) - 1;
+    const auto from = std::clamp(static_cast<itk::IndexValueType>(std::floor(low[axis])), first, last);
+    const auto to = std::clamp(static_cast<itk::IndexValueType>(std::ceil(high[axis])), first, last);
+    region.SetIndex(axis, from);
+    region.SetSize(axis, static_cast<itk::SizeValueType>(to - from + 1));
+  }
+  cropped->SetRegions(region);
+  const auto identity = itk::IdentityTransform<double, 3>::New();
+  const RegistrationLabelImage::Pointer masks[2] = {
+    WarpLabelImage(structure, transform != nullptr ? transform : identity.GetPointer(), cropped),
+    WarpLabelImage(structure, truth, cropped)
+  };
+  using DistanceImage = itk::Image<float, 3>;
+  std::vector<double> distances;
+  for (int side = 0; side < 2; ++side)
+  {
+    const RegistrationLabelImage * from = masks[side];
+    auto                           map = itk::SignedMaurerDistanceMapImageFilter<RegistrationLabelImage, DistanceImage>::New();
+    map->SetInput(masks[1 - side]);
+    map->SetBackgroundValue(0);
+    map->SetUseImageSpacing(true);
+    map->SetSquaredDistance(false);
+    map->Update();
+    const DistanceImage * toOther = map->GetOutput();
+    const auto            region = from->GetBufferedRegion();
+    const auto            size = region.GetSize();
+    std::size_t           inside = 0;
+    for (itk::ImageRegionConstIteratorWithIndex<RegistrationLabelImage> it(from, region); !it.IsAtEnd(); ++it)
+    {
+      if (it.Get() == 0)
+      {
+        continue;
+      }
+      ++inside;
+      // A boundary voxel: a 6-neighbour outside the mask or the grid.
+      bool boundary = false;
+      for (unsigned int axis = 0; axis < 3 && !boundary; ++axis)
+      {
+        for (const int step : { -1, 1 })
+        {
+          auto neighbour = it.GetIndex();
+          neighbour[axis] += step;
+          if (neighbour[axis] < region.GetIndex()[axis] ||
+              neighbour[axis] >= region.GetIndex()[axis] + static_cast<itk::IndexValueType>(size[axis]) ||
+              from->GetPixel(neighbour) == 0)
+          {
+            boundary = true;
+            break;
+          }
+        }
+      }
+      if (boundary)
+      {
+        // Maurer's map measures to the other mask's boundary voxel centres: zero on them.
+        distances.push_back(std::abs(toOther->GetPixel(it.GetIndex())));
+      }
+    }
+    if (inside == 0)
+    {
+      throw Error("SurfaceDistance95: the structure warped onto the grid has no voxel; give a grid that holds it");
+    }
+  }
+  const std::size_t rank = static_cast<std::size_t>(std::ceil(0.95 * static_cast<double>(distances.size()))) - 1;
+  std::nth_element(distances.begin(), distances.begin() + static_cast<std::ptrdiff_t>(rank), distances.end());
+  return distances[rank];
 }
 
 DisplacementError
