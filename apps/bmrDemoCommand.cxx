@@ -396,7 +396,7 @@ RunDemo(DemoOptions options)
     if (nearTumour)
     {
       method.nearTumourError = MeasureDisplacementError(transform, truth.truthTransform, nearTumour);
-      method.tumourSurfaceDistance = SurfaceDistance95(transform, truth.truthTransform, structure, intraoperative);
+      method.tumourSurfaceDistance = SurfaceDistance95(transform, truth.truthTransform, structure);
     }
     if (secondTruth)
     {

@@ -271,8 +271,8 @@ def near_tumour_table(runs):
     return ["", "Near the tumour, or the resection cavity's walls: the same displacement error on the intraoperative "
                 "brain within %g mm of it (`displacement_error_near_tumour_mm` of `biomech demo`'s report), and the "
                 "95th percentile of the symmetric distances between the tumour's (or the planned resection's) surface "
-                "moved by the method and by the truth (`tumour_surface_distance_p95_mm`; on the intraoperative grid, "
-                "to voxel centres)." % distance,
+                "moved by the method and by the truth (`tumour_surface_distance_p95_mm`; boundary voxels of the two "
+                "warped masks on a 0.5 mm grid)." % distance,
             "", "| scene | method | near | error mean mm | error p95 mm | error max mm | surface distance p95 mm |",
             "|---|---|---|---|---|---|---|", *rows]
 

@@ -233,18 +233,18 @@ RegionNear(const RegistrationLabelImage * structure, const RegistrationLabelImag
 
 /** How far a registration puts a structure's surface from where it truly
  *  is: `structure` (voxels > 0, on the preoperative grid, e.g. the tumour)
- *  warped onto `grid` (the intraoperative image's) by the backward map
- *  `transform` (null: no registration, the identity) and by `truth`; the 95th
- *  percentile (mm) of the distances from each warped mask's boundary voxels
- *  to the other's boundary, both ways (a symmetric Hausdorff percentile; the
- *  boundaries are the masks' voxels with a 6-neighbour outside, distances
- *  from ITK's Maurer map, to voxel centres). Throws bmr::Error when either
- *  warped mask is empty on `grid`. */
+ *  warped by the backward map `transform` (null: no registration, the
+ *  identity) and by `truth` onto an axis-aligned grid of `spacing` (mm) over
+ *  the structure's box and 30 mm around it; the 95th percentile (mm) of the
+ *  distances from each warped mask's boundary voxels to the other's
+ *  boundary, both ways (a symmetric Hausdorff percentile; boundary voxels
+ *  have a 6-neighbour outside, distances from ITK's Maurer map, between
+ *  voxel centres). Throws bmr::Error for an empty structure. */
 double
 SurfaceDistance95(const itk::Transform<double, 3, 3> * transform,
                   const itk::Transform<double, 3, 3> * truth,
                   const RegistrationLabelImage *       structure,
-                  const itk::ImageBase<3> *            grid);
+                  double                               spacing = 0.5);
 
 /** The intensity-based baseline (itk::BSplineIntensityRegistrationFilter with
  *  its defaults: translation, then B-spline 80 -> 40 -> 20 mm, Mattes mutual

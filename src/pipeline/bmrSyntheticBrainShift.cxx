@@ -664,59 +664,48 @@ double
 SurfaceDistance95(const itk::Transform<double, 3, 3> * transform,
                   const itk::Transform<double, 3, 3> * truth,
                   const RegistrationLabelImage *       structure,
-                  const itk::ImageBase<3> *            grid)
+                  double                               spacing)
 {
-  if (truth == nullptr || structure == nullptr || grid == nullptr)
+  if (truth == nullptr || structure == nullptr || !(spacing > 0.0))
   {
-    throw Error("SurfaceDistance95: give the ground-truth transform, the structure's mask and the grid");
+    throw Error("SurfaceDistance95: give the ground-truth transform, the structure's mask and a spacing > 0 mm");
   }
-  // Only the part of the grid the structure can reach: its box and kSurfaceDistanceMargin around it.
+  // An axis-aligned grid of `spacing` over the part of space the structure can reach: its box and
+  // kSurfaceDistanceMargin around it (the image's own voxels, often anisotropic, would quantize the distances).
   constexpr double kSurfaceDistanceMargin = 30.0; // mm: more than the largest shift the module is built for
-  itk::ContinuousIndex<double, 3> low, high;
-  low.Fill(std::numeric_limits<double>::max());
-  high.Fill(std::numeric_limits<double>::lowest());
+  Vector3 low = Vector3::Constant(std::numeric_limits<double>::max());
+  Vector3 high = Vector3::Constant(std::numeric_limits<double>::lowest());
   for (itk::ImageRegionConstIteratorWithIndex<RegistrationLabelImage> it(structure, structure->GetBufferedRegion());
        !it.IsAtEnd(); ++it)
   {
-    if (it.Get() == 0)
+    if (it.Get() != 0)
     {
-      continue;
-    }
-    RegistrationLabelImage::PointType point;
-    structure->TransformIndexToPhysicalPoint(it.GetIndex(), point);
-    for (int corner = 0; corner < 8; ++corner)
-    {
-      RegistrationLabelImage::PointType shifted = point;
-      for (unsigned int axis = 0; axis < 3; ++axis)
-      {
-        shifted[axis] += ((corner >> axis) & 1 ? 1.0 : -1.0) * kSurfaceDistanceMargin;
-      }
-      const auto index = grid->TransformPhysicalPointToContinuousIndex<double, double>(shifted);
-      for (unsigned int axis = 0; axis < 3; ++axis)
-      {
-        low[axis] = std::min(low[axis], index[axis]);
-        high[axis] = std::max(high[axis], index[axis]);
-      }
+      RegistrationLabelImage::PointType point;
+      structure->TransformIndexToPhysicalPoint(it.GetIndex(), point);
+      const Vector3 x(point[0], point[1], point[2]);
+      low = low.cwiseMin(x);
+      high = high.cwiseMax(x);
     }
   }
-  if (!(low[0] <= high[0]))
+  if (!(low.x() <= high.x()))
   {
     throw Error("SurfaceDistance95: the structure's mask has no voxel");
   }
-  const auto whole = grid->GetLargestPossibleRegion();
-  auto       cropped = RegistrationLabelImage::New();
-  cropped->CopyInformation(grid);
-  RegistrationLabelImage::RegionType region;
+  low.array() -= kSurfaceDistanceMargin;
+  high.array() += kSurfaceDistanceMargin;
+  auto cropped = RegistrationLabelImage::New();
+  RegistrationLabelImage::SizeType    size;
+  RegistrationLabelImage::PointType   origin;
+  RegistrationLabelImage::SpacingType voxel;
   for (unsigned int axis = 0; axis < 3; ++axis)
   {
-    const auto first = whole.GetIndex()[axis];
-    const auto last = first + static_cast<itk::IndexValueType>(whole.GetSize()[axis]) - 1;
-    const auto from = std::clamp(static_cast<itk::IndexValueType>(std::floor(low[axis])), first, last);
-    const auto to = std::clamp(static_cast<itk::IndexValueType>(std::ceil(high[axis])), first, last);
-    region.SetIndex(axis, from);
-    region.SetSize(axis, static_cast<itk::SizeValueType>(to - from + 1));
+    size[axis] = static_cast<itk::SizeValueType>(std::ceil((high[axis] - low[axis]) / spacing)) + 1;
+    origin[axis] = low[axis];
+    voxel[axis] = spacing;
   }
-  cropped->SetRegions(region);
+  cropped->SetRegions(size);
+  cropped->SetOrigin(origin);
+  cropped->SetSpacing(voxel);
   const auto identity = itk::IdentityTransform<double, 3>::New();
   const RegistrationLabelImage::Pointer masks[2] = {
     WarpLabelImage(structure, transform != nullptr ? transform : identity.GetPointer(), cropped),
@@ -735,7 +724,7 @@ SurfaceDistance95(const itk::Transform<double, 3, 3> * transform,
     map->Update();
     const DistanceImage * toOther = map->GetOutput();
     const auto            region = from->GetBufferedRegion();
-    const auto            size = region.GetSize();
+    const auto            extent = region.GetSize();
     std::size_t           inside = 0;
     for (itk::ImageRegionConstIteratorWithIndex<RegistrationLabelImage> it(from, region); !it.IsAtEnd(); ++it)
     {
@@ -753,7 +742,7 @@ SurfaceDistance95(const itk::Transform<double, 3, 3> * transform,
           auto neighbour = it.GetIndex();
           neighbour[axis] += step;
           if (neighbour[axis] < region.GetIndex()[axis] ||
-              neighbour[axis] >= region.GetIndex()[axis] + static_cast<itk::IndexValueType>(size[axis]) ||
+              neighbour[axis] >= region.GetIndex()[axis] + static_cast<itk::IndexValueType>(extent[axis]) ||
               from->GetPixel(neighbour) == 0)
           {
             boundary = true;
@@ -769,7 +758,7 @@ SurfaceDistance95(const itk::Transform<double, 3, 3> * transform,
     }
     if (inside == 0)
     {
-      throw Error("SurfaceDistance95: the structure warped onto the grid has no voxel; give a grid that holds it");
+      throw Error("SurfaceDistance95: a map moved the structure out of the 30 mm around it; check the transforms");
     }
   }
   const std::size_t rank = static_cast<std::size_t>(std::ceil(0.95 * static_cast<double>(distances.size()))) - 1;
