@@ -4,8 +4,8 @@
 #include "itkBSplineIntensityRegistrationFilter.h"
 #include "itkBiomechanicalImageConversion.h"
 #include "itkDisplacementPointSetToBSplineTransformFilter.h"
-#include "itkImageRegionConstIteratorWithIndex.h"
 #include "itkIdentityTransform.h"
+#include "itkImageRegionConstIteratorWithIndex.h"
 #include "itkImageRegionIteratorWithIndex.h"
 #include "itkSignedMaurerDistanceMapImageFilter.h"
 
@@ -13,8 +13,8 @@
 
 #include <algorithm>
 #include <chrono>
-#include <limits>
 #include <cmath>
+#include <limits>
 #include <random>
 #include <set>
 #include <sstream>
@@ -693,7 +693,7 @@ SurfaceDistance95(const itk::Transform<double, 3, 3> * transform,
   }
   low.array() -= kSurfaceDistanceMargin;
   high.array() += kSurfaceDistanceMargin;
-  auto cropped = RegistrationLabelImage::New();
+  auto grid = RegistrationLabelImage::New();
   RegistrationLabelImage::SizeType    size;
   RegistrationLabelImage::PointType   origin;
   RegistrationLabelImage::SpacingType voxel;
@@ -703,13 +703,13 @@ SurfaceDistance95(const itk::Transform<double, 3, 3> * transform,
     origin[axis] = low[axis];
     voxel[axis] = spacing;
   }
-  cropped->SetRegions(size);
-  cropped->SetOrigin(origin);
-  cropped->SetSpacing(voxel);
+  grid->SetRegions(size);
+  grid->SetOrigin(origin);
+  grid->SetSpacing(voxel);
   const auto identity = itk::IdentityTransform<double, 3>::New();
   const RegistrationLabelImage::Pointer masks[2] = {
-    WarpLabelImage(structure, transform != nullptr ? transform : identity.GetPointer(), cropped),
-    WarpLabelImage(structure, truth, cropped)
+    WarpLabelImage(structure, transform != nullptr ? transform : identity.GetPointer(), grid),
+    WarpLabelImage(structure, truth, grid)
   };
   using DistanceImage = itk::Image<float, 3>;
   std::vector<double> distances;
