@@ -198,6 +198,21 @@ NodeCentroid(const Model & model)
   return centroid / static_cast<double>(model.nodes.size());
 }
 
+/** Signed Euclidean distance (mm) of every voxel centre to the boundary
+ *  voxels of `mask` (> 0), negative inside: ITK's Maurer map. */
+itk::Image<float, 3>::Pointer
+SignedDistanceToMask(const RegistrationLabelImage * mask)
+{
+  auto map = itk::SignedMaurerDistanceMapImageFilter<RegistrationLabelImage, itk::Image<float, 3>>::New();
+  map->SetInput(mask);
+  map->SetBackgroundValue(0);
+  map->SetUseImageSpacing(true);
+  map->SetSquaredDistance(false);
+  map->SetInsideIsPositive(false);
+  map->Update();
+  return map->GetOutput();
+}
+
 } // namespace
 
 RegistrationImage::Pointer
@@ -629,20 +644,13 @@ RegionNear(const RegistrationLabelImage * structure, const RegistrationLabelImag
   {
     throw Error("RegionNear: the structure's mask is not on the region's grid; resample it onto that grid");
   }
-  using DistanceImage = itk::Image<float, 3>;
-  auto distanceMap = itk::SignedMaurerDistanceMapImageFilter<RegistrationLabelImage, DistanceImage>::New();
-  distanceMap->SetInput(structure);
-  distanceMap->SetBackgroundValue(0);
-  distanceMap->SetUseImageSpacing(true);
-  distanceMap->SetSquaredDistance(false);
-  distanceMap->SetInsideIsPositive(false);
-  distanceMap->Update();
-  auto near = RegistrationLabelImage::New();
+  const auto distanceMap = SignedDistanceToMask(structure);
+  auto       near = RegistrationLabelImage::New();
   near->CopyInformation(region);
   near->SetRegions(region->GetBufferedRegion());
   near->Allocate();
   const std::size_t voxels = region->GetBufferedRegion().GetNumberOfPixels();
-  const float *     distances = distanceMap->GetOutput()->GetBufferPointer();
+  const float *     distances = distanceMap->GetBufferPointer();
   std::size_t       inside = 0, count = 0;
   for (std::size_t n = 0; n < voxels; ++n)
   {
@@ -711,18 +719,11 @@ SurfaceDistance95(const itk::Transform<double, 3, 3> * transform,
     WarpLabelImage(structure, transform != nullptr ? transform : identity.GetPointer(), grid),
     WarpLabelImage(structure, truth, grid)
   };
-  using DistanceImage = itk::Image<float, 3>;
   std::vector<double> distances;
   for (int side = 0; side < 2; ++side)
   {
     const RegistrationLabelImage * from = masks[side];
-    auto                           map = itk::SignedMaurerDistanceMapImageFilter<RegistrationLabelImage, DistanceImage>::New();
-    map->SetInput(masks[1 - side]);
-    map->SetBackgroundValue(0);
-    map->SetUseImageSpacing(true);
-    map->SetSquaredDistance(false);
-    map->Update();
-    const DistanceImage * toOther = map->GetOutput();
+    const auto                     toOther = SignedDistanceToMask(masks[1 - side]);
     const auto            region = from->GetBufferedRegion();
     const auto            extent = region.GetSize();
     std::size_t           inside = 0;
