@@ -48,6 +48,8 @@ namespace
 constexpr double kLargestExpectedShift = 25.0;
 // The error near a tumour or a resection cavity is measured within this distance (mm) of it.
 constexpr double kNearTumourDistance = 10.0;
+// The ventricles: the CSF class deeper than this (mm) below the brain's surface (VentricleMask).
+constexpr double kVentricleDepth = 10.0;
 
 struct DemoOptions
 {
@@ -87,7 +89,8 @@ struct MethodResult
   json              stages = json::object();
   DisplacementError error;
   std::optional<DisplacementError> nearTumourError; // within kNearTumourDistance of the tumour or the cavity
-  std::optional<double>            tumourSurfaceDistance; // 95th percentile, mm (SurfaceDistance95)
+  std::optional<double>            tumourSurfaceDistance; // 95th percentile, mm (StructureSurfaceDistance)
+  double                           ventricleSurfaceDistance = 0.0; // 95th percentile, mm
   EdgeEvaluation    edges;
   json              details = json::object();
 };
@@ -115,6 +118,7 @@ MethodJson(const MethodResult & method)
   {
     result["tumour_surface_distance_p95_mm"] = *method.tumourSurfaceDistance;
   }
+  result["ventricle_surface_distance_p95_mm"] = method.ventricleSurfaceDistance;
   if (method.edges.valid)
   {
     result["hausdorff_mm"] = { { "p50", method.edges.Percentile(50) },
@@ -141,15 +145,16 @@ PrintTable(const std::vector<MethodResult> & methods)
   {
     width = std::max(width, static_cast<int>(method.name.size()));
   }
-  std::printf("\n%-*s %9s | %27s | %27s | %9s\n", width, "", "time", "displacement error (mm)", "edge Hausdorff (mm)",
-              "edges");
-  std::printf("%-*s %9s | %8s %8s %9s | %8s %8s %9s | %9s\n", width, "method", "s", "mean", "p95", "max", "p50", "p90",
-              "p95", "<1.7 mm");
+  std::printf("\n%-*s %9s | %27s | %27s | %9s | %10s\n", width, "", "time", "displacement error (mm)",
+              "edge Hausdorff (mm)", "edges", "ventricles");
+  std::printf("%-*s %9s | %8s %8s %9s | %8s %8s %9s | %9s | %10s\n", width, "method", "s", "mean", "p95", "max", "p50",
+              "p90", "p95", "<1.7 mm", "p95 (mm)");
   for (const MethodResult & method : methods)
   {
-    std::printf("%-*s %9.2f | %8.2f %8.2f %9.2f | %8.2f %8.2f %9.2f | %8.1f%%\n", width, method.name.c_str(),
+    std::printf("%-*s %9.2f | %8.2f %8.2f %9.2f | %8.2f %8.2f %9.2f | %8.1f%% | %10.2f\n", width, method.name.c_str(),
                 method.seconds, method.error.mean, method.error.p95, method.error.max, method.edges.Percentile(50),
-                method.edges.Percentile(90), method.edges.Percentile(95), 100.0 * method.edges.fractionWithinThreshold);
+                method.edges.Percentile(90), method.edges.Percentile(95), 100.0 * method.edges.fractionWithinThreshold,
+                method.ventricleSurfaceDistance);
   }
   std::printf("\ntime per stage (s)\n");
   for (const MethodResult & method : methods)
@@ -390,14 +395,26 @@ RunDemo(DemoOptions options)
   const RegistrationLabelImage::Pointer nearTumour =
     structure != nullptr ? RegionNear(structure, truth.intraoperativeBrainOnPreoperativeGrid, kNearTumourDistance)
                          : nullptr;
+  const std::optional<StructureSurfaceDistance> tumourSurface =
+    structure != nullptr ? std::make_optional<StructureSurfaceDistance>(truth.truthTransform, structure) : std::nullopt;
+  const RegistrationLabelImage::Pointer ventricles = VentricleMask(preoperative, brainMask, kVentricleDepth);
+  WriteImageAtomically(ventricles.GetPointer(), output / "ventricle-mask.nii.gz");
+  const auto   ventricleSpacing = ventricles->GetSpacing();
+  const double ventricleVolume = ventricleSpacing[0] * ventricleSpacing[1] * ventricleSpacing[2] *
+                                 static_cast<double>(std::count_if(ventricles->GetBufferPointer(),
+                                                                   ventricles->GetBufferPointer() +
+                                                                     ventricles->GetBufferedRegion().GetNumberOfPixels(),
+                                                                   [](unsigned char v) { return v > 0; }));
+  const StructureSurfaceDistance ventricleSurface(truth.truthTransform, ventricles);
   // A method's error against the ground truth (also near the tumour), and against the second truth when there is one.
   const auto score = [&](const itk::Transform<double, 3, 3> * transform, MethodResult & method) {
     method.error = MeasureDisplacementError(transform, truth.truthTransform, truth.intraoperativeBrainOnPreoperativeGrid);
     if (nearTumour)
     {
       method.nearTumourError = MeasureDisplacementError(transform, truth.truthTransform, nearTumour);
-      method.tumourSurfaceDistance = SurfaceDistance95(transform, truth.truthTransform, structure);
+      method.tumourSurfaceDistance = tumourSurface->Percentile95(transform);
     }
+    method.ventricleSurfaceDistance = ventricleSurface.Percentile95(transform);
     if (secondTruth)
     {
       method.details["displacement_error_against_second_truth_mm"] = DisplacementErrorJson(
@@ -601,6 +618,12 @@ RunDemo(DemoOptions options)
                               { "surface_distance", "95th percentile of the symmetric distances between the "
                                                     "structure's boundary moved by the method and by the truth" } };
   }
+  // What the methods' ventricle_surface_distance_p95_mm measures.
+  report["ventricles"] = { { "depth_mm", kVentricleDepth },
+                           { "volume_mm3", ventricleVolume },
+                           { "mask", "ventricle-mask.nii.gz" },
+                           { "definition", "the CSF class deeper than depth_mm below the brain's surface, its largest "
+                                           "connected component" } };
   if (!electrodeReport.is_null())
   {
     report["electrodes"] = electrodeReport;

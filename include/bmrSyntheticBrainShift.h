@@ -6,15 +6,16 @@
 // surface displacements; see docs/validation.md for why not tetrahedra); from it an "intraoperative" image (the
 // preoperative image warped, resampled to a typical intraoperative
 // resolution, with noise) and the displaced exposed brain surface, the only
-// thing the registration is given. Also: the displacement error of any
-// transform against the ground truth, and the intensity-based B-spline
-// registration baseline on the same pair.
+// thing the registration is given. Also: the intensity-based B-spline
+// registration baseline on the same pair. The error of any transform against
+// the ground truth: bmrRegistrationMetrics.h.
 //
 // Units: mm, Pa, kg/m^3, s.
 #ifndef bmrSyntheticBrainShift_h
 #define bmrSyntheticBrainShift_h
 
 #include "bmrBrainShiftRegistration.h"
+#include "bmrRegistrationMetrics.h"
 
 #include <optional>
 
@@ -207,44 +208,6 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
                         const RegistrationLabelImage *      brainMask,
                         const SyntheticBrainShiftSettings & settings,
                         const StageCallback &               stageCallback = {});
-
-/** Displacement error |T(x) - T_truth(x)| (mm) of a backward map T (null: no
- *  registration, the identity) over the voxels of `region` (> 0), sampled
- *  on every `stride`-th voxel along each axis. */
-struct DisplacementError
-{
-  double      mean = 0.0, p95 = 0.0, max = 0.0;
-  std::size_t samples = 0;
-};
-
-DisplacementError
-MeasureDisplacementError(const itk::Transform<double, 3, 3> * transform,
-                         const itk::Transform<double, 3, 3> * truth,
-                         const RegistrationLabelImage *       region,
-                         int                                  stride = 2);
-
-/** The voxels of `region` (e.g. the intraoperative brain on the preoperative
- *  grid) within `distance` mm of `structure` (a tumour or a resection cavity,
- *  voxels > 0, on the same grid): where the error near a tumour or a cavity
- *  is measured. Throws bmr::Error for masks on different grids, an empty
- *  structure, or no voxel of the region that near. */
-RegistrationLabelImage::Pointer
-RegionNear(const RegistrationLabelImage * structure, const RegistrationLabelImage * region, double distance);
-
-/** How far a registration puts a structure's surface from where it truly
- *  is: `structure` (voxels > 0, on the preoperative grid, e.g. the tumour)
- *  warped by the backward map `transform` (null: no registration, the
- *  identity) and by `truth` onto an axis-aligned grid of `spacing` (mm) over
- *  the structure's box and 30 mm around it; the 95th percentile (mm) of the
- *  distances from each warped mask's boundary voxels to the other's
- *  boundary, both ways (a symmetric Hausdorff percentile; boundary voxels
- *  have a 6-neighbour outside, distances from ITK's Maurer map, between
- *  voxel centres). Throws bmr::Error for an empty structure. */
-double
-SurfaceDistance95(const itk::Transform<double, 3, 3> * transform,
-                  const itk::Transform<double, 3, 3> * truth,
-                  const RegistrationLabelImage *       structure,
-                  double                               spacing = 0.5);
 
 /** The intensity-based baseline (itk::BSplineIntensityRegistrationFilter with
  *  its defaults: translation, then B-spline 80 -> 40 -> 20 mm, Mattes mutual

@@ -65,13 +65,16 @@ def demo_block(root):
     rows = ["The main job's scene (10 mm shift of a 30 mm superior craniotomy) in the validation study "
             "([docs/validation.md](docs/validation.md): the registrations from its tracked surface points; "
             "machine: %s):" % record["machine"], "",
-            "| method | time s | displacement error p95 (max) mm | edges within 1.7 mm |", "|---|---|---|---|"]
+            "| method | time s | displacement error p95 (max) mm | edges within 1.7 mm | ventricles' surface p95 mm |",
+            "|---|---|---|---|---|"]
     for method in scene["report"]["methods"]:
         error = method["displacement_error_mm"]
         fraction = method.get("fraction_within_1_7_mm")
-        rows.append("| %s | %s | %.2f (%.1f) | %s |" % (
+        ventricles = method.get("ventricle_surface_distance_p95_mm")
+        rows.append("| %s | %s | %.2f (%.1f) | %s | %s |" % (
             method["name"], "" if method["seconds"] == 0.0 else "%.1f" % method["seconds"], error["p95"],
-            error["max"], "%.1f %%" % (100 * fraction) if fraction is not None else "-"))
+            error["max"], "%.1f %%" % (100 * fraction) if fraction is not None else "-",
+            "%.2f" % ventricles if ventricles is not None else "-"))
     reading = section(read(root, "docs/validation.md"), "## Reading the results")
     rows += ["", "The study's targets, as its report computes them from its table:", ""]
     rows += [headline(line) for line in starting(reading, ("* **Target", "* **Against the intensity"))]

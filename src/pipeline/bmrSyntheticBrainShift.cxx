@@ -4,17 +4,14 @@
 #include "itkBSplineIntensityRegistrationFilter.h"
 #include "itkBiomechanicalImageConversion.h"
 #include "itkDisplacementPointSetToBSplineTransformFilter.h"
-#include "itkIdentityTransform.h"
 #include "itkImageRegionConstIteratorWithIndex.h"
 #include "itkImageRegionIteratorWithIndex.h"
-#include "itkSignedMaurerDistanceMapImageFilter.h"
 
 #include "bmrUnits.h"
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <limits>
 #include <random>
 #include <set>
 #include <sstream>
@@ -196,21 +193,6 @@ NodeCentroid(const Model & model)
     centroid += node;
   }
   return centroid / static_cast<double>(model.nodes.size());
-}
-
-/** Signed Euclidean distance (mm) of every voxel centre to the boundary
- *  voxels of `mask` (> 0), negative inside: ITK's Maurer map. */
-itk::Image<float, 3>::Pointer
-SignedDistanceToMask(const RegistrationLabelImage * mask)
-{
-  auto map = itk::SignedMaurerDistanceMapImageFilter<RegistrationLabelImage, itk::Image<float, 3>>::New();
-  map->SetInput(mask);
-  map->SetBackgroundValue(0);
-  map->SetUseImageSpacing(true);
-  map->SetSquaredDistance(false);
-  map->SetInsideIsPositive(false);
-  map->Update();
-  return map->GetOutput();
 }
 
 } // namespace
@@ -630,192 +612,6 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
     }
   });
   return truth;
-}
-
-RegistrationLabelImage::Pointer
-RegionNear(const RegistrationLabelImage * structure, const RegistrationLabelImage * region, double distance)
-{
-  if (structure == nullptr || region == nullptr || !(distance >= 0.0))
-  {
-    throw Error("RegionNear: give the structure's mask, the region and a distance >= 0 mm");
-  }
-  const ImageGeometry grid = itk::MakeBiomechanicalGeometry(region);
-  if (!itk::MakeBiomechanicalGeometry(structure).SameGridAs(grid))
-  {
-    throw Error("RegionNear: the structure's mask is not on the region's grid; resample it onto that grid");
-  }
-  const auto distanceMap = SignedDistanceToMask(structure);
-  auto       near = RegistrationLabelImage::New();
-  near->CopyInformation(region);
-  near->SetRegions(region->GetBufferedRegion());
-  near->Allocate();
-  const std::size_t voxels = region->GetBufferedRegion().GetNumberOfPixels();
-  const float *     distances = distanceMap->GetBufferPointer();
-  std::size_t       inside = 0, count = 0;
-  for (std::size_t n = 0; n < voxels; ++n)
-  {
-    inside += structure->GetBufferPointer()[n] > 0;
-    const bool take = region->GetBufferPointer()[n] > 0 && distances[n] <= distance;
-    near->GetBufferPointer()[n] = take ? 1 : 0;
-    count += take;
-  }
-  if (inside == 0 || count == 0)
-  {
-    throw Error(inside == 0 ? "RegionNear: the structure's mask has no voxel"
-                            : "RegionNear: no voxel of the region lies within " + std::to_string(distance) +
-                                " mm of the structure");
-  }
-  return near;
-}
-
-double
-SurfaceDistance95(const itk::Transform<double, 3, 3> * transform,
-                  const itk::Transform<double, 3, 3> * truth,
-                  const RegistrationLabelImage *       structure,
-                  double                               spacing)
-{
-  if (truth == nullptr || structure == nullptr || !(spacing > 0.0))
-  {
-    throw Error("SurfaceDistance95: give the ground-truth transform, the structure's mask and a spacing > 0 mm");
-  }
-  // An axis-aligned grid of `spacing` over the part of space the structure can reach: its box and
-  // kSurfaceDistanceMargin around it (the image's own voxels, often anisotropic, would quantize the distances).
-  constexpr double kSurfaceDistanceMargin = 30.0; // mm: more than the largest shift the module is built for
-  Vector3 low = Vector3::Constant(std::numeric_limits<double>::max());
-  Vector3 high = Vector3::Constant(std::numeric_limits<double>::lowest());
-  for (itk::ImageRegionConstIteratorWithIndex<RegistrationLabelImage> it(structure, structure->GetBufferedRegion());
-       !it.IsAtEnd(); ++it)
-  {
-    if (it.Get() != 0)
-    {
-      RegistrationLabelImage::PointType point;
-      structure->TransformIndexToPhysicalPoint(it.GetIndex(), point);
-      const Vector3 x(point[0], point[1], point[2]);
-      low = low.cwiseMin(x);
-      high = high.cwiseMax(x);
-    }
-  }
-  if (!(low.x() <= high.x()))
-  {
-    throw Error("SurfaceDistance95: the structure's mask has no voxel");
-  }
-  low.array() -= kSurfaceDistanceMargin;
-  high.array() += kSurfaceDistanceMargin;
-  auto grid = RegistrationLabelImage::New();
-  RegistrationLabelImage::SizeType    size;
-  RegistrationLabelImage::PointType   origin;
-  RegistrationLabelImage::SpacingType voxel;
-  for (unsigned int axis = 0; axis < 3; ++axis)
-  {
-    size[axis] = static_cast<itk::SizeValueType>(std::ceil((high[axis] - low[axis]) / spacing)) + 1;
-    origin[axis] = low[axis];
-    voxel[axis] = spacing;
-  }
-  grid->SetRegions(size);
-  grid->SetOrigin(origin);
-  grid->SetSpacing(voxel);
-  const auto identity = itk::IdentityTransform<double, 3>::New();
-  const RegistrationLabelImage::Pointer masks[2] = {
-    WarpLabelImage(structure, transform != nullptr ? transform : identity.GetPointer(), grid),
-    WarpLabelImage(structure, truth, grid)
-  };
-  std::vector<double> distances;
-  for (int side = 0; side < 2; ++side)
-  {
-    const RegistrationLabelImage * from = masks[side];
-    const auto                     toOther = SignedDistanceToMask(masks[1 - side]);
-    const auto            region = from->GetBufferedRegion();
-    const auto            extent = region.GetSize();
-    std::size_t           inside = 0;
-    for (itk::ImageRegionConstIteratorWithIndex<RegistrationLabelImage> it(from, region); !it.IsAtEnd(); ++it)
-    {
-      if (it.Get() == 0)
-      {
-        continue;
-      }
-      ++inside;
-      // A boundary voxel: a 6-neighbour outside the mask or the grid.
-      bool boundary = false;
-      for (unsigned int axis = 0; axis < 3 && !boundary; ++axis)
-      {
-        for (const int step : { -1, 1 })
-        {
-          auto neighbour = it.GetIndex();
-          neighbour[axis] += step;
-          if (neighbour[axis] < region.GetIndex()[axis] ||
-              neighbour[axis] >= region.GetIndex()[axis] + static_cast<itk::IndexValueType>(extent[axis]) ||
-              from->GetPixel(neighbour) == 0)
-          {
-            boundary = true;
-            break;
-          }
-        }
-      }
-      if (boundary)
-      {
-        // Maurer's map measures to the other mask's boundary voxel centres: zero on them.
-        distances.push_back(std::abs(toOther->GetPixel(it.GetIndex())));
-      }
-    }
-    if (inside == 0)
-    {
-      throw Error("SurfaceDistance95: a map moved the structure out of the 30 mm around it; check the transforms");
-    }
-  }
-  const std::size_t rank = static_cast<std::size_t>(std::ceil(0.95 * static_cast<double>(distances.size()))) - 1;
-  std::nth_element(distances.begin(), distances.begin() + static_cast<std::ptrdiff_t>(rank), distances.end());
-  return distances[rank];
-}
-
-DisplacementError
-MeasureDisplacementError(const itk::Transform<double, 3, 3> * transform,
-                         const itk::Transform<double, 3, 3> * truth,
-                         const RegistrationLabelImage *       region,
-                         int                                  stride)
-{
-  if (truth == nullptr || region == nullptr || stride < 1)
-  {
-    throw Error("MeasureDisplacementError: give the ground-truth transform, the region and a stride >= 1");
-  }
-  const auto          size = region->GetBufferedRegion().GetSize();
-  const auto          start = region->GetBufferedRegion().GetIndex();
-  std::vector<double> errors;
-  RegistrationLabelImage::IndexType index;
-  for (index[2] = start[2]; index[2] < start[2] + static_cast<itk::IndexValueType>(size[2]); index[2] += stride)
-  {
-    for (index[1] = start[1]; index[1] < start[1] + static_cast<itk::IndexValueType>(size[1]); index[1] += stride)
-    {
-      for (index[0] = start[0]; index[0] < start[0] + static_cast<itk::IndexValueType>(size[0]); index[0] += stride)
-      {
-        if (region->GetPixel(index) == 0)
-        {
-          continue;
-        }
-        RegistrationLabelImage::PointType x;
-        region->TransformIndexToPhysicalPoint(index, x);
-        const auto expected = truth->TransformPoint(x);
-        const auto estimate = transform != nullptr ? transform->TransformPoint(x) : x;
-        errors.push_back(expected.EuclideanDistanceTo(estimate));
-      }
-    }
-  }
-  DisplacementError result;
-  result.samples = errors.size();
-  if (errors.empty())
-  {
-    throw Error("MeasureDisplacementError: the region has no voxel; give the brain mask of the intraoperative image");
-  }
-  double sum = 0.0;
-  for (const double error : errors)
-  {
-    sum += error;
-  }
-  result.mean = sum / static_cast<double>(errors.size());
-  const auto p95 = errors.begin() + static_cast<std::ptrdiff_t>(std::ceil(0.95 * static_cast<double>(errors.size())) - 1);
-  std::nth_element(errors.begin(), p95, errors.end());
-  result.p95 = *p95;
-  result.max = *std::max_element(errors.begin(), errors.end());
-  return result;
 }
 
 BaselineRegistration
