@@ -34,6 +34,17 @@ SignedDistanceToMask(const RegistrationLabelImage * mask)
   return map->GetOutput();
 }
 
+/** A mask on `grid`'s grid (size, spacing, origin, direction), its values not yet set. */
+RegistrationLabelImage::Pointer
+MaskOnGridOf(const RegistrationLabelImage * grid)
+{
+  auto mask = RegistrationLabelImage::New();
+  mask->CopyInformation(grid);
+  mask->SetRegions(grid->GetBufferedRegion());
+  mask->Allocate();
+  return mask;
+}
+
 /** The voxels of `mask` (> 0) with a 6-neighbour outside it or outside its grid. */
 std::vector<itk::Index<3>>
 BoundaryVoxels(const RegistrationLabelImage * mask)
@@ -105,10 +116,7 @@ RegionNear(const RegistrationLabelImage * structure, const RegistrationLabelImag
     throw Error("RegionNear: the structure's mask is not on the region's grid; resample it onto that grid");
   }
   const auto distanceMap = SignedDistanceToMask(structure);
-  auto       near = RegistrationLabelImage::New();
-  near->CopyInformation(region);
-  near->SetRegions(region->GetBufferedRegion());
-  near->Allocate();
+  auto       near = MaskOnGridOf(region);
   const std::size_t voxels = region->GetBufferedRegion().GetNumberOfPixels();
   const float *     distances = distanceMap->GetBufferPointer();
   std::size_t       inside = 0, count = 0;
@@ -203,10 +211,7 @@ VentricleMask(const RegistrationImage * t1Image, const RegistrationLabelImage * 
   const RegistrationLabelImage * classes = classifier->GetLabelOutput();
   const auto                     fromSurface = SignedDistanceToMask(brainMask); // negative inside
 
-  auto deepFluid = RegistrationLabelImage::New();
-  deepFluid->CopyInformation(brainMask);
-  deepFluid->SetRegions(brainMask->GetBufferedRegion());
-  deepFluid->Allocate();
+  auto deepFluid = MaskOnGridOf(brainMask);
   const std::size_t voxels = brainMask->GetBufferedRegion().GetNumberOfPixels();
   std::size_t       count = 0;
   for (std::size_t n = 0; n < voxels; ++n)
@@ -223,19 +228,13 @@ VentricleMask(const RegistrationImage * t1Image, const RegistrationLabelImage * 
   // An opening by kOpening (erosion, the largest component, dilation): the fissures and cisterns that touch
   // the ventricles are thinner than twice it and fall away; the ventricles' bodies are wider.
   constexpr double kOpening = 2.0; // mm
-  auto             outside = RegistrationLabelImage::New();
-  outside->CopyInformation(deepFluid);
-  outside->SetRegions(deepFluid->GetBufferedRegion());
-  outside->Allocate();
+  auto             outside = MaskOnGridOf(deepFluid);
   for (std::size_t n = 0; n < voxels; ++n)
   {
     outside->GetBufferPointer()[n] = deepFluid->GetBufferPointer()[n] > 0 ? 0 : 1;
   }
   const auto fromOutside = SignedDistanceToMask(outside); // distance to the nearest voxel outside the fluid
-  auto       core = RegistrationLabelImage::New();
-  core->CopyInformation(deepFluid);
-  core->SetRegions(deepFluid->GetBufferedRegion());
-  core->Allocate();
+  auto       core = MaskOnGridOf(deepFluid);
   std::size_t inCore = 0;
   for (std::size_t n = 0; n < voxels; ++n)
   {
@@ -260,6 +259,7 @@ VentricleMask(const RegistrationImage * t1Image, const RegistrationLabelImage * 
   {
     core->GetBufferPointer()[n] = labels->GetBufferPointer()[n] == 1 ? 1 : 0;
   }
+  // Grown back within the fluid: the opened fluid, in place of the deep fluid.
   const auto fromCore = SignedDistanceToMask(core);
   for (std::size_t n = 0; n < voxels; ++n)
   {
