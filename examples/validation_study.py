@@ -632,6 +632,9 @@ def busy(machine):
 
 
 def markdown(runs, machine):
+    volumes = sorted({entry["report"]["ventricles"]["volume_mm3"] for entry in runs
+                      if (entry["report"] or {}).get("ventricles")})
+    ventricles = ", %s mL on Colin27" % "-".join("%.1f" % (volume / 1000.0) for volume in volumes) if volumes else ""
     lines = ["# Validation study: brain-shift registration against a known answer", "",
              "Written by the Snakemake workflow `examples/validation/Snakefile` (`snakemake -s "
              "examples/validation/Snakefile -j2`; the scenes and this report: `examples/validation_study.py`). Each "
@@ -659,8 +662,9 @@ def markdown(runs, machine):
              "view). Edges: edge-based Hausdorff (Canny, axial slices) inside the intraoperative brain; fraction of "
              "edges within 1.7 mm. Ventricles: the 95th percentile of the symmetric distances between the lateral ventricles' "
              "surface moved by the method and by the truth (`ventricle_surface_distance_p95_mm`: the CSF class deeper than "
-             "10 mm below the brain's surface, opened by 2 mm, the largest component, 21 mL on Colin27; boundary voxels of "
-             "the two warped masks on a 0.5 mm grid, so the distances are steps of it: 0.50, 0.71, 0.87, 1.00 mm, ...).",
+             "10 mm below the brain's surface, opened by 2 mm, the largest component" + ventricles + "; boundary voxels "
+             "of the two warped masks on a 0.5 mm grid, so the distances are steps of it: 0.50, 0.71, 0.87, 1.00 mm, "
+             "...).",
              "", "Machine: " + machine, "",
              "| scene | method | time s | error mean mm | error p95 mm | error max mm | Hausdorff p95 mm | edges < 1.7 mm "
              "| ventricles p95 mm |",
