@@ -142,6 +142,35 @@ BindSyntheticBrainShift(py::module_ & module)
     },
     py::arg("transform"), py::arg("truth"), py::arg("region"), py::kw_only(), py::arg("stride") = 2,
     "|T(x) - T_truth(x)| (mm) over the voxels of region (> 0): mean, 95th percentile, maximum. None: no registration.");
+
+  module.def(
+    "surface_distance_p95",
+    [](const py::object & transform, const PythonTransform & truth, const py::object & structure, double spacing) {
+      const TransformType * mapped = transform.is_none() ? nullptr : transform.cast<const PythonTransform &>().transform.GetPointer();
+      const auto            mask = ItkLabelImage(structure, "structure");
+      py::gil_scoped_release release;
+      return StructureSurfaceDistance(truth.transform, mask, spacing).Percentile95(mapped);
+    },
+    py::arg("transform"), py::arg("truth"), py::arg("structure"), py::kw_only(), py::arg("spacing") = 0.5,
+    "How far transform puts a structure's surface (structure: voxels > 0 on the preoperative grid, e.g. a tumour or "
+    "ventricle_mask's) from where truth puts it: the 95th percentile (mm) of the symmetric distances between the two "
+    "warped masks' boundaries on an isotropic grid of spacing mm. None: no registration.");
+
+  module.def(
+    "ventricle_mask",
+    [](const py::object & image, const py::object & brainMask, double depth) {
+      const auto t1 = ItkImage(image, "image");
+      const auto mask = ItkLabelImage(brainMask, "brain_mask");
+      RegistrationLabelImage::Pointer ventricles;
+      {
+        py::gil_scoped_release release;
+        ventricles = VentricleMask(t1, mask, depth);
+      }
+      return PythonImage(ventricles.GetPointer());
+    },
+    py::arg("image"), py::arg("brain_mask"), py::kw_only(), py::arg("depth") = 10.0,
+    "The lateral ventricles of a T1 image: its CSF class deeper than depth mm below the brain mask's surface, opened "
+    "by 2 mm, the largest component (what biomech demo's ventricle surface distance measures).");
 }
 
 // ---------------------------------------------------------------------------
