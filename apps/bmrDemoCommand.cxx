@@ -90,7 +90,7 @@ struct MethodResult
   DisplacementError error;
   std::optional<DisplacementError> nearTumourError; // within kNearTumourDistance of the tumour or the cavity
   std::optional<double>            tumourSurfaceDistance; // 95th percentile, mm (StructureSurfaceDistance)
-  double                           ventricleSurfaceDistance = 0.0; // 95th percentile, mm
+  std::optional<double>            ventricleSurfaceDistance; // 95th percentile, mm; none: not measured
   EdgeEvaluation    edges;
   json              details = json::object();
 };
@@ -118,7 +118,10 @@ MethodJson(const MethodResult & method)
   {
     result["tumour_surface_distance_p95_mm"] = *method.tumourSurfaceDistance;
   }
-  result["ventricle_surface_distance_p95_mm"] = method.ventricleSurfaceDistance;
+  if (method.ventricleSurfaceDistance)
+  {
+    result["ventricle_surface_distance_p95_mm"] = *method.ventricleSurfaceDistance;
+  }
   if (method.edges.valid)
   {
     result["hausdorff_mm"] = { { "p50", method.edges.Percentile(50) },
@@ -151,10 +154,15 @@ PrintTable(const std::vector<MethodResult> & methods)
               "p90", "p95", "<1.7 mm", "p95 (mm)");
   for (const MethodResult & method : methods)
   {
-    std::printf("%-*s %9.2f | %8.2f %8.2f %9.2f | %8.2f %8.2f %9.2f | %8.1f%% | %10.2f\n", width, method.name.c_str(),
+    char ventricles[32] = "-";
+    if (method.ventricleSurfaceDistance)
+    {
+      std::snprintf(ventricles, sizeof ventricles, "%.2f", *method.ventricleSurfaceDistance);
+    }
+    std::printf("%-*s %9.2f | %8.2f %8.2f %9.2f | %8.2f %8.2f %9.2f | %8.1f%% | %10s\n", width, method.name.c_str(),
                 method.seconds, method.error.mean, method.error.p95, method.error.max, method.edges.Percentile(50),
                 method.edges.Percentile(90), method.edges.Percentile(95), 100.0 * method.edges.fractionWithinThreshold,
-                method.ventricleSurfaceDistance);
+                ventricles);
   }
   std::printf("\ntime per stage (s)\n");
   for (const MethodResult & method : methods)
@@ -397,15 +405,34 @@ RunDemo(DemoOptions options)
                          : nullptr;
   const std::optional<StructureSurfaceDistance> tumourSurface =
     structure != nullptr ? std::make_optional<StructureSurfaceDistance>(truth.truthTransform, structure) : std::nullopt;
-  const RegistrationLabelImage::Pointer ventricles = VentricleMask(preoperative, brainMask, kVentricleDepth);
-  WriteImageAtomically(ventricles.GetPointer(), output / "ventricle-mask.nii.gz");
-  const auto   ventricleSpacing = ventricles->GetSpacing();
-  const double ventricleVolume = ventricleSpacing[0] * ventricleSpacing[1] * ventricleSpacing[2] *
-                                 static_cast<double>(std::count_if(ventricles->GetBufferPointer(),
-                                                                   ventricles->GetBufferPointer() +
-                                                                     ventricles->GetBufferedRegion().GetNumberOfPixels(),
-                                                                   [](unsigned char v) { return v > 0; }));
-  const StructureSurfaceDistance ventricleSurface(truth.truthTransform, ventricles);
+  // The ventricles' surface, found in the preoperative T1; an image where they are not found (another contrast,
+  // part of a brain) is measured without it, and the report says why.
+  json                                    ventricleReport;
+  std::optional<StructureSurfaceDistance> ventricleSurface;
+  try
+  {
+    const RegistrationLabelImage::Pointer ventricles = VentricleMask(preoperative, brainMask, kVentricleDepth);
+    WriteImageAtomically(ventricles.GetPointer(), output / "ventricle-mask.nii.gz");
+    const auto   spacing = ventricles->GetSpacing();
+    const auto * voxels = ventricles->GetBufferPointer();
+    const double volume = spacing[0] * spacing[1] * spacing[2] *
+                          static_cast<double>(std::count_if(voxels, voxels + ventricles->GetBufferedRegion().GetNumberOfPixels(),
+                                                            [](unsigned char v) { return v > 0; }));
+    ventricleSurface.emplace(truth.truthTransform, ventricles);
+    ventricleReport = { { "depth_mm", kVentricleDepth },
+                        { "volume_mm3", volume },
+                        { "mask", "ventricle-mask.nii.gz" },
+                        { "definition", "the CSF class deeper than depth_mm below the brain's surface, opened by 2 mm, "
+                                        "its largest connected component" } };
+  }
+  catch (const Error & error)
+  {
+    ventricleReport = { { "error", error.what() } };
+    if (!options.quiet)
+    {
+      std::cerr << "the ventricles' surface is not measured: " << error.what() << "\n";
+    }
+  }
   // A method's error against the ground truth (also near the tumour), and against the second truth when there is one.
   const auto score = [&](const itk::Transform<double, 3, 3> * transform, MethodResult & method) {
     method.error = MeasureDisplacementError(transform, truth.truthTransform, truth.intraoperativeBrainOnPreoperativeGrid);
@@ -414,7 +441,10 @@ RunDemo(DemoOptions options)
       method.nearTumourError = MeasureDisplacementError(transform, truth.truthTransform, nearTumour);
       method.tumourSurfaceDistance = tumourSurface->Percentile95(transform);
     }
-    method.ventricleSurfaceDistance = ventricleSurface.Percentile95(transform);
+    if (ventricleSurface)
+    {
+      method.ventricleSurfaceDistance = ventricleSurface->Percentile95(transform);
+    }
     if (secondTruth)
     {
       method.details["displacement_error_against_second_truth_mm"] = DisplacementErrorJson(
@@ -619,11 +649,7 @@ RunDemo(DemoOptions options)
                                                     "structure's boundary moved by the method and by the truth" } };
   }
   // What the methods' ventricle_surface_distance_p95_mm measures.
-  report["ventricles"] = { { "depth_mm", kVentricleDepth },
-                           { "volume_mm3", ventricleVolume },
-                           { "mask", "ventricle-mask.nii.gz" },
-                           { "definition", "the CSF class deeper than depth_mm below the brain's surface, its largest "
-                                           "connected component" } };
+  report["ventricles"] = ventricleReport;
   if (!electrodeReport.is_null())
   {
     report["electrodes"] = electrodeReport;
