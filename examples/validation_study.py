@@ -371,8 +371,7 @@ def plot_scenes(runs, path):
         methods = {method["name"]: method for method in entry["report"]["methods"]}
         for index, kind in enumerate(kinds):
             if kind in methods:
-                axis.bar(index, methods[kind]["displacement_error_mm"]["p95"], color="C%d" % (index % 10),
-                         label=kind)
+                axis.bar(index, methods[kind]["displacement_error_mm"]["p95"], color="C%d" % (index % 10))
         none = methods.get("no registration")
         axis.set_title("%s\n(no registration %.1f mm)" % (entry["name"], none["displacement_error_mm"]["p95"])
                        if none else entry["name"], fontsize=8)
@@ -634,7 +633,8 @@ def busy(machine):
 def markdown(runs, machine):
     volumes = sorted({entry["report"]["ventricles"]["volume_mm3"] for entry in runs
                       if (entry["report"] or {}).get("ventricles")})
-    ventricles = ", %s mL on Colin27" % "-".join("%.1f" % (volume / 1000.0) for volume in volumes) if volumes else ""
+    ventricle_volume = (", %s mL on Colin27" % "-".join("%.1f" % (volume / 1000.0) for volume in volumes)
+                        if volumes else "")
     lines = ["# Validation study: brain-shift registration against a known answer", "",
              "Written by the Snakemake workflow `examples/validation/Snakefile` (`snakemake -s "
              "examples/validation/Snakefile -j2`; the scenes and this report: `examples/validation_study.py`). Each "
@@ -662,7 +662,7 @@ def markdown(runs, machine):
              "view). Edges: edge-based Hausdorff (Canny, axial slices) inside the intraoperative brain; fraction of "
              "edges within 1.7 mm. Ventricles: the 95th percentile of the symmetric distances between the lateral ventricles' "
              "surface moved by the method and by the truth (`ventricle_surface_distance_p95_mm`: the CSF class deeper than "
-             "10 mm below the brain's surface, opened by 2 mm, the largest component" + ventricles + "; boundary voxels "
+             "10 mm below the brain's surface, opened by 2 mm, the largest component" + ventricle_volume + "; boundary voxels "
              "of the two warped masks on a 0.5 mm grid, so the distances are steps of it: 0.50, 0.71, 0.87, 1.00 mm, "
              "...).",
              "", "Machine: " + machine, "",

@@ -79,6 +79,15 @@ BoundaryVoxels(const RegistrationLabelImage * mask)
   return boundary;
 }
 
+/** The 95th percentile of `values` (not empty; the nearest rank, ceil(0.95 n)), which it reorders. */
+double
+NearestRankPercentile95(std::vector<double> & values)
+{
+  const auto rank = values.begin() + static_cast<std::ptrdiff_t>(std::ceil(0.95 * static_cast<double>(values.size()))) - 1;
+  std::nth_element(values.begin(), rank, values.end());
+  return *rank;
+}
+
 /** Whether `mask` has a voxel on the outermost layer of its grid (a structure cut off by it). */
 bool
 TouchesGridEdge(const RegistrationLabelImage * mask, const std::vector<itk::Index<3>> & boundary)
@@ -180,9 +189,7 @@ MeasureDisplacementError(const itk::Transform<double, 3, 3> * transform,
     sum += error;
   }
   result.mean = sum / static_cast<double>(errors.size());
-  const auto p95 = errors.begin() + static_cast<std::ptrdiff_t>(std::ceil(0.95 * static_cast<double>(errors.size())) - 1);
-  std::nth_element(errors.begin(), p95, errors.end());
-  result.p95 = *p95;
+  result.p95 = NearestRankPercentile95(errors);
   result.max = *std::max_element(errors.begin(), errors.end());
   return result;
 }
@@ -387,9 +394,7 @@ StructureSurfaceDistance::Percentile95(const itk::Transform<double, 3, 3> * tran
   {
     distances.push_back(std::abs(toMethod->GetPixel(index)));
   }
-  const std::size_t rank = static_cast<std::size_t>(std::ceil(0.95 * static_cast<double>(distances.size()))) - 1;
-  std::nth_element(distances.begin(), distances.begin() + static_cast<std::ptrdiff_t>(rank), distances.end());
-  return distances[rank];
+  return NearestRankPercentile95(distances);
 }
 
 } // namespace bmr
