@@ -104,8 +104,11 @@ TriangleSurfaceTree::Closest(const Vector3 & query, const Hit & hint) const
   {
     return Closest(query);
   }
-  const AabbTree::Point_and_primitive_id start(ToPoint(hint.point), m_Impl->triangles.begin() + primitive);
-  return ToHit(query, m_Impl->tree.closest_point_and_primitive(ToPoint(query), start));
+  // The query's projection onto the hint's triangle is at least as close as the hint's own point.
+  const auto triangle = m_Impl->triangles.begin() + primitive;
+  const Point q = ToPoint(query);
+  const AabbTree::Point_and_primitive_id start(Kernel::Construct_projected_point_3()(*triangle, q), triangle);
+  return ToHit(query, m_Impl->tree.closest_point_and_primitive(q, start));
 }
 
 } // namespace bmr
