@@ -6,6 +6,7 @@
 // synthetic brains and skulls.
 #include "bmrBrainSurfaces.h"
 #include "bmrClosestPoint.h"
+#include "bmrContact.h"
 #include "bmrMeshGenerators.h"
 #include "bmrSurfaceLoads.h"
 #include "bmrTemporaryFolderTest.h"
@@ -303,6 +304,100 @@ TEST(BrainSurface, HintedClosestPointsAreTheClosestWhateverTheHint)
     }
   }
   EXPECT_EQ(checked, 1600);
+}
+
+TEST(BrainSurface, CandidateTrianglesHoldTheClosestPointOfEveryQueryNearThem)
+{
+  // Contact keeps, per slave, the triangles within d + 2 r of where it was
+  // last searched (d: its distance there) and finds the closest point among
+  // them while it stays within r. On the fissured ball (the closest triangle
+  // jumps between the walls of the fold) every such query must give the
+  // brute-force distance, and the candidates must be exactly the triangles
+  // within the radius.
+  const double radius = 20.0, halfWidth = 2.5, reach = 0.4;
+  const auto   mask = MakeMask({ 52, 52, 52 }, Vector3::Constant(-25.5), Eigen::Matrix3d::Identity(), [&](const Vector3 & x) {
+    return x.norm() <= radius && !(x.z() > 0.0 && std::abs(x.x()) < halfWidth);
+  });
+  const bmr::ContactSurface        surface = RunSource(mask, 1.5)->GetBrainSurface();
+  const bmr::TriangleSurfaceTree   tree(surface.vertices, surface.triangles, "fissured ball");
+  std::mt19937                     random(11);
+  std::uniform_real_distribution<> coordinate(-radius - 4.0, radius + 4.0), unit(-1.0, 1.0);
+  int                              checked = 0;
+  for (int c = 0; c < 100; ++c)
+  {
+    // Centres near the surface and in the fissure, where contact searches.
+    const Vector3 centre = c % 2 == 0 ? Vector3(coordinate(random), coordinate(random), coordinate(random))
+                                      : Vector3(unit(random) * halfWidth, 8.0 * unit(random), radius * (0.3 + 0.5 * std::abs(unit(random))));
+    const double  within = BruteForceDistance(centre, surface) + 2.0 * reach;
+    const std::vector<Index> candidates = tree.TrianglesWithin(centre, within);
+    ASSERT_FALSE(candidates.empty());
+    for (std::size_t t = 0; t < surface.triangles.size(); ++t)
+    {
+      const auto &   corners = surface.triangles[t];
+      const double   distance = (centre - ClosestOnTriangle(centre, surface.vertices[corners[0]], surface.vertices[corners[1]],
+                                                            surface.vertices[corners[2]]))
+                                .norm();
+      const bool     listed = std::binary_search(candidates.begin(), candidates.end(), static_cast<Index>(t));
+      if (std::abs(distance - within) > 1e-9)
+      {
+        ASSERT_EQ(listed, distance < within) << "triangle " << t << " at " << distance << " mm, radius " << within;
+      }
+    }
+    for (int q = 0; q < 5; ++q)
+    {
+      const Vector3 query = centre + reach * Vector3(unit(random), unit(random), unit(random)).normalized() * std::abs(unit(random));
+      const auto    hit = tree.ClosestAmong(query, candidates);
+      ASSERT_NEAR(std::sqrt(hit.squaredDistance), BruteForceDistance(query, surface), 1e-9) << "query " << query.transpose();
+      ASSERT_NEAR((hit.point - query).norm(), std::sqrt(hit.squaredDistance), 1e-9);
+      ++checked;
+    }
+  }
+  EXPECT_EQ(checked, 500);
+  EXPECT_THROW(tree.ClosestAmong(Vector3::Zero(), {}), bmr::Error);
+}
+
+TEST(BrainSurface, ContactProjectsASlidingNodeOntoTheClosestPointAcrossAFold)
+{
+  // A slave node beyond the surface is moved onto its closest point. Slid in
+  // steps shorter and longer than its candidates' reach through the fissure
+  // (where the closest wall changes) and around the ball, it must land on
+  // the brute-force closest point every time.
+  const double radius = 20.0, halfWidth = 2.5;
+  const auto   mask = MakeMask({ 52, 52, 52 }, Vector3::Constant(-25.5), Eigen::Matrix3d::Identity(), [&](const Vector3 & x) {
+    return x.norm() <= radius && !(x.z() > 0.0 && std::abs(x.x()) < halfWidth);
+  });
+  bmr::ContactSurface surface = RunSource(mask, 1.5)->GetBrainSurface();
+  surface.bodySide = bmr::ContactSurface::Side::Inside;
+  const Vector3       start(-1.8, 0.0, 12.0);
+  bmr::RigidContact   contact(surface, { 0 }, { start });
+  const std::vector<char> held(3, 0);
+  std::vector<char>       inContact(1, 0);
+  int                     projected = 0;
+  for (int step = 0; step <= 400; ++step)
+  {
+    // Across the fissure and back in steps of 0.036 mm, then around the ball in jumps of 0.32 mm.
+    const double  s = step <= 200 ? step / 100.0 : (step - 200) / 200.0;
+    const double  across = s <= 1.0 ? s : 2.0 - s;
+    const Vector3 position = step <= 200 ? Vector3(-1.8 + 3.6 * across, 0.3 * s, 12.0 + 1.5 * s)
+                                         : Vector3((radius + 1.0) * std::cos(3.0 * s), (radius + 1.0) * std::sin(3.0 * s), -3.0);
+    std::vector<double> u = { position.x() - start.x(), position.y() - start.y(), position.z() - start.z() };
+    std::fill(inContact.begin(), inContact.end(), 0);
+    contact.Enforce(u.data(), held, inContact, 1);
+    const Vector3 moved = start + Vector3(u[0], u[1], u[2]);
+    const double  expected = BruteForceDistance(position, surface);
+    if (inContact[0])
+    {
+      ASSERT_NEAR((moved - position).norm(), expected, 1e-9) << "step " << step;
+      ASSERT_NEAR(BruteForceDistance(moved, surface), 0.0, 1e-9) << "step " << step;
+      ++projected;
+    }
+    else
+    {
+      ASSERT_EQ(moved, position) << "step " << step;
+    }
+  }
+  // Every position in the fissure and outside the ball lies beyond the surface.
+  EXPECT_EQ(projected, 401);
 }
 
 TEST(BrainSurface, SmoothingKeepsVolumeAndDecimationReachesEdgeLength)

@@ -5,6 +5,10 @@
 #include <CGAL/AABB_triangle_primitive.h>
 #include <CGAL/Simple_cartesian.h>
 
+#include <algorithm>
+#include <iterator>
+#include <limits>
+
 namespace bmr
 {
 
@@ -109,6 +113,56 @@ TriangleSurfaceTree::Closest(const Vector3 & query, const Hit & hint) const
   const Point q = ToPoint(query);
   const AabbTree::Point_and_primitive_id start(Kernel::Construct_projected_point_3()(*triangle, q), triangle);
   return ToHit(query, m_Impl->tree.closest_point_and_primitive(q, start));
+}
+
+std::vector<Index>
+TriangleSurfaceTree::TrianglesWithin(const Vector3 & query, double radius) const
+{
+  // The box around the ball finds every triangle the ball reaches, and a few
+  // in its corners, which the exact distance leaves out.
+  const Point                        q = ToPoint(query);
+  const Kernel::Iso_cuboid_3         box(ToPoint(query - Vector3::Constant(radius)), ToPoint(query + Vector3::Constant(radius)));
+  std::vector<Primitive::Id>         inBox;
+  m_Impl->tree.all_intersected_primitives(box, std::back_inserter(inBox));
+  const double                       squaredRadius = radius * radius * (1.0 + 1e-9);
+  std::vector<Index>                 within;
+  for (const Primitive::Id & id : inBox)
+  {
+    const Point closest = Kernel::Construct_projected_point_3()(*id, q);
+    if (AabbTraits().squared_distance_object()(q, closest) <= squaredRadius)
+    {
+      within.push_back(m_Impl->inputIndex[static_cast<std::size_t>(id - m_Impl->triangles.begin())]);
+    }
+  }
+  std::sort(within.begin(), within.end());
+  return within;
+}
+
+TriangleSurfaceTree::Hit
+TriangleSurfaceTree::ClosestAmong(const Vector3 & query, const std::vector<Index> & triangles) const
+{
+  const Point q = ToPoint(query);
+  Hit         best{ Vector3::Zero(), -1, std::numeric_limits<double>::infinity() };
+  for (const Index t : triangles)
+  {
+    const Index primitive = m_Impl->primitiveOf[static_cast<std::size_t>(t)];
+    if (primitive < 0)
+    {
+      continue;
+    }
+    const Point  closest = Kernel::Construct_projected_point_3()(m_Impl->triangles[static_cast<std::size_t>(primitive)], q);
+    const double squaredDistance = AabbTraits().squared_distance_object()(q, closest);
+    if (squaredDistance < best.squaredDistance)
+    {
+      best = { Vector3(closest.x(), closest.y(), closest.z()), t, squaredDistance };
+    }
+  }
+  if (best.triangle < 0)
+  {
+    throw Error("TriangleSurfaceTree::ClosestAmong: no triangle of non-zero area was given (internal error; please "
+                "report it).");
+  }
+  return best;
 }
 
 } // namespace bmr

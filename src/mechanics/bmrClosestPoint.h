@@ -52,6 +52,17 @@ public:
    *  Closest(query)'s; the distance does not, beyond rounding. */
   Hit Closest(const Vector3 & query, const Hit & hint) const;
 
+  /** The triangles (the constructor's indices, ascending) that come within
+   *  `radius` (mm) of `query`, give or take rounding; zero-area ones are left
+   *  out as in Closest. */
+  std::vector<Index> TrianglesWithin(const Vector3 & query, double radius) const;
+
+  /** The closest point of `query` on `triangles` (the constructor's indices,
+   *  not empty) alone, projected as Closest projects: where the closest
+   *  triangle of the whole surface is among them, the same hit (on a tie,
+   *  possibly the other triangle). */
+  Hit ClosestAmong(const Vector3 & query, const std::vector<Index> & triangles) const;
+
 private:
   struct Impl;
   template <typename TreeHit>

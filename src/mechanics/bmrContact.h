@@ -73,6 +73,17 @@ private:
   std::vector<Vector3>   m_LastQueried;   // position at the last exact query, in the surface's frame
   std::vector<double>    m_SafeDistance;  // distance to the surface at that query (allowed side), else 0
   std::vector<TriangleSurfaceTree::Hit> m_LastHit; // closest point of the last query (surface frame; triangle -1: none yet)
+  /** The triangles that hold a slave's closest point while it stays within
+   *  m_CandidateReach of `centre` (surface frame; none yet: empty). */
+  struct Candidates
+  {
+    Vector3            centre = Vector3::Zero();
+    std::vector<Index> triangles;
+  };
+  std::vector<Candidates> m_Candidates;
+  double                  m_CandidateReach = 0.0; // mm
+  /** The closest point of slave i at x (surface frame): from its candidates while it stays near them, else from the tree. */
+  TriangleSurfaceTree::Hit ClosestOfSlave(Index i, const Vector3 & x);
 };
 
 } // namespace bmr
