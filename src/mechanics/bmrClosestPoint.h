@@ -44,10 +44,9 @@ public:
   /** The same closest point, searched from a hit of a nearby earlier query
    *  (CGAL's hint): the query's projection onto the hint's triangle bounds
    *  the search from the start, so a query near the hint's visits a few
-   *  boxes instead of first searching the tree's k-d tree of sample points,
-   *  and projects onto few triangles (the hit's own point as the bound, about
-   *  one step farther, let several times more triangles through: Colin27's
-   *  `register` solve with skull contact 1.20-1.26 -> 0.96-0.98 s). Where
+   *  boxes instead of first searching the tree's k-d tree of sample points
+   *  (Colin27's `register` solve with skull contact: 1.20-1.26 s with the
+   *  hint's own point as the bound, 0.96-0.98 s with the projection). Where
    *  two triangles are equally close the triangle may differ from
    *  Closest(query)'s; the distance does not, beyond rounding. */
   Hit Closest(const Vector3 & query, const Hit & hint) const;
