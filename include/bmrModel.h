@@ -123,6 +123,8 @@ struct ContactSurface
    *  edge is shared by exactly two triangles. Throws bmr::Error for a closed
    *  surface whose triangles are not consistently oriented. */
   std::vector<std::array<Index, 3>> OutwardTriangles(bool * closed = nullptr) const;
+  /** Mean length of the triangles' edges (mm; each shared edge counted once per triangle); 0 without triangles. */
+  double MeanEdgeLength() const;
 };
 
 /** Where a rigid tool is at a time: the origin of the tool's frame (mm) and

@@ -131,6 +131,22 @@ SortedEdges(const std::vector<std::array<Index, 3>> & triangles)
 }
 } // namespace
 
+double
+ContactSurface::MeanEdgeLength() const
+{
+  double      sum = 0.0;
+  std::size_t count = 0;
+  for (const auto & t : triangles)
+  {
+    for (int k = 0; k < 3; ++k)
+    {
+      sum += (vertices[t[k]] - vertices[t[(k + 1) % 3]]).norm();
+      ++count;
+    }
+  }
+  return count > 0 ? sum / static_cast<double>(count) : 0.0;
+}
+
 std::vector<std::array<Index, 3>>
 ContactSurface::OutwardTriangles(bool * closedOut) const
 {
@@ -240,15 +256,7 @@ RigidContact::RigidContact(const ContactSurface & surface, std::vector<Index> sl
   m_SafeDistance.assign(m_SlaveNodes.size(), 0.0);
   m_LastHit.assign(m_SlaveNodes.size(), TriangleSurfaceTree::Hit{ Vector3::Zero(), -1, 0.0 });
   m_Candidates.resize(m_SlaveNodes.size());
-  double edgeSum = 0.0;
-  for (const auto & c : tree.corners)
-  {
-    for (int k = 0; k < 3; ++k)
-    {
-      edgeSum += (tree.vertices[c[(k + 1) % 3]] - tree.vertices[c[k]]).norm();
-    }
-  }
-  m_CandidateReach = kCandidateReach * edgeSum / (3.0 * static_cast<double>(tree.corners.size()));
+  m_CandidateReach = kCandidateReach * surface.MeanEdgeLength();
 }
 
 TriangleSurfaceTree::Hit

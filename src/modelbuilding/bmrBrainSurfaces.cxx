@@ -73,22 +73,6 @@ ToContactSurface(vtkPolyData * polyData, const std::string & name)
   return surface;
 }
 
-double
-MeanEdgeLength(const ContactSurface & surface)
-{
-  double      sum = 0.0;
-  std::size_t count = 0;
-  for (const auto & t : surface.triangles)
-  {
-    for (int k = 0; k < 3; ++k)
-    {
-      sum += (surface.vertices[t[k]] - surface.vertices[t[(k + 1) % 3]]).norm();
-      ++count;
-    }
-  }
-  return count > 0 ? sum / static_cast<double>(count) : 0.0;
-}
-
 vtkSmartPointer<vtkPolyData>
 CleanTriangles(vtkPolyData * input)
 {
@@ -302,7 +286,7 @@ EnclosedVolume(const ContactSurface & surface)
 ContactSurface
 DecimateSurface(const ContactSurface & surface, double targetEdgeLength, std::vector<std::string> * warnings)
 {
-  const double meanEdge = MeanEdgeLength(surface);
+  const double meanEdge = surface.MeanEdgeLength();
   if (!(targetEdgeLength > meanEdge))
   {
     return surface;
