@@ -160,17 +160,21 @@ Driver(const Options & options, const std::string & self)
   }
   report << md.str();
   std::cout << report.str();
-  // The sections other programs write on the page (bmrImageBenchmark,
-  // scripts/benchmark-simulation.py) are kept as they are, so that this
+  // The sections other programs write on the page (bmrImageBenchmark and the
+  // scripts' sections) are kept as they are, so that this
   // program can be rerun alone.
   const std::string previous = ReadTextFile(options.output);
   const std::string imageSection = bmr::benchmark::ImageSection(previous);
   std::string       page = imageSection.empty() ? report.str() : bmr::benchmark::WithImageSection(report.str(), imageSection);
-  const std::string simulationSection = bmr::benchmark::MarkedSection(
-    previous, bmr::benchmark::SimulationSectionBegin, bmr::benchmark::SimulationSectionEnd);
-  if (!simulationSection.empty())
+  for (const std::string name : bmr::benchmark::ScriptSections)
   {
-    page += "\n" + simulationSection;
+    const std::string begin = "<!-- " + name + ":begin -->";
+    const std::string end = "<!-- " + name + ":end -->";
+    const std::string section = bmr::benchmark::MarkedSection(previous, begin.c_str(), end.c_str());
+    if (!section.empty())
+    {
+      page += "\n" + section;
+    }
   }
   WriteCreatingFolder(options.output, page);
   Log("wrote " + options.output);

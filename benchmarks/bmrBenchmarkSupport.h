@@ -71,9 +71,11 @@ LoadAverage()
 constexpr const char * ImageSectionBegin = "<!-- image-benchmark: written by bmrImageBenchmark -->";
 constexpr const char * ImageSectionEnd = "<!-- image-benchmark: end -->";
 
-/** Markers of the surgical-simulation section (scripts/benchmark-simulation.py). */
-constexpr const char * SimulationSectionBegin = "<!-- simulation-benchmark:begin -->";
-constexpr const char * SimulationSectionEnd = "<!-- simulation-benchmark:end -->";
+/** The sections scripts write on the page, each between `<!-- NAME:begin -->` and
+ *  `<!-- NAME:end -->` (scripts/docsection.py): the surgical simulation
+ *  (scripts/benchmark-simulation.py) and issue 20's targets on Colin27
+ *  (scripts/benchmark-registration.py, scripts/benchmark-model-building.py). */
+constexpr const char * ScriptSections[] = { "simulation-benchmark", "colin27-meshless", "colin27-registration" };
 
 /** The section of `report` between two markers (included), or "" when it has none. */
 inline std::string

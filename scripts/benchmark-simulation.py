@@ -23,7 +23,6 @@ import argparse
 import json
 import os
 import platform
-import re
 import sys
 import time
 
@@ -33,8 +32,11 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "build", "python"))
 import biomechanical_registration as bmr  # noqa: E402
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from docsection import write_section  # noqa: E402
+
 TEMPLATES = "/usr/share/mricron/templates"
-BEGIN, END = "<!-- simulation-benchmark:begin -->", "<!-- simulation-benchmark:end -->"
+SECTION = "simulation-benchmark"  # its markers in docs/benchmarks.md (scripts/docsection.py)
 PROBE_RADIUS, DEPTH, DURATION = 2.5, 3.0, 0.1  # mm, mm, s
 TOP = (-11.0, 43.0)  # x, y (mm, LPS) of the probe: the README demo's craniotomy
 
@@ -84,7 +86,7 @@ def run(model, start, threads, region):
 
 
 def markdown(rows, machine):
-    lines = [BEGIN, "", "## Surgical simulation: haptic rate on the generic brain (`scripts/benchmark-simulation.py`)", ""]
+    lines = ["## Surgical simulation: haptic rate on the generic brain (`scripts/benchmark-simulation.py`)", ""]
     lines += [
         "Colin27's brain (mricron-data) meshed with hexahedra as `biomech model` builds it (classes and materials, "
         "skull base fixed, brain-skull contact); a %.1f mm sphere-ended probe sinks %.0f mm in %.2f s and is held; "
@@ -115,8 +117,7 @@ def markdown(rows, machine):
                       best["real_time_factor"], "met" if best["dofs"] >= 10000 else "missed")]
     else:
         lines += ["", "No size kept 500 Hz on this machine (target: 10,000 DOF): **missed**."]
-    lines += ["", END]
-    return "\n".join(lines)
+    return lines
 
 
 def main():
@@ -148,14 +149,7 @@ def main():
         print("with the Ogden region: real-time factor %.2f" % row["real_time_factor"], flush=True)
     machine = "%s, %d cores, Python %s, measured %s" % (platform.processor() or platform.machine(), os.cpu_count(),
                                                       platform.python_version(), time.strftime("%Y-%m-%d"))
-    section = markdown(rows, machine)
-    text = open(arguments.output).read() if os.path.exists(arguments.output) else "# Benchmarks\n"
-    if BEGIN in text and END in text:
-        text = re.sub(re.escape(BEGIN) + ".*?" + re.escape(END), lambda _: section, text, flags=re.S)
-    else:
-        text = text.rstrip("\n") + "\n\n" + section + "\n"
-    with open(arguments.output, "w") as handle:
-        handle.write(text)
+    write_section(arguments.output, SECTION, markdown(rows, machine))
     with open(arguments.json, "w") as handle:
         json.dump({"machine": machine, "rows": rows}, handle, indent=1)
     print("wrote", arguments.output, "and", arguments.json)
