@@ -2,8 +2,9 @@
 # Builds the module in Release and runs the benchmark driver, then draws the
 # error-against-run-time plot, then times model building from an MRI. Writes
 # docs/benchmarks.md, docs/benchmark-error-vs-time.csv,
-# docs/benchmark-error-vs-time.png, docs/stability-matrix.md and
-# docs/model-building-benchmark.md.
+# docs/benchmark-error-vs-time.png, docs/stability-matrix.md,
+# docs/wait-policy.md, docs/model-building-benchmark.md and
+# docs/registration-benchmark.md (with their sections of docs/benchmarks.md).
 #
 #   scripts/run-benchmarks.sh [bmrBenchmark options, e.g. --quick or --threads 1,2]
 #
