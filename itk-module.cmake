@@ -7,6 +7,7 @@ itk_module(BiomechanicalRegistration
   DEPENDS
     ITKCommon
     ITKIOImageBase
+    ITKIOGDCM
     ITKMesh
     ITKStatistics
     ITKImageFilterBase

@@ -101,12 +101,14 @@ private:
   std::chrono::steady_clock::time_point m_LastUpdate;
 };
 
-/** Reads an image; a missing or unreadable file is an Error naming `what` and the path. */
+/** Reads an image (a DICOM series too: its folder or one of its files,
+ *  `series` choosing among several); a missing or unreadable file is an
+ *  Error naming `what` and the path. */
 template <typename TImage>
 typename TImage::Pointer
-ReadImage(const std::string & path, const std::string & what)
+ReadImage(const std::string & path, const std::string & what, const std::string & series = {})
 {
-  return itk::ReadBiomechanicalImage<TImage>(path, what);
+  return itk::ReadBiomechanicalImage<TImage>(path, what, series);
 }
 
 /** A mask file as an image of 0 and 1: every voxel > 0 is inside (so a

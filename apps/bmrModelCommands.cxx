@@ -17,6 +17,7 @@
 #include "bmrImageGrids.h"
 #include "bmrMaterialMapping.h"
 #include "bmrMeshIO.h"
+#include "bmrModelBundle.h"
 #include "bmrScene.h"
 #include "bmrSurfaceLoads.h"
 
@@ -341,6 +342,7 @@ struct SettingOptions
 struct PatientModelOptions
 {
   std::string         image;
+  std::string         series;
   std::string         mask;
   std::string         tumourMask;
   std::string         resectionMask;
@@ -351,9 +353,15 @@ struct PatientModelOptions
   double              csfDrainedDepth = 0.0;
   CLI::Option *       csfDrainedDepthOption = nullptr;
 
-  void Add(CLI::App * command)
+  /** `bodyLoads`: also --gravity and --csf-drained-depth (not `prepare`'s: they are the update's). */
+  void Add(CLI::App * command, bool bodyLoads = true)
   {
-    command->add_option("image", image, "Preoperative T1 MRI (.nii.gz, .nrrd, .mha, ...)")->required();
+    command->add_option("image", image,
+                        "Preoperative MRI (.nii.gz, .nrrd, .mha, ..., or a DICOM series: its folder or one of its files)")
+      ->required();
+    command->add_option("--series", series,
+                        "DICOM Series Instance UID of the preoperative image, when its folder holds several series "
+                        "(default: the file's own series, else the one with most slices)");
     command->add_option("--mask", mask, "Brain mask on the image grid (voxels > 0); default: atlas skull stripping");
     command->add_option("--tumour-mask", tumourMask, "Tumour mask on the image grid (voxels > 0)");
     command->add_option("--resection-mask", resectionMask,
@@ -363,6 +371,10 @@ struct PatientModelOptions
                         "Rigid skull surface (.stl, .obj, .vtp, .vtk) to use instead of the body dilated by --skull-gap");
     settings.Add(command);
     regions.Add(command);
+    if (!bodyLoads)
+    {
+      return;
+    }
     CLI::Option * gravityOption =
       command->add_option("--gravity", gravity, "Body acceleration X Y Z (mm/s^2), e.g. 0 0 -9810")->expected(3);
     csfDrainedDepthOption =
@@ -385,7 +397,7 @@ struct PatientModelOptions
     {
       model.gravity = ThreeValues(gravity, "--gravity");
     }
-    if (csfDrainedDepthOption->count() > 0)
+    if (csfDrainedDepthOption != nullptr && csfDrainedDepthOption->count() > 0)
     {
       model.csfDrainedDepth = csfDrainedDepth;
     }
@@ -411,7 +423,7 @@ struct PatientModelOptions
   Inputs Read() const
   {
     Inputs inputs;
-    inputs.image = ReadImage<ImageType>(image, "preoperative image");
+    inputs.image = ReadImage<ImageType>(image, "preoperative image", series);
     if (!mask.empty())
     {
       inputs.brainMask = ReadMaskImage(mask, "brain mask");
@@ -545,6 +557,7 @@ RunModel(const ModelOptions & options)
   report["skull_gap_mm"] = settings.skullGap;
   const Material csf = CsfClassMaterial(settings.materials);
   report["csf"] = { { "youngs_modulus_pa", csf.youngsModulus }, { "poisson_ratio", csf.poissonRatio } };
+  report["csf"].update(CsfClassJson(brain));
   if (settings.csfDrainedDepth)
   {
     report["csf"]["drained_depth_mm"] = *settings.csfDrainedDepth;
@@ -597,6 +610,9 @@ RunModel(const ModelOptions & options)
     }
     std::cout << "\n  volume error      " << 100.0 * brain.gridQuality.volumeError << " % of the mask\n"
               << "  exposed nodes     " << exposed.size() << ", fixed " << model.NodeSet("skull_base").size() << "\n"
+              << "  CSF               class " << brain.csfClass.csfClass + 1 << " of "
+              << brain.classificationFit.centroids.size() << " (" << TissueContrastName(brain.csfClass.contrast)
+              << " contrast), " << brain.csfVolume / 1000.0 << " mL\n"
               << "  time              " << report["seconds"]["total"].get<double>() << " s\n"
               << "  scene             " << (outputDirectory / "scene.json").string() << "\n";
   }
@@ -607,13 +623,58 @@ RunModel(const ModelOptions & options)
 // The registration: model, solve, transform, warp, evaluation in one call.
 // ---------------------------------------------------------------------------
 
+/** The intraoperative data of `register` and `update`: measurements and an intraoperative image. */
+struct IntraoperativeOptions
+{
+  MeasurementOptions measurements;
+  std::string        image;
+  std::string        series;
+  std::string        mask;
+
+  void Add(CLI::App * command)
+  {
+    measurements.Add(command);
+    command->add_option("--intraoperative-image", image,
+                        "Intraoperative image (a file, or a DICOM series' folder or file): evaluation (edge-based "
+                        "Hausdorff), the gravity fit (--gravity-fit-candidates), and the exposed surface when no "
+                        "surface or sparse displacements are given");
+    command->add_option("--intraoperative-series", series,
+                        "DICOM Series Instance UID of the intraoperative image, when its folder holds several");
+    command->add_option("--intraoperative-mask", mask,
+                        "Brain mask of the intraoperative image (default: atlas skull stripping when its "
+                        "surface is needed; the registered preoperative mask for the evaluation)");
+  }
+
+  IntraoperativeData Read() const
+  {
+    IntraoperativeData data;
+    if (const auto measured = measurements.Data())
+    {
+      data = *measured;
+    }
+    data.maxDistance = measurements.maxDistance;
+    data.surfaceMatchDirection = measurements.MatchDirection();
+    if (!image.empty())
+    {
+      data.image = ReadImage<ImageType>(image, "intraoperative image", series);
+    }
+    if (!mask.empty())
+    {
+      if (image.empty())
+      {
+        throw Error("--intraoperative-mask belongs to --intraoperative-image; give the image as well");
+      }
+      data.imageBrainMask = ReadMaskImage(mask, "intraoperative brain mask");
+    }
+    return data;
+  }
+};
+
 struct RegisterOptions
 {
   PatientModelOptions            patient;
-  MeasurementOptions             measurements;
+  IntraoperativeOptions          intraoperative;
   std::vector<std::string>       labelMaps;
-  std::string                    intraoperativeImage;
-  std::string                    intraoperativeMask;
   std::string                    outputDirectory = "registration";
   SettingOptions                 settings{ { "solve", "fit", "evaluation" } };
   int                            overlays = 5;
@@ -636,12 +697,102 @@ WarpedName(const std::string & path)
   return name + "-warped.nii.gz";
 }
 
+/** Writes a registration's outputs into `outputDirectory` (the warped
+ *  image and label maps, the transform, the model's result, with an
+ *  intraoperative image its evaluation and overlays) and the report last, so
+ *  that a folder without the report holds no finished result; prints the
+ *  table. `report` holds what the caller adds, `moreSeconds` stages timed
+ *  outside the registration ("seconds" gains them and "write"). Returns the
+ *  exit status: 0 converged, 2 not converged. */
+int
+WriteRegistrationOutputs(const BrainShiftRegistrationResult & result, const BrainShiftRegistrationSettings & settings,
+                         const fs::path & outputDirectory, const std::vector<std::string> & labelNames,
+                         const RegistrationImage * intraoperative, int overlays, bool quiet, json report,
+                         const json & moreSeconds = json::object())
+{
+  const auto     written = std::chrono::steady_clock::now();
+  const fs::path reportPath = outputDirectory / "registration-report.json";
+  CreateFolder(outputDirectory);
+  std::error_code ignored;
+  fs::remove(reportPath, ignored);
+  report.update(RegistrationReportJson(result, settings));
+  json files = json::object();
+  const auto write = [&](const std::string & key, const fs::path & path, const auto & writeFile) {
+    writeFile(path);
+    files[key] = path.string();
+  };
+  write("warped_image", outputDirectory / "warped.nii.gz",
+        [&](const fs::path & path) { WriteImageAtomically(result.warpedImage.GetPointer(), path); });
+  write("transform", outputDirectory / "transform.h5",
+        [&](const fs::path & path) { itk::WriteBiomechanicalTransform(result.transform, path.string()); });
+  write("model_result", outputDirectory / "model-result.vtu",
+        [&](const fs::path & path) { WriteResultVtu(path.string(), result.model.model, result.solve); });
+  for (std::size_t k = 0; k < result.warpedLabelMaps.size(); ++k)
+  {
+    write("warped_labels_" + std::to_string(k), outputDirectory / WarpedName(labelNames.at(k)),
+          [&](const fs::path & path) { WriteImageAtomically(result.warpedLabelMaps[k].GetPointer(), path); });
+  }
+  if (result.Evaluated())
+  {
+    write("registered_on_intraoperative_grid", outputDirectory / "registered-on-intraoperative-grid.nii.gz",
+          [&](const fs::path & path) { WriteImageAtomically(result.registeredOnIntraoperativeGrid.GetPointer(), path); });
+    files["overlays"] = {
+      { "unregistered", WriteEdgeOverlays(result.unregistered, intraoperative, (outputDirectory / "overlays").string(),
+                                          "unregistered", overlays) },
+      { "registered", WriteEdgeOverlays(result.registered, intraoperative, (outputDirectory / "overlays").string(),
+                                        "registered", overlays) }
+    };
+  }
+  report["files"] = files;
+  report["seconds"].update(moreSeconds);
+  report["seconds"]["write"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - written).count();
+  WriteTextFileAtomically(reportPath.string(), report.dump(2) + "\n");
+
+  PrintWarnings(result.warnings);
+  if (!quiet)
+  {
+    std::cout << FormatRegistrationTable(result) << "  output            " << outputDirectory.string() << "\n";
+  }
+  if (!result.solve.converged)
+  {
+    std::cerr << "biomech: the solve did NOT converge (" << result.solve.message
+              << "); results written, the report says converged: false\n";
+    return 2;
+  }
+  return 0;
+}
+
+/** Stage lines on a terminal and the solver's progress, for `register` and `update`. */
+struct RegistrationProgress
+{
+  explicit RegistrationProgress(bool terminal)
+    : terminal(terminal)
+    , progress(terminal)
+  {}
+
+  StageCallback Stages()
+  {
+    if (!terminal)
+    {
+      return {};
+    }
+    return [this](const std::string & stage, double seconds) {
+      progress.Clear();
+      StepTimer::PrintStage(stage, seconds);
+    };
+  }
+  ProgressCallback Steps()
+  {
+    return [this](int step, double fraction, double estimatedError) { progress.Update(step, fraction, estimatedError); };
+  }
+
+  bool             terminal;
+  TerminalProgress progress;
+};
+
 int
 RunRegister(const RegisterOptions & options)
 {
-  const fs::path outputDirectory(options.outputDirectory);
-  const bool     terminal = !options.quiet && ::isatty(STDERR_FILENO) != 0;
-
   const PatientModelOptions::Inputs patient = options.patient.Read();
   BrainShiftRegistrationInputs      inputs;
   inputs.preoperativeImage = patient.image;
@@ -656,91 +807,180 @@ RunRegister(const RegisterOptions & options)
   {
     throw Error("give the craniotomy: --craniotomy-centre X Y Z with --craniotomy-radius R, or --craniotomy-mask");
   }
-  if (const auto data = options.measurements.Data())
-  {
-    inputs.intraoperative = *data;
-  }
-  inputs.intraoperative.maxDistance = options.measurements.maxDistance;
-  inputs.intraoperative.surfaceMatchDirection = options.measurements.MatchDirection();
-  if (!options.intraoperativeImage.empty())
-  {
-    inputs.intraoperative.image = ReadImage<ImageType>(options.intraoperativeImage, "intraoperative image");
-  }
-  if (!options.intraoperativeMask.empty())
-  {
-    if (options.intraoperativeImage.empty())
-    {
-      throw Error("--intraoperative-mask belongs to --intraoperative-image; give the image as well");
-    }
-    inputs.intraoperative.imageBrainMask = ReadMaskImage(options.intraoperativeMask, "intraoperative brain mask");
-  }
+  inputs.intraoperative = options.intraoperative.Read();
 
   BrainShiftRegistrationSettings settings = options.patient.RegistrationSettings();
   options.settings.Apply(settings);
 
   BrainShiftRegistrationResult result;
   {
-    TerminalProgress progress(terminal);
-    result = RegisterBrainShift(
-      inputs, settings,
-      terminal ? StageCallback([&progress](const std::string & stage, double seconds) {
-        progress.Clear();
-        StepTimer::PrintStage(stage, seconds);
-      })
-               : StageCallback(),
-      [&progress](int step, double fraction, double estimatedError) { progress.Update(step, fraction, estimatedError); });
+    RegistrationProgress progress(!options.quiet && ::isatty(STDERR_FILENO) != 0);
+    result = RegisterBrainShift(inputs, settings, progress.Stages(), progress.Steps());
   }
+  return WriteRegistrationOutputs(result, settings, options.outputDirectory, options.labelMaps,
+                                  inputs.intraoperative.image, options.overlays, options.quiet,
+                                  { { "preoperative_image", options.patient.image } });
+}
 
-  // Outputs: the report is written last, so a folder without it holds no finished result.
-  const fs::path reportPath = outputDirectory / "registration-report.json";
-  CreateFolder(outputDirectory);
-  std::error_code ignored;
-  fs::remove(reportPath, ignored);
-  json report = RegistrationReportJson(result, settings);
-  report["preoperative_image"] = options.patient.image;
-  json files = json::object();
-  const auto write = [&](const std::string & key, const fs::path & path, const auto & writeFile) {
-    writeFile(path);
-    files[key] = path.string();
-  };
-  write("warped_image", outputDirectory / "warped.nii.gz",
-        [&](const fs::path & path) { WriteImageAtomically(result.warpedImage.GetPointer(), path); });
-  write("transform", outputDirectory / "transform.h5",
-        [&](const fs::path & path) { itk::WriteBiomechanicalTransform(result.transform, path.string()); });
-  write("model_result", outputDirectory / "model-result.vtu",
-        [&](const fs::path & path) { WriteResultVtu(path.string(), result.model.model, result.solve); });
-  for (std::size_t k = 0; k < result.warpedLabelMaps.size(); ++k)
-  {
-    write("warped_labels_" + std::to_string(k), outputDirectory / WarpedName(options.labelMaps[k]),
-          [&](const fs::path & path) { WriteImageAtomically(result.warpedLabelMaps[k].GetPointer(), path); });
-  }
-  if (result.Evaluated())
-  {
-    write("registered_on_intraoperative_grid", outputDirectory / "registered-on-intraoperative-grid.nii.gz",
-          [&](const fs::path & path) { WriteImageAtomically(result.registeredOnIntraoperativeGrid.GetPointer(), path); });
-    const RegistrationImage * intraoperative = inputs.intraoperative.image.GetPointer();
-    files["overlays"] = {
-      { "unregistered", WriteEdgeOverlays(result.unregistered, intraoperative, (outputDirectory / "overlays").string(),
-                                          "unregistered", options.overlays) },
-      { "registered", WriteEdgeOverlays(result.registered, intraoperative, (outputDirectory / "overlays").string(),
-                                        "registered", options.overlays) }
-    };
-  }
-  report["files"] = files;
-  WriteTextFileAtomically(reportPath.string(), report.dump(2) + "\n");
+// ---------------------------------------------------------------------------
+// The two phases: `prepare` before surgery, `update` during it.
+// ---------------------------------------------------------------------------
 
-  PrintWarnings(result.warnings);
+struct PrepareOptions
+{
+  PatientModelOptions      patient;
+  std::vector<std::string> labelMaps;
+  /** The solve's, fit's and evaluation's settings, stored as the updates' defaults. */
+  SettingOptions           settings{ { "solve", "fit", "evaluation" } };
+  std::string              output;
+  bool                     quiet = false;
+};
+
+int
+RunPrepare(const PrepareOptions & options)
+{
+  const auto                        started = std::chrono::steady_clock::now();
+  const PatientModelOptions::Inputs patient = options.patient.Read();
+  if (!options.patient.regions.HasCraniotomy())
+  {
+    throw Error("give the planned craniotomy: --craniotomy-centre X Y Z with --craniotomy-radius R, or "
+                "--craniotomy-mask");
+  }
+  ModelBundle bundle;
+  bundle.settings = options.patient.RegistrationSettings();
+  options.settings.Apply(bundle.settings);
+  bundle.preoperativeImage = patient.image;
+  for (const std::string & path : options.labelMaps)
+  {
+    bundle.labelMaps.push_back(ReadImage<MaskImageType>(path, "label map"));
+    bundle.labelMapNames.push_back(fs::path(path).filename().string());
+  }
+  RegistrationProgress progress(!options.quiet && ::isatty(STDERR_FILENO) != 0);
+  StageTimer           timer(progress.Stages());
+  bundle.model = PrepareBrainModel(patient.image, patient.brainMask, patient.tumourMask, patient.skullSurface,
+                                   bundle.settings.model, timer, true);
+  timer.Run("write", [&] {
+    bundle.manifest["prepare"] = { { "preoperative_image", options.patient.image },
+                                   { "seconds", timer.Json() },
+                                   { "wall_seconds", std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count() } };
+    WriteModelBundle(options.output, bundle);
+  });
+  PrintWarnings(bundle.model.warnings);
   if (!options.quiet)
   {
-    std::cout << FormatRegistrationTable(result) << "  output            " << outputDirectory.string() << "\n";
-  }
-  if (!result.solve.converged)
-  {
-    std::cerr << "biomech: the solve did NOT converge (" << result.solve.message
-              << "); results written, the report says converged: false\n";
-    return 2;
+    const ModelCounts counts = CountModel(bundle.model.model);
+    std::cout << "model bundle " << options.output << " of " << options.patient.image << "\n"
+              << "  grid              " << ImageGridKindName(bundle.settings.model.grid.kind) << ", " << counts.nodes
+              << " nodes, " << counts.cells << " cells, " << counts.dofs << " DOF";
+    if (counts.integrationPoints > 0)
+    {
+      std::cout << ", " << counts.integrationPoints << " integration points";
+    }
+    std::cout << "\n  exposed nodes     " << bundle.model.exposedNodes.size() << ", fixed "
+              << bundle.model.model.NodeSet("skull_base").size() << "\n"
+              << "  CSF               class " << bundle.model.csfClass.csfClass + 1 << " ("
+              << TissueContrastName(bundle.model.csfClass.contrast) << " contrast), "
+              << bundle.model.csfVolume / 1000.0 << " mL\n"
+              << "  time              ";
+    for (const auto & [stage, seconds] : timer.Stages())
+    {
+      std::cout << stage << " " << std::fixed << std::setprecision(2) << seconds << "  ";
+    }
+    std::cout << "| total " << timer.Json()["total"].get<double>() << " s\n";
   }
   return 0;
+}
+
+struct UpdateOptions
+{
+  std::string           bundle;
+  IntraoperativeOptions intraoperative;
+  std::vector<double>   gravity;
+  double                csfDrainedDepth = 0.0;
+  CLI::Option *         csfDrainedDepthOption = nullptr;
+  SettingOptions        settings{ { "solve", "fit", "evaluation" } };
+  int                   overlays = 5;
+  std::string           outputDirectory = "update";
+  bool                  quiet = false;
+};
+
+/** Intraoperative measurements must lie on the bundle's preoperative image: a
+ *  point outside it is from another patient, scan or coordinate frame. */
+void
+CheckMeasurementsInside(const IntraoperativeData & data, const RegistrationImage * image, const std::string & bundle)
+{
+  const ImageGeometry geometry = itk::MakeBiomechanicalGeometry(image);
+  const auto          outside = [&](const Vector3 & point) {
+    const Vector3 index = geometry.PointToIndex(point);
+    for (int d = 0; d < 3; ++d)
+    {
+      if (index[d] < -0.5 || index[d] > geometry.size[d] - 0.5)
+      {
+        return true;
+      }
+    }
+    return false;
+  };
+  const std::vector<Vector3> & points = data.sparse.points.empty() ? data.surface.vertices : data.sparse.points;
+  const auto first = std::find_if(points.begin(), points.end(), outside);
+  if (first != points.end())
+  {
+    std::ostringstream message;
+    message << "the intraoperative " << (data.sparse.points.empty() ? "surface's vertex " : "point ") << first - points.begin()
+            << " (" << first->transpose() << " mm) lies outside the preoperative image of the model bundle '" << bundle
+            << "' (" << geometry.Describe() << "): the measurements are in another coordinate frame or of another "
+            << "patient; give them in the preoperative image's physical space";
+    throw Error(message.str());
+  }
+}
+
+int
+RunUpdate(const UpdateOptions & options)
+{
+  const auto started = std::chrono::steady_clock::now();
+  ModelBundle bundle = ReadModelBundle(options.bundle);
+  const double readSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  BrainShiftRegistrationSettings settings = bundle.settings;
+  options.settings.Apply(settings);
+  if (!options.gravity.empty())
+  {
+    settings.model.gravity = ThreeValues(options.gravity, "--gravity");
+  }
+  if (options.csfDrainedDepthOption->count() > 0)
+  {
+    settings.model.csfDrainedDepth = options.csfDrainedDepth;
+  }
+  BrainShiftUpdateInputs inputs;
+  inputs.preoperativeImage = bundle.preoperativeImage;
+  inputs.labelMaps.assign(bundle.labelMaps.begin(), bundle.labelMaps.end());
+  inputs.intraoperative = options.intraoperative.Read();
+  CheckMeasurementsInside(inputs.intraoperative, bundle.preoperativeImage, options.bundle);
+
+  BrainShiftRegistrationResult result;
+  {
+    RegistrationProgress progress(!options.quiet && ::isatty(STDERR_FILENO) != 0);
+    result = UpdateBrainShift(std::move(bundle.model), inputs, settings, progress.Stages(), progress.Steps());
+  }
+  json report = { { "bundle", options.bundle },
+                  { "preoperative_image",
+                    bundle.manifest.value("prepare", json::object()).value("preoperative_image", std::string()) } };
+  report["stages"] = json::array();
+  for (const auto & stage : result.timer.Stages())
+  {
+    report["stages"].push_back(stage.first);
+  }
+  const int status = WriteRegistrationOutputs(result, settings, options.outputDirectory, bundle.labelMapNames,
+                                              inputs.intraoperative.image, options.overlays, true, report,
+                                              { { "read-bundle", readSeconds } });
+  // The whole update, from reading the bundle to the last file written.
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  if (!options.quiet)
+  {
+    std::cout << FormatRegistrationTable(result) << "  bundle read       " << std::fixed << std::setprecision(2)
+              << readSeconds << " s; update " << wall << " s from reading the bundle to the last file written\n"
+              << "  output            " << options.outputDirectory << "\n";
+  }
+  return status;
 }
 
 // ---------------------------------------------------------------------------
@@ -976,21 +1216,55 @@ AddModelCommands(CLI::App & app)
   registration->patient.Add(registerCommand);
   registerCommand->add_option("--labels", registration->labelMaps,
                               "Label maps on the image grid to warp (nearest neighbour); repeat for several");
-  registration->measurements.Add(registerCommand);
-  registerCommand->add_option("--intraoperative-image", registration->intraoperativeImage,
-                              "Intraoperative image: evaluation (edge-based Hausdorff), the gravity fit "
-                              "(--gravity-fit-candidates), and the exposed surface when no surface or sparse "
-                              "displacements are given");
-  registerCommand->add_option("--intraoperative-mask", registration->intraoperativeMask,
-                              "Brain mask of the intraoperative image (default: atlas skull stripping when its "
-                              "surface is needed; the registered preoperative mask for the evaluation)");
+  registration->intraoperative.Add(registerCommand);
   registration->settings.Add(registerCommand);
   registerCommand->add_option("--overlays", registration->overlays, "Edge-overlay PNGs per evaluation (0: none)")
     ->capture_default_str();
   registerCommand->add_option("-o,--output-dir", registration->outputDirectory, "Output folder")->capture_default_str();
   registerCommand->add_flag("--quiet,-q", registration->quiet, "Print nothing but warnings and errors");
 
+  auto       prepare = std::make_shared<PrepareOptions>();
+  CLI::App * prepareCommand = app.add_subcommand(
+    "prepare", "Before surgery: skull stripping, classification, grid, materials, surfaces and regions of the "
+               "preoperative MRI, written as a model bundle (a folder) for `update`");
+  prepare->patient.Add(prepareCommand, false);
+  prepareCommand->add_option("--labels", prepare->labelMaps,
+                             "Label maps on the image grid that each update warps (nearest neighbour); repeat for several");
+  prepare->settings.Add(prepareCommand);
+  prepareCommand->add_option("-o,--output", prepare->output, "The model bundle's folder")->required();
+  prepareCommand->add_flag("--quiet,-q", prepare->quiet, "Print nothing but warnings and errors");
+
+  auto       update = std::make_shared<UpdateOptions>();
+  CLI::App * updateCommand = app.add_subcommand(
+    "update", "During surgery: loads from the intraoperative data, solve, transform, warped image (+ labels), "
+              "evaluation, report, on a model bundle from `prepare`. Exit 0 converged, 2 not converged (results "
+              "written), 1 error");
+  updateCommand->add_option("bundle", update->bundle, "Model bundle (folder) written by `biomech prepare`")->required();
+  update->intraoperative.Add(updateCommand);
+  CLI::Option * updateGravity =
+    updateCommand->add_option("--gravity", update->gravity, "Body acceleration X Y Z (mm/s^2), e.g. 0 0 -9810")
+      ->expected(3);
+  update->csfDrainedDepthOption =
+    updateCommand
+      ->add_option("--csf-drained-depth", update->csfDrainedDepth,
+                   "CSF drained to this depth (mm) below the brain's top along gravity (default: all of it)")
+      ->check(CLI::NonNegativeNumber)
+      ->needs(updateGravity);
+  update->settings.Add(updateCommand);
+  updateCommand->add_option("--overlays", update->overlays, "Edge-overlay PNGs per evaluation (0: none)")
+    ->capture_default_str();
+  updateCommand->add_option("-o,--output-dir", update->outputDirectory, "Output folder")->capture_default_str();
+  updateCommand->add_flag("--quiet,-q", update->quiet, "Print nothing but warnings and errors");
+
   return [=]() -> int {
+    if (prepareCommand->parsed())
+    {
+      return RunPrepare(*prepare);
+    }
+    if (updateCommand->parsed())
+    {
+      return RunUpdate(*update);
+    }
     if (registerCommand->parsed())
     {
       return RunRegister(*registration);

@@ -74,8 +74,10 @@ constexpr const char * ImageSectionEnd = "<!-- image-benchmark: end -->";
 /** The sections scripts write on the page, each between `<!-- NAME:begin -->` and
  *  `<!-- NAME:end -->` (scripts/docsection.py): the surgical simulation
  *  (scripts/benchmark-simulation.py) and issue 20's targets on Colin27
- *  (scripts/benchmark-registration.py, scripts/benchmark-model-building.py). */
-constexpr const char * ScriptSections[] = { "simulation-benchmark", "colin27-meshless", "colin27-registration" };
+ *  (scripts/benchmark-registration.py, scripts/benchmark-model-building.py) and the
+ *  update latency on a prepared bundle (scripts/benchmark-update.py). */
+constexpr const char * ScriptSections[] = { "simulation-benchmark", "colin27-meshless", "colin27-registration",
+                                             "update-latency" };
 
 /** The section of `report` between two markers (included), or "" when it has none. */
 inline std::string

@@ -149,7 +149,12 @@ struct BrainModelSettings
     settings.classes = 3;
     return settings;
   }();
-  /** Materials per class (ascending centroid) and of the tumour. */
+  /** Which class is the CSF: the darkest (t1), the brightest (t2), or
+   *  decided from the classes (auto; bmr::ChooseCsfClass). */
+  TissueContrast contrast = TissueContrast::Auto;
+  /** Materials per tissue class in T1 order (ascending centroid on a T1
+   *  image: the CSF first; BuildBrainModel reverses them on a T2 image) and
+   *  of the tumour. */
   MaterialMappingSettings materials;
   /** Hexahedra of 5 mm by default. */
   ImageGridSettings grid;
@@ -208,6 +213,10 @@ struct BrainModel
   BrainSurfaces            surfaces; // preoperative brain surface and the skull (contact master)
   /** The classifier's fit (centroids, iterations, convergence). */
   FuzzyCMeansResult        classificationFit;
+  /** The class that became the CSF (ascending centroid order) and why,
+   *  and its volume (mm^3, voxels whose largest membership is the CSF's). */
+  CsfClassChoice           csfClass;
+  double                   csfVolume = 0.0;
   LabelVolume              brainMask;
   /** Brain removed by settings.resectionMask (mm^3; 0 without one). */
   double                   resectedVolume = 0.0;
@@ -216,6 +225,10 @@ struct BrainModel
   PrescribedDisplacement   load;
   LoadReport               loadReport;
   std::vector<std::string> warnings;
+  /** The cortex: the smooth surface of the brain mask (CortexSurfaceOfMask)
+   *  that a displaced surface is matched to; made when the loads may need it
+   *  (always by PrepareBrainModel with `cortex`), else empty. */
+  ContactSurface           cortex;
   /** The same model as the pipeline hands it to itk::BiomechanicalDeformationFilter:
    *  the regions filter's output (materials, node sets "skull_base" (fixed),
    *  "exposed", "contact", gravity; no loads, no contact surface), the loads
@@ -245,6 +258,27 @@ BuildBrainModel(const RegistrationImage *      image,
                 const IntraoperativeData *     intraoperative,
                 const BrainModelSettings &     settings,
                 StageTimer &                   timer);
+
+/** The preoperative phase of BuildBrainModel, without intraoperative data:
+ *  skull stripping (without a mask), classification, grid, materials,
+ *  surfaces (and the cortex when `cortex`), regions; no loads and no contact
+ *  yet. settings.craniotomy* must be given. Throws bmr::Error. */
+BrainModel
+PrepareBrainModel(const RegistrationImage *      image,
+                  const RegistrationLabelImage * brainMask,
+                  const RegistrationLabelImage * tumourMask,
+                  const ContactSurface &         skullSurface,
+                  const BrainModelSettings &     settings,
+                  StageTimer &                   timer,
+                  bool                           cortex);
+
+/** The intraoperative phase's first step on a prepared model: the exposed
+ *  nodes' displacements from `intraoperative` (the "loads" stage; a surface
+ *  scan is matched to model.cortex, which must then be there) and the
+ *  skull's contact. Throws bmr::Error naming the bad input. */
+void
+LoadBrainModel(BrainModel & model, const IntraoperativeData & intraoperative, const BrainModelSettings & settings,
+               StageTimer & timer);
 
 // ---------------------------------------------------------------------------
 // The registration.
@@ -357,6 +391,27 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
                    const StageCallback &                  stageCallback = {},
                    const ProgressCallback &               solverProgress = {});
 
+/** What the intraoperative phase needs beside the prepared model. */
+struct BrainShiftUpdateInputs
+{
+  RegistrationImage::ConstPointer                   preoperativeImage; // warped; the gravity fit's moving image
+  std::vector<RegistrationLabelImage::ConstPointer> labelMaps;         // on the preoperative grid
+  IntraoperativeData                                intraoperative;
+};
+
+/** The intraoperative phase on a prepared model (PrepareBrainModel, or a
+ *  model bundle read back): loads, (gravity fit,) solve, transform fit,
+ *  warp, evaluation. `RegisterBrainShift` is PrepareBrainModel followed by
+ *  this, so the two phases give bitwise the same result as the one call.
+ *  settings.model is read for the loads, gravity and CSF settings only.
+ *  Throws as RegisterBrainShift does. */
+BrainShiftRegistrationResult
+UpdateBrainShift(BrainModel                             model,
+                 const BrainShiftUpdateInputs &         inputs,
+                 const BrainShiftRegistrationSettings & settings,
+                 const StageCallback &                  stageCallback = {},
+                 const ProgressCallback &               solverProgress = {});
+
 /** Edge detection of the evaluation (itk::EdgeHausdorffDistanceImageFilter's
  *  Canny settings); an empty value keeps the filter's default. Fixed
  *  thresholds (both given) turn the automatic ones off. */
@@ -392,6 +447,12 @@ WriteEdgeOverlays(const EdgeEvaluation &    evaluation,
                   const std::string &       folder,
                   const std::string &       prefix,
                   int                       count = 5);
+
+/** The class that became the CSF: contrast, class (the tissue label's value
+ *  1..K), centroid, volume (mL) and why it was chosen; the "csf" entry of
+ *  the registration's and `biomech model`'s reports. */
+nlohmann::json
+CsfClassJson(const BrainModel & model);
 
 /** Report: stage times, model size, solver convergence and estimated error,
  *  fit residual, evaluation (keys in docs/registration.md). */

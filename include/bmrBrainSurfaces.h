@@ -215,11 +215,28 @@ struct BrainRegionSettings
  *  "skull_base" (SkullBaseNodes; model.fixedConstraints becomes its one
  *  fixed constraint, all three directions), "exposed" (ExposedSurfaceNodes,
  *  when the craniotomy is given) and, with `contact`, "contact": every other
- *  surface node, the slaves of the skull. Exposed nodes are never contact
- *  slaves, even where a measurement is rejected: the craniotomy has no bone.
- *  Errors are those of the region functions. */
-void
+ *  surface node, the slaves of the skull. The craniotomy takes precedence
+ *  over the skull base: a node in both is exposed, not fixed (an opening low
+ *  on the head reaches into the default band). Exposed nodes are never
+ *  contact slaves, even where a measurement is rejected: the craniotomy has
+ *  no bone. Returns how many skull-base nodes the craniotomy took. Errors
+ *  are those of the region functions. */
+std::size_t
 SetBrainRegions(Model & model, const std::vector<Index> & surfaceNodes, const BrainRegionSettings & settings);
+
+/** The checks of the regions that need only the brain mask, made before the
+ *  grid is built so that a conflict is named in the user's terms without
+ *  waiting for the model: a craniotomy sphere must reach the mask's surface
+ *  and must not cover the whole default skull-base band (nothing would then
+ *  hold the brain stem). Surface voxels stand for the model's surface nodes.
+ *  `craniotomyOption` and `heightOption` name the settings in the message
+ *  (e.g. "--craniotomy-radius", "--skull-base-height"). Throws bmr::Error. */
+void
+CheckBrainRegionsOnMask(const LabelVolume &       brainMask,
+                        const CraniotomyRegion &  craniotomy,
+                        const SkullBaseSettings & skullBase,
+                        const std::string &       craniotomyOption = "the craniotomy's radius",
+                        const std::string &       heightOption = "the skull base's height");
 
 } // namespace bmr
 

@@ -84,6 +84,49 @@ ClassifyTissue(const ScalarVolume &                 intensities,
                const std::function<void(double)> & progress = {},
                std::vector<std::string> *           warnings = nullptr);
 
+/** Where the CSF lies on the image's intensity scale: darkest on a
+ *  T1-weighted image, brightest on a T2-weighted one; Auto decides from the
+ *  classes (ChooseCsfClass). */
+enum class TissueContrast
+{
+  Auto,
+  T1,
+  T2
+};
+
+/** "auto", "t1", "t2". */
+std::string
+TissueContrastName(TissueContrast contrast);
+
+/** Parses "auto", "t1", "t2"; throws bmr::Error naming the choices. */
+TissueContrast
+ParseTissueContrast(const std::string & name);
+
+/** The volume (mm^3) of each class of hard labels 1..`classes` (0: outside; element k: label k + 1). */
+std::vector<double>
+ClassVolumes(const LabelVolume & labels, int classes);
+
+/** The class that is the CSF, and the contrast it was chosen for. */
+struct CsfClassChoice
+{
+  TissueContrast contrast = TissueContrast::T1; // T1 or T2, never Auto
+  int            csfClass = 0;                  // index in ascending centroid order
+  /** Why (Auto: both cues, with their numbers; else "given"). */
+  std::string reason;
+};
+
+/** The CSF class of a classification whose classes are in ascending centroid
+ *  order with `classVolumes` (any unit): for T1 the darkest, for T2 the
+ *  brightest. Auto (at least 3 classes) uses two cues that hold on both
+ *  contrasts inside a brain mask: the CSF class is the end class of smaller
+ *  volume (grey and white matter fill most of the brain), and the end class
+ *  farther in intensity from its neighbour (on T1 grey matter lies nearer
+ *  white matter than CSF; on T2 nearer white matter too, CSF far above). When
+ *  the cues disagree, or with 2 classes, the contrast cannot be told and a
+ *  bmr::Error says to give it. */
+CsfClassChoice
+ChooseCsfClass(const std::vector<double> & centroids, const std::vector<double> & classVolumes, TissueContrast contrast);
+
 } // namespace bmr
 
 #endif

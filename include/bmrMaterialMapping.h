@@ -63,6 +63,9 @@ struct MaterialMappingSettings
 {
   /** One material per class (ascending centroid); empty: DefaultClassMaterials(K). */
   std::vector<Material> classMaterials;
+  /** The CSF's class (ascending centroid; bmr::ChooseCsfClass): the fluid
+   *  that fills a resection. 0 on a T1 image, the last class on a T2 one. */
+  int csfClass = 0;
   /** Material of the voxels of the tumour mask (full membership there). */
   Material         tumour = TumourMaterial();
   MaterialSampling sampling;
@@ -82,8 +85,8 @@ CsfClassMaterial(const MaterialMappingSettings & settings);
  *  interpolation of the membership image; voxels of `tumourMask` (same grid,
  *  non-zero = tumour) count as membership 1 in an extra tumour class, and
  *  voxels of `resectionMask` (same grid, non-zero = tissue removed by the
- *  surgery, e.g. the planned resection) as membership 1 in the first class,
- *  the CSF, whose fluid fills the cavity (they override the tumour). Samples
+ *  surgery, e.g. the planned resection) as membership 1 in the CSF's class
+ *  (settings.csfClass), whose fluid fills the cavity (they override the tumour). Samples
  *  outside the image or the mask contribute nothing: the average is
  *  sum(u) / sum(sum_k u_k) over the samples, so it sums to 1. A cell with no
  *  sample inside the mask takes the memberships of the mask voxel nearest its

@@ -1,17 +1,22 @@
-// Reading images with a message that names the file, and writing them
-// through a temporary file and a rename (nothing half-written is left as a
-// result); shared by the command-line tool and the registration pipeline.
+// Reading images with a message that names the file (a DICOM series too,
+// given as its folder or one of its files), and writing them through a
+// temporary file and a rename (nothing half-written is left as a result);
+// shared by the command-line tool, the registration pipeline and Python.
 #ifndef itkBiomechanicalImageIO_h
 #define itkBiomechanicalImageIO_h
 
 // ITK first: its bundled Eigen must be seen before the system Eigen the core includes.
+#include "itkGDCMImageIO.h"
+#include "itkGDCMSeriesFileNames.h"
 #include "itkImageFileReader.h"
 #include "itkImageFileWriter.h"
+#include "itkImageSeriesReader.h"
 #include "itk_zlib.h"
 
 #include "bmrAtomicWrite.h"
 #include "bmrModel.h"
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -44,15 +49,158 @@ PlainDescription(const std::string & description)
   return first == std::string::npos ? std::string() : text.substr(first, last - first + 1);
 }
 
-/** Reads an image; a missing or unreadable file is a bmr::Error naming `what` and the path. */
-template <typename TImage>
-typename TImage::Pointer
-ReadBiomechanicalImage(const std::string & path, const std::string & what)
+/** The DICOM series an image path stands for: a folder, or one file of a
+ *  series (its neighbours in the same folder with the same series are read
+ *  with it). `files` in slice order (GDCM's sort by image position). */
+struct BiomechanicalDicomSeries
+{
+  std::string              uid;          // GDCM's series identifier (the Series Instance UID, then details)
+  std::vector<std::string> files;
+  std::size_t              seriesInFolder = 0;
+};
+
+/** True when `path` is a folder, or a file that GDCM reads as DICOM. */
+inline bool
+IsBiomechanicalDicomPath(const std::string & path)
 {
   std::error_code error;
+  if (std::filesystem::is_directory(path, error))
+  {
+    return true;
+  }
+  auto io = GDCMImageIO::New();
+  return std::filesystem::is_regular_file(path, error) && io->CanReadFile(path.c_str());
+}
+
+/** Chooses the series of `path` (IsBiomechanicalDicomPath): the one named by
+ *  `seriesUid` (its Series Instance UID, or GDCM's identifier), else the
+ *  file's own series, else the folder's series with most slices. Throws
+ *  bmr::Error naming `what` when the folder holds no image series or the
+ *  named one. Series are told apart by GDCM's series details (orientation,
+ *  size...), so a localiser in the same Series Instance UID is not mixed in. */
+inline BiomechanicalDicomSeries
+ChooseBiomechanicalDicomSeries(const std::string & path, const std::string & what, const std::string & seriesUid = {})
+{
+  std::error_code       error;
+  const bool            folder = std::filesystem::is_directory(path, error);
+  const std::string     directory = folder ? path : std::filesystem::path(path).parent_path().string();
+  std::string           wanted = seriesUid;
+  if (!folder && wanted.empty())
+  {
+    auto io = GDCMImageIO::New();
+    io->SetFileName(path);
+    try
+    {
+      io->ReadImageInformation();
+    }
+    catch (const ExceptionObject & exception)
+    {
+      throw bmr::Error("cannot read " + what + " '" + path + "': " + PlainDescription(exception.GetDescription()));
+    }
+    io->GetValueFromTag("0020|000e", wanted);
+    while (!wanted.empty() && (wanted.back() == ' ' || wanted.back() == '\0'))
+    {
+      wanted.pop_back();
+    }
+  }
+  auto names = GDCMSeriesFileNames::New();
+  names->SetUseSeriesDetails(true);
+  names->SetGlobalWarningDisplay(false);
+  names->SetDirectory(directory.empty() ? std::string(".") : directory);
+  const std::vector<std::string> uids = names->GetSeriesUIDs();
+  if (uids.empty())
+  {
+    throw bmr::Error("cannot read " + what + " '" + path + "': the folder '" + directory +
+                     "' holds no DICOM image series; give the folder of the series (or one of its files), or an "
+                     "image file (NIfTI, NRRD, MetaImage)");
+  }
+  BiomechanicalDicomSeries chosen;
+  chosen.seriesInFolder = uids.size();
+  for (const std::string & uid : uids)
+  {
+    // GDCM's identifier is the Series Instance UID followed by the details.
+    if (!wanted.empty() && uid.rfind(wanted, 0) != 0)
+    {
+      continue;
+    }
+    std::vector<std::string> files = names->GetFileNames(uid);
+    const bool holdsFile = folder || std::any_of(files.begin(), files.end(), [&](const std::string & file) {
+                             return std::filesystem::equivalent(file, path, error);
+                           });
+    if (holdsFile && files.size() > chosen.files.size())
+    {
+      chosen.uid = uid;
+      chosen.files = std::move(files);
+    }
+  }
+  if (chosen.files.empty())
+  {
+    std::ostringstream message;
+    message << "cannot read " << what << " '" << path << "': the folder holds no DICOM series '" << wanted
+            << "'; its series are:";
+    for (const std::string & uid : uids)
+    {
+      message << " " << uid << " (" << names->GetFileNames(uid).size() << " files)";
+    }
+    message << ". Choose one with --series UID";
+    throw bmr::Error(message.str());
+  }
+  return chosen;
+}
+
+/** Reads a DICOM series (ChooseBiomechanicalDicomSeries) with ITK's GDCM
+ *  series reader: the scanner geometry kept (origin and direction cosines of
+ *  the first slice, the slice spacing from the slices' positions). When the
+ *  folder holds several series, says on std::clog which was read. */
+template <typename TImage>
+typename TImage::Pointer
+ReadBiomechanicalDicomSeries(const std::string & path, const std::string & what, const std::string & seriesUid = {})
+{
+  const BiomechanicalDicomSeries series = ChooseBiomechanicalDicomSeries(path, what, seriesUid);
+  if (series.seriesInFolder > 1)
+  {
+    std::clog << what << ": read DICOM series " << series.uid << " (" << series.files.size() << " slices), one of the "
+              << series.seriesInFolder << " series in the folder" << (seriesUid.empty() ? " (the one with most slices or of the file given; choose another with --series UID)" : "") << "\n";
+  }
+  auto reader = ImageSeriesReader<TImage>::New();
+  reader->SetImageIO(GDCMImageIO::New());
+  reader->SetFileNames(series.files);
+  try
+  {
+    reader->Update();
+  }
+  catch (const ExceptionObject & exception)
+  {
+    throw bmr::Error("cannot read " + what + " '" + path + "' (DICOM series " + series.uid + "): " +
+                     PlainDescription(exception.GetDescription()));
+  }
+  return reader->GetOutput();
+}
+
+/** Reads an image; a missing or unreadable file is a bmr::Error naming `what`
+ *  and the path. A folder, or a DICOM file, is read as a DICOM series
+ *  (ReadBiomechanicalDicomSeries; `seriesUid` chooses among several). */
+template <typename TImage>
+typename TImage::Pointer
+ReadBiomechanicalImage(const std::string & path, const std::string & what, const std::string & seriesUid = {})
+{
+  std::error_code error;
+  if (std::filesystem::is_directory(path, error))
+  {
+    return ReadBiomechanicalDicomSeries<TImage>(path, what, seriesUid);
+  }
   if (!std::filesystem::is_regular_file(path, error))
   {
     throw bmr::Error("cannot read " + what + " '" + path + "': no such file");
+  }
+  if (IsBiomechanicalDicomPath(path))
+  {
+    return ReadBiomechanicalDicomSeries<TImage>(path, what, seriesUid);
+  }
+  if (!seriesUid.empty())
+  {
+    throw bmr::Error("cannot read " + what + " '" + path + "': a series (" + seriesUid +
+                     ") is chosen, but the file is not DICOM; give the series' folder or leave out --series");
   }
   auto reader = ImageFileReader<TImage>::New();
   reader->SetFileName(path);

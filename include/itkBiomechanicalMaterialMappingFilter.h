@@ -31,12 +31,14 @@ namespace itk
  *  - "TumourMask" (optional): a mask on the memberships' grid (non-zero =
  *    tumour), an extra class of full membership there;
  *  - "ResectionMask" (optional): a mask on the memberships' grid (non-zero =
- *    tissue removed by the surgery), full membership in the first class (the
- *    CSF, whose fluid fills the cavity) there, over the tumour's.
+ *    tissue removed by the surgery), full membership in the CSF's class
+ *    (CsfClass, default 0: the darkest) there, over the tumour's.
  *
  * Settings: ClassMaterials (one per class; empty, the default:
  * bmr::DefaultClassMaterials, the darkest class CSF and the others
- * parenchyma), TumourMaterial, Sampling (bmr::MaterialSampling), and
+ * parenchyma), CsfClass (the class whose fluid fills a resection: 0 on a
+ * T1 image, the brightest on a T2 one; bmr::ChooseCsfClass), TumourMaterial,
+ * Sampling (bmr::MaterialSampling), and
  * NumberOfWorkUnits (the sampling's threads; results do not depend on it).
  *
  * Output: the model (a BiomechanicalModelObject) with model.materials and
@@ -89,6 +91,20 @@ public:
   GetClassMaterials() const
   {
     return m_Settings.classMaterials;
+  }
+  void
+  SetCsfClass(int csfClass)
+  {
+    if (m_Settings.csfClass != csfClass)
+    {
+      m_Settings.csfClass = csfClass;
+      this->Modified();
+    }
+  }
+  int
+  GetCsfClass() const
+  {
+    return m_Settings.csfClass;
   }
   void
   SetTumourMaterial(const bmr::Material & material)
@@ -192,7 +208,8 @@ protected:
   PrintSelf(std::ostream & os, Indent indent) const override
   {
     Superclass::PrintSelf(os, indent);
-    os << indent << "ClassMaterials: " << m_Settings.classMaterials.size() << std::endl;
+    os << indent << "ClassMaterials: " << m_Settings.classMaterials.size() << ", CsfClass: " << m_Settings.csfClass
+       << std::endl;
     os << indent << "Tumour: E = " << m_Settings.tumour.youngsModulus << " Pa" << std::endl;
     os << indent << "SamplesPerVoxel: " << m_Settings.sampling.samplesPerVoxel << std::endl;
   }

@@ -102,6 +102,9 @@ public:
   itkBooleanMacro(Contact);
   itkSetStringMacro(SurfaceNodeSet);
   itkGetStringMacro(SurfaceNodeSet);
+  /** After Update: the skull-base nodes that lie in the craniotomy and are
+   *  exposed instead of fixed (the opening takes precedence). */
+  itkGetConstMacro(FixedNodesExposed, SizeValueType);
 
   ModelObjectType *
   GetOutput()
@@ -159,7 +162,7 @@ protected:
         settings.craniotomy.mask = &mask;
       }
       settings.contact = m_Contact;
-      bmr::SetBrainRegions(model, surfaceNodes, settings);
+      m_FixedNodesExposed = bmr::SetBrainRegions(model, surfaceNodes, settings);
     }
     catch (const bmr::Error & error)
     {
@@ -184,6 +187,7 @@ private:
   double                 m_CraniotomyRadius{ 0.0 };
   bool                   m_Contact{ true };
   std::string            m_SurfaceNodeSet{ "surface" };
+  SizeValueType          m_FixedNodesExposed{ 0 };
 };
 
 } // namespace itk

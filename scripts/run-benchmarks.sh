@@ -50,6 +50,8 @@ fi
 # Surgical simulation on the generic brain (haptic rate): its section of docs/benchmarks.md.
 cmake --build "${build}" --target _bmr
 PYTHONPATH="${build}/python" /usr/bin/python3 scripts/benchmark-simulation.py
+# The intraoperative phase on prepared bundles (prepare, then update), with its error: its section of docs/benchmarks.md.
+/usr/bin/python3 scripts/benchmark-update.py --build "${build}"
 # README's measured numbers, copied from the docs just written.
 /usr/bin/python3 scripts/update-readme.py
 echo "run-benchmarks: wrote docs/benchmarks.md, docs/wait-policy.md, docs/model-building-benchmark.md, docs/registration-benchmark.md and README.md's measured numbers"

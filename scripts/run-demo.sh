@@ -10,7 +10,10 @@
 #   3. B-spline intensity registration on the same pair;
 #   4. a table (time, displacement error against the ground truth, edge-based
 #      Hausdorff) and, in out/demo: warped images, transforms (.h5), edge
-#      overlays, demo-report.json and error-vs-time.png.
+#      overlays, demo-report.json and error-vs-time.png;
+#   5. the same registration in the clinical workflow's two phases: `biomech
+#      prepare` (the model bundle, out/demo/plan) and `biomech update` from
+#      the displaced surface (out/demo/update), each with its time.
 #
 #   bash scripts/run-demo.sh                     # the Colin27 demo into out/demo
 #   bash scripts/run-demo.sh SCENE.json [DIR]    # solve any scene instead
@@ -47,3 +50,14 @@ echo "== biomech demo -o ${output_dir} (Colin27 from mricron-data)"
 "${biomech}" demo -o "${output_dir}" --load surface --variant hexahedra:5 --variant mixed:5 \
   --registration-gravity 1 --gravity-fit-candidates 5 --elastix
 /usr/bin/python3 scripts/plot-demo.py "${output_dir}/demo-report.json" "${output_dir}/error-vs-time.png"
+
+# The clinical workflow on the same scene: the model prepared before surgery
+# (a bundle), then updated in seconds when the exposed surface is scanned.
+echo
+echo "== biomech prepare: before surgery (Colin27, 5 mm hexahedra) -> ${output_dir}/plan"
+"${biomech}" prepare /usr/share/mricron/templates/ch2.nii.gz --mask /usr/share/mricron/templates/ch2bet.nii.gz \
+  --craniotomy-centre -11 43 84 --craniotomy-radius 30 -o "${output_dir}/plan"
+echo
+echo "== biomech update: during surgery, from the displaced exposed surface -> ${output_dir}/update"
+"${biomech}" update "${output_dir}/plan" --intraoperative-surface "${output_dir}/exposed-surface.vtp" \
+  --intraoperative-image "${output_dir}/intraoperative.nii.gz" -o "${output_dir}/update"

@@ -8,6 +8,7 @@
 // ITK before the core: ITK's bundled Eigen must be seen before the system
 // Eigen (the pipeline headers include ITK's first).
 #include "bmrBrainShiftRegistration.h"
+#include "bmrModelBundle.h"
 
 #include "itkBiomechanicalImageConversion.h"
 #include "itkBiomechanicalImageIO.h"
@@ -56,13 +57,22 @@ BindFilesAndTransforms(py::module_ & module)
 {
   module.def(
     "imread",
-    [](const std::filesystem::path & pathArgument, const std::string & pixelType) -> py::object {
+    [](const std::filesystem::path & pathArgument, const std::string & pixelType, const std::string & series) -> py::object {
       const std::string path = pathArgument.string();
       if (pixelType != "auto" && pixelType != "float32" && pixelType != "uint8")
       {
         throw py::value_error("pixel_type must be 'auto', 'float32' or 'uint8', not '" + pixelType + "'");
       }
       return TranslateItkErrors([&]() -> py::object {
+        if (itk::IsBiomechanicalDicomPath(path) || !series.empty())
+        {
+          // A DICOM series (its folder or one of its files): scanner intensities as float32 unless asked otherwise.
+          if (pixelType == "uint8")
+          {
+            return PythonImage(itk::ReadBiomechanicalImage<RegistrationLabelImage>(path, "image", series).GetPointer());
+          }
+          return PythonImage(itk::ReadBiomechanicalImage<RegistrationImage>(path, "image", series).GetPointer());
+        }
         auto io = itk::ImageIOFactory::CreateImageIO(path.c_str(), itk::CommonEnums::IOFileMode::ReadMode);
         if (io.IsNull())
         {
@@ -95,9 +105,11 @@ BindFilesAndTransforms(py::module_ & module)
         return PythonImage(itk::ReadBiomechanicalImage<RegistrationImage>(path, "image").GetPointer());
       });
     },
-    py::arg("path"), py::arg("pixel_type") = "auto",
-    "Reads an image (.nii.gz, .nrrd, .mha, ...): uint8 files as uint8, everything else as float32 (pixel_type "
-    "'float32' or 'uint8' forces one); multi-component files as float32 [z, y, x, component].");
+    py::arg("path"), py::arg("pixel_type") = "auto", py::arg("series") = "",
+    "Reads an image (.nii.gz, .nrrd, .mha, ..., or a DICOM series given as its folder or one of its files; "
+    "series: the Series Instance UID when the folder holds several, else the file's own series or the one with "
+    "most slices): uint8 files as uint8, everything else (DICOM too) as float32 (pixel_type 'float32' or 'uint8' "
+    "forces one); multi-component files as float32 [z, y, x, component].");
 
   module.def(
     "imwrite",
@@ -460,7 +472,7 @@ DefaultRegistrationSettings()
 }
 
 BrainShiftRegistrationSettings
-RegistrationSettingsFrom(const py::dict & values)
+RegistrationSettingsFrom(const py::dict & values, BrainShiftRegistrationSettings settings = {})
 {
   const py::dict known = DefaultRegistrationSettings();
   for (const auto & [key, value] : values)
@@ -473,7 +485,6 @@ RegistrationSettingsFrom(const py::dict & values)
   const auto get = [&](const char * name) -> py::object {
     return values.contains(name) ? py::reinterpret_borrow<py::object>(values[name]) : py::object(known[name]);
   };
-  BrainShiftRegistrationSettings settings;
   for (const RegistrationSettingField & row : RegistrationSettingFields())
   {
     if (!values.contains(row.name.c_str()))
@@ -584,6 +595,19 @@ BindRegistration(py::module_ & module)
                                itk::MakeBiomechanicalVolume<std::uint8_t>(model.tissueLabelImage.GetPointer()));
                            })
     .def_property_readonly("centroids", [](const BrainModel & model) { return model.classificationFit.centroids; })
+    .def_property_readonly("csf_class",
+                           [](const BrainModel & model) {
+                             const nlohmann::json csf = CsfClassJson(model);
+                             py::dict             out;
+                             out["contrast"] = csf["contrast"].get<std::string>();
+                             out["class"] = csf["class"].get<int>();
+                             out["centroid"] = csf["centroid"].get<double>();
+                             out["volume_ml"] = csf["volume_ml"].get<double>();
+                             out["chosen"] = csf["chosen"].get<std::string>();
+                             return out;
+                           },
+                           "The class that became the CSF: a dict of contrast ('t1' or 't2'), class (the tissue "
+                           "label 1..K), centroid, volume_ml, and why it was chosen (chosen)")
     .def_property_readonly("brain_mask", [](const BrainModel & model) { return ImageFromVolume(model.brainMask); })
     .def_readonly("resected_volume", &BrainModel::resectedVolume, "mm^3 of brain the resection_mask removed (0: none)")
     .def_property_readonly("exposed_nodes", [](const BrainModel & model) { return ArrayFromIndices(model.exposedNodes); })
@@ -693,6 +717,77 @@ BindRegistration(py::module_ & module)
     },
     py::arg("preoperative_image"), py::arg("brain_mask"), py::arg("tumour_mask"), py::arg("skull_surface"),
     py::arg("label_maps"), py::arg("intraoperative_surface"), py::arg("sparse_points"), py::arg("sparse_displacements"),
+    py::arg("intraoperative_image"), py::arg("intraoperative_mask"), py::arg("settings"), py::arg("progress"));
+
+  py::class_<ModelBundle>(module, "ModelBundle",
+                          "A brain model prepared before surgery (biomech prepare): the model, its surfaces, the "
+                          "preoperative image and label maps and the settings; write() makes the bundle folder.")
+    .def_readonly("brain_model", &ModelBundle::model)
+    .def_property_readonly("manifest", [](const ModelBundle & bundle) { return JsonToDict(bundle.manifest); })
+    .def_property_readonly("preoperative_image",
+                           [](const ModelBundle & bundle) { return PythonImage(bundle.preoperativeImage.GetPointer()); })
+    .def(
+      "write",
+      [](ModelBundle & bundle, const std::filesystem::path & folder) {
+        bundle.manifest = TranslateItkErrors([&] { return WriteModelBundle(folder, bundle); });
+      },
+      py::arg("folder"), "Writes the bundle folder (manifest, model, images, surfaces); replaces a bundle there.");
+  module.def(
+    "read_model_bundle",
+    [](const std::filesystem::path & folder) { return TranslateItkErrors([&] { return ReadModelBundle(folder); }); },
+    py::arg("folder"), "Reads a bundle folder that biomech prepare (or ModelBundle.write) made; checks its checksums.");
+
+  module.def(
+    "_prepare",
+    [](const py::object & image, const py::object & brainMask, const py::object & tumourMask,
+       const std::optional<ContactSurface> & skullSurface, const std::vector<py::object> & labelMaps,
+       const py::dict & values, const py::object & progress) {
+      ModelBundle bundle;
+      bundle.settings = RegistrationSettingsFrom(values);
+      bundle.preoperativeImage = ItkImage(image, "image");
+      const auto mask = ItkLabelImage(brainMask, "brain_mask");
+      const auto tumour = ItkLabelImage(tumourMask, "tumour_mask");
+      for (std::size_t k = 0; k < labelMaps.size(); ++k)
+      {
+        bundle.labelMaps.push_back(ItkLabelImage(labelMaps[k], "label_maps[" + std::to_string(k) + "]"));
+        bundle.labelMapNames.push_back("labels-" + std::to_string(k) + ".nii.gz");
+      }
+      ProgressReporter reporter(progress);
+      return RunWithoutGil(reporter, [&] {
+        StageTimer timer(reporter.StageCallback());
+        TranslateItkErrors([&] {
+          CheckCraniotomyChoice(bundle.settings.model.craniotomyRadius, bundle.settings.model.craniotomyMask.IsNotNull());
+          bundle.model = PrepareBrainModel(bundle.preoperativeImage, mask, tumour, skullSurface.value_or(ContactSurface{}),
+                                           bundle.settings.model, timer, true);
+        });
+        bundle.manifest["prepare"] = { { "seconds", timer.Json() } };
+        return bundle;
+      });
+    },
+    py::arg("image"), py::arg("brain_mask"), py::arg("tumour_mask"), py::arg("skull_surface"), py::arg("label_maps"),
+    py::arg("settings"), py::arg("progress"));
+
+  module.def(
+    "_update",
+    [](const ModelBundle & bundle, const py::object & surface, const py::object & points,
+       const py::object & displacements, const py::object & intraoperativeImage, const py::object & intraoperativeMask,
+       const py::dict & values, const py::object & progress) {
+      const BrainShiftRegistrationSettings settings = RegistrationSettingsFrom(values, bundle.settings);
+      BrainShiftUpdateInputs               inputs;
+      inputs.preoperativeImage = bundle.preoperativeImage;
+      inputs.labelMaps.assign(bundle.labelMaps.begin(), bundle.labelMaps.end());
+      inputs.intraoperative = IntraoperativeFrom(surface, points, displacements, intraoperativeImage,
+                                                 intraoperativeMask, MaxDistanceFrom(values));
+      ProgressReporter reporter(progress);
+      auto result = RunWithoutGil(reporter, [&] {
+        return TranslateItkErrors([&] {
+          return UpdateBrainShift(bundle.model, inputs, settings, reporter.StageCallback(), reporter.SolverCallback());
+        });
+      });
+      py::object report = JsonToDict(RegistrationReportJson(result, settings));
+      return py::make_tuple(std::move(result), report);
+    },
+    py::arg("bundle"), py::arg("intraoperative_surface"), py::arg("sparse_points"), py::arg("sparse_displacements"),
     py::arg("intraoperative_image"), py::arg("intraoperative_mask"), py::arg("settings"), py::arg("progress"));
 }
 

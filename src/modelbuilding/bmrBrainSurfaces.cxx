@@ -29,6 +29,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <iterator>
 #include <limits>
 #include <sstream>
 #include <utility>
@@ -714,14 +715,23 @@ ExposedSurfaceNodes(const Model & model, const std::vector<Index> & surfaceNodes
                                 : SurfaceNodesInSphere(model, surfaceNodes, region.centre, region.radius);
 }
 
-void
+std::size_t
 SetBrainRegions(Model & model, const std::vector<Index> & surfaceNodes, const BrainRegionSettings & settings)
 {
   std::vector<Index> fixed = SkullBaseNodes(model, surfaceNodes, settings.skullBase);
   std::vector<Index> exposed;
+  std::size_t        fixedNodesExposed = 0;
   if (settings.craniotomy.Given())
   {
     exposed = ExposedSurfaceNodes(model, surfaceNodes, settings.craniotomy);
+    // The opening takes precedence: a craniotomy low on the head (suboccipital,
+    // low temporal) reaches into the default fixed band, and a node both fixed
+    // and loaded would be two constraints on one degree of freedom.
+    const std::size_t before = fixed.size();
+    std::vector<Index> kept;
+    std::set_difference(fixed.begin(), fixed.end(), exposed.begin(), exposed.end(), std::back_inserter(kept));
+    fixed = std::move(kept);
+    fixedNodesExposed = before - fixed.size();
   }
   std::vector<Index> contact;
   if (settings.contact)
@@ -753,6 +763,78 @@ SetBrainRegions(Model & model, const std::vector<Index> & surfaceNodes, const Br
   if (settings.contact)
   {
     model.nodeSets["contact"] = std::move(contact);
+  }
+  return fixedNodesExposed;
+}
+
+void
+CheckBrainRegionsOnMask(const LabelVolume &       brainMask,
+                        const CraniotomyRegion &  craniotomy,
+                        const SkullBaseSettings & skullBase,
+                        const std::string &       craniotomyOption,
+                        const std::string &       heightOption)
+{
+  // Only a sphere can be checked here; a craniotomy mask's own check needs the model's nodes.
+  if (!(craniotomy.radius > 0.0) || craniotomy.mask != nullptr)
+  {
+    return;
+  }
+  const ImageGeometry & geometry = brainMask.geometry;
+  const auto inside = [&](int i, int j, int k) {
+    return i >= 0 && j >= 0 && k >= 0 && i < geometry.size[0] && j < geometry.size[1] && k < geometry.size[2] &&
+           brainMask.At(i, j, k) != 0;
+  };
+  const bool    band = skullBase.sphereRadius <= 0.0 && skullBase.mask == nullptr && skullBase.superior.norm() > 0.0;
+  const Vector3 up = band ? Vector3(skullBase.superior.normalized()) : Vector3::UnitZ();
+  std::vector<Vector3> surface;
+  double               lowest = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < geometry.size[2]; ++k)
+  {
+    for (int j = 0; j < geometry.size[1]; ++j)
+    {
+      for (int i = 0; i < geometry.size[0]; ++i)
+      {
+        if (inside(i, j, k) && !(inside(i - 1, j, k) && inside(i + 1, j, k) && inside(i, j - 1, k) &&
+                                 inside(i, j + 1, k) && inside(i, j, k - 1) && inside(i, j, k + 1)))
+        {
+          surface.push_back(geometry.IndexToPoint(Vector3(i, j, k)));
+          lowest = std::min(lowest, surface.back().dot(up));
+        }
+      }
+    }
+  }
+  if (surface.empty())
+  {
+    throw Error("the brain mask (" + geometry.Describe() + ") is empty: give a mask with the brain's voxels > 0");
+  }
+  double      nearest = std::numeric_limits<double>::infinity();
+  std::size_t bandVoxels = 0, bandVoxelsOpen = 0;
+  for (const Vector3 & point : surface)
+  {
+    const double distance = (point - craniotomy.centre).norm();
+    nearest = std::min(nearest, distance);
+    if (band && point.dot(up) <= lowest + skullBase.height)
+    {
+      ++bandVoxels;
+      bandVoxelsOpen += distance <= craniotomy.radius ? 1 : 0;
+    }
+  }
+  std::ostringstream message;
+  if (nearest > craniotomy.radius)
+  {
+    message << "the craniotomy (centre " << FormatPoint(craniotomy.centre) << " mm, radius " << craniotomy.radius
+            << " mm) does not reach the brain's surface: the nearest surface voxel of the brain mask is " << nearest
+            << " mm from its centre. Move the centre onto the exposed brain surface, or raise " << craniotomyOption
+            << " to at least " << std::ceil(nearest + 1.0) << " mm";
+    throw Error(message.str());
+  }
+  if (bandVoxels > 0 && bandVoxelsOpen == bandVoxels)
+  {
+    message << "the craniotomy (centre " << FormatPoint(craniotomy.centre) << " mm, radius " << craniotomy.radius
+            << " mm) covers the whole fixed band at the skull base (the brain's surface within " << skullBase.height
+            << " mm of its lowest point), so nothing would hold the brain stem: make the craniotomy smaller ("
+            << craniotomyOption << ") or raise " << heightOption << " so that the band reaches beyond the opening";
+    throw Error(message.str());
   }
 }
 

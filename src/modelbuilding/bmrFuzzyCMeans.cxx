@@ -394,4 +394,90 @@ ClassifyTissue(const ScalarVolume &                 intensities,
   return classification;
 }
 
+std::string
+TissueContrastName(TissueContrast contrast)
+{
+  switch (contrast)
+  {
+    case TissueContrast::T1:
+      return "t1";
+    case TissueContrast::T2:
+      return "t2";
+    case TissueContrast::Auto:
+      break;
+  }
+  return "auto";
+}
+
+TissueContrast
+ParseTissueContrast(const std::string & name)
+{
+  for (const TissueContrast contrast : { TissueContrast::Auto, TissueContrast::T1, TissueContrast::T2 })
+  {
+    if (name == TissueContrastName(contrast))
+    {
+      return contrast;
+    }
+  }
+  throw Error("unknown contrast '" + name + "': give t1 (CSF darkest), t2 (CSF brightest) or auto");
+}
+
+std::vector<double>
+ClassVolumes(const LabelVolume & labels, int classes)
+{
+  std::vector<double> volumes(static_cast<std::size_t>(std::max(classes, 0)), 0.0);
+  for (const std::uint8_t label : labels.values)
+  {
+    if (label >= 1 && label <= classes)
+    {
+      volumes[label - 1] += 1.0;
+    }
+  }
+  for (double & volume : volumes)
+  {
+    volume *= labels.geometry.VoxelVolume();
+  }
+  return volumes;
+}
+
+CsfClassChoice
+ChooseCsfClass(const std::vector<double> & centroids, const std::vector<double> & classVolumes, TissueContrast contrast)
+{
+  const int classes = static_cast<int>(centroids.size());
+  if (classes < 2 || classVolumes.size() != centroids.size())
+  {
+    throw Error("ChooseCsfClass: " + std::to_string(classes) + " centroids and " +
+                std::to_string(classVolumes.size()) + " class volumes; give one volume per class, at least 2 classes");
+  }
+  CsfClassChoice choice;
+  if (contrast != TissueContrast::Auto)
+  {
+    choice.contrast = contrast;
+    choice.csfClass = contrast == TissueContrast::T1 ? 0 : classes - 1;
+    choice.reason = "given";
+    return choice;
+  }
+  const int          last = classes - 1;
+  std::ostringstream cues;
+  cues << "end classes' volumes " << classVolumes[0] << " (darkest) and " << classVolumes[last]
+       << " (brightest); their gaps to the next class " << centroids[1] - centroids[0] << " and "
+       << centroids[last] - centroids[last - 1];
+  if (classes < 3)
+  {
+    throw Error("cannot tell the image's contrast from 2 tissue classes (" + cues.str() +
+                "): give the contrast (--contrast t1 or t2), or classify into 3 classes");
+  }
+  const bool darkBySize = classVolumes[0] < classVolumes[last];
+  const bool darkByGap = centroids[1] - centroids[0] > centroids[last] - centroids[last - 1];
+  if (darkBySize != darkByGap)
+  {
+    throw Error("cannot tell whether the CSF is the darkest or the brightest tissue class: " + cues.str() +
+                " point different ways; give the contrast (--contrast t1 if the CSF is dark, t2 if it is bright)");
+  }
+  choice.contrast = darkBySize ? TissueContrast::T1 : TissueContrast::T2;
+  choice.csfClass = darkBySize ? 0 : last;
+  choice.reason = "auto: " + cues.str();
+  return choice;
+}
+
 } // namespace bmr

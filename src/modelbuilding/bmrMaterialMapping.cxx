@@ -536,6 +536,11 @@ MapMaterialsFromMemberships(Model &                         model,
     throw Error(std::string(who) + ": " + std::to_string(materials.size()) + " class materials for a membership image of " +
                 std::to_string(classes) + " classes; give one material per class (ascending centroid) or none for the defaults");
   }
+  if (settings.csfClass < 0 || settings.csfClass >= classes)
+  {
+    throw Error(std::string(who) + ": the CSF class " + std::to_string(settings.csfClass) + " is not one of the " +
+                std::to_string(classes) + " classes; give 0 .. " + std::to_string(classes - 1));
+  }
   for (const auto & [mask, name] : { std::pair{ tumourMask, "tumour mask" }, std::pair{ resectionMask, "resection mask" } })
   {
     if (mask && (!mask->geometry.SameGridAs(geometry) || mask->values.size() != voxels))
@@ -584,7 +589,7 @@ MapMaterialsFromMemberships(Model &                         model,
     {
       if (isTumour(offset) || std::accumulate(u, u + classes, 0.0) > 0.0)
       {
-        sum[0] += weight;
+        sum[settings.csfClass] += weight;
       }
       return;
     }

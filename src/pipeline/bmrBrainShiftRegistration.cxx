@@ -349,25 +349,38 @@ CortexSurfaceOfMask(const RegistrationLabelImage * brainMask, std::vector<std::s
 // The model.
 // ---------------------------------------------------------------------------
 
+namespace
+{
+/** The skull base along the patient's superior axis: the image axis nearest
+ *  LPS +z unless the settings name another direction. On an oblique
+ *  acquisition (scanners tilt the slices 20-30 degrees) world +z would tilt
+ *  the fixed band across the brain stem. */
+SkullBaseSettings
+PatientSkullBase(SkullBaseSettings skullBase, const RegistrationImage * image)
+{
+  if (skullBase.superior == Vector3::UnitZ())
+  {
+    skullBase.superior = SuperiorImageAxis(image);
+  }
+  return skullBase;
+}
+} // namespace
+
 BrainModel
-BuildBrainModel(const RegistrationImage *      image,
-                const RegistrationLabelImage * brainMask,
-                const RegistrationLabelImage * tumourMask,
-                const ContactSurface &         skullSurface,
-                const IntraoperativeData *     intraoperative,
-                const BrainModelSettings &     settings,
-                StageTimer &                   timer)
+PrepareBrainModel(const RegistrationImage *      image,
+                  const RegistrationLabelImage * brainMask,
+                  const RegistrationLabelImage * tumourMask,
+                  const ContactSurface &         skullSurface,
+                  const BrainModelSettings &     settings,
+                  StageTimer &                   timer,
+                  bool                           cortexSurface)
 {
   if (image == nullptr)
   {
     throw Error("no preoperative image: give the preoperative MRI");
   }
-  if (intraoperative != nullptr)
-  {
-    CheckIntraoperativeData(*intraoperative);
-  }
   // Checked before the long stages; the regions filter selects the nodes.
-  if (intraoperative != nullptr || settings.craniotomyRadius > 0.0 || settings.craniotomyMask.IsNotNull())
+  if (settings.craniotomyRadius > 0.0 || settings.craniotomyMask.IsNotNull())
   {
     CheckCraniotomyChoice(settings.craniotomyRadius, settings.craniotomyMask.IsNotNull());
   }
@@ -390,18 +403,24 @@ BuildBrainModel(const RegistrationImage *      image,
   }
   // The cortex of the preoperative mask, which a displaced surface is matched
   // to, depends on the mask alone: it is made beside the model's stages
-  // (their serial parts leave a core free) and waited for in "loads". The
+  // (their serial parts leave a core free) and waited for at the end. The
   // README demo's `register`, 2 threads, 4 runs alternating: model 2.90 ->
   // 2.68 s (medians; "loads" 0.68 -> 0.08 s, "classify" 0.21 -> 0.44 s).
-  const bool surfaceLoad = intraoperative != nullptr && intraoperative->sparse.points.empty();
   std::future<std::pair<ContactSurface, std::vector<std::string>>> cortex;
-  if (surfaceLoad)
+  if (cortexSurface)
   {
     cortex = std::async(std::launch::async, [mask] {
       std::vector<std::string> cortexWarnings;
       ContactSurface           surface = CortexSurfaceOfMask(mask, cortexWarnings);
       return std::make_pair(std::move(surface), std::move(cortexWarnings));
     });
+  }
+  {
+    CraniotomyRegion craniotomy;
+    craniotomy.centre = settings.craniotomyCentre;
+    craniotomy.radius = settings.craniotomyRadius;
+    CheckBrainRegionsOnMask(result.brainMask, craniotomy, PatientSkullBase(settings.skullBase, image),
+                            "the craniotomy radius (--craniotomy-radius)", "--skull-base-height");
   }
   LabelVolume tumour;
   if (tumourMask != nullptr)
@@ -429,6 +448,25 @@ BuildBrainModel(const RegistrationImage *      image,
   result.classificationFit.converged = classifier->GetConverged();
   result.membershipImage = classifier->GetOutput();
   result.tissueLabelImage = classifier->GetLabelOutput();
+  // Which class is the CSF: the classes are in ascending centroid order, the
+  // settings' materials in T1 order (the CSF first).
+  MaterialMappingSettings classMapping = settings.materials;
+  {
+    const int                 classes = static_cast<int>(result.classificationFit.centroids.size());
+    const std::vector<double> volumes =
+      ClassVolumes(itk::MakeBiomechanicalVolume<std::uint8_t>(result.tissueLabelImage.GetPointer()), classes);
+    result.csfClass = ChooseCsfClass(result.classificationFit.centroids, volumes, settings.contrast);
+    result.csfVolume = volumes[static_cast<std::size_t>(result.csfClass.csfClass)];
+    if (classMapping.classMaterials.empty())
+    {
+      classMapping.classMaterials = DefaultClassMaterials(classes);
+    }
+    if (result.csfClass.contrast == TissueContrast::T2)
+    {
+      std::reverse(classMapping.classMaterials.begin(), classMapping.classMaterials.end());
+    }
+    classMapping.csfClass = result.csfClass.csfClass;
+  }
 
   // The tumour is a second label, so that tetrahedral meshes conform to its boundary.
   LabelVolume labels = result.brainMask;
@@ -459,7 +497,8 @@ BuildBrainModel(const RegistrationImage *      image,
   {
     materials->SetResectionMask(settings.resectionMask);
   }
-  materials->SetClassMaterials(settings.materials.classMaterials);
+  materials->SetClassMaterials(classMapping.classMaterials);
+  materials->SetCsfClass(classMapping.csfClass);
   materials->SetTumourMaterial(settings.materials.tumour);
   materials->SetSampling(settings.materials.sampling);
   materials->SetNumberOfWorkUnits(static_cast<itk::ThreadIdType>(threads));
@@ -481,27 +520,17 @@ BuildBrainModel(const RegistrationImage *      image,
   });
   warnings.insert(warnings.end(), surfaces->GetWarnings().begin(), surfaces->GetWarnings().end());
   result.surfaces = BrainSurfaces{ surfaces->GetBrainSurface(), surfaces->GetSkullSurface() };
-  itk::BiomechanicalSurfaceMeshType::Pointer skull = surfaces->GetSkullOutput();
   if (!skullSurface.triangles.empty())
   {
     // The user's skull (e.g. segmented from CT) replaces the dilated body as the contact master.
     result.surfaces.skull = skullSurface;
     result.surfaces.skull.bodySide = ContactSurface::Side::Inside;
-    skull = itk::MakeMeshFromContactSurface<itk::BiomechanicalSurfaceMeshType>(skullSurface);
   }
   result.surfaces.skull.name = "skull";
 
   auto regions = itk::BiomechanicalRegionsFilter<RegistrationLabelImage>::New();
   regions->SetModelInput(materials->GetOutput());
-  SkullBaseSettings skullBase = settings.skullBase;
-  if (skullBase.superior == Vector3::UnitZ())
-  {
-    // The patient's superior axis: the image axis nearest LPS +z. On an
-    // oblique acquisition (scanners tilt the slices 20-30 degrees) world +z
-    // would tilt the fixed band across the brain stem.
-    skullBase.superior = SuperiorImageAxis(image);
-  }
-  regions->SetSkullBase(skullBase);
+  regions->SetSkullBase(PatientSkullBase(settings.skullBase, image));
   regions->SetCraniotomyCentre(settings.craniotomyCentre);
   regions->SetCraniotomyRadius(settings.craniotomyRadius);
   if (settings.craniotomyMask.IsNotNull())
@@ -511,11 +540,37 @@ BuildBrainModel(const RegistrationImage *      image,
   regions->SetContact(settings.contact);
   UpdateStage(regions.GetPointer(), "model regions");
   result.pipelineModel = regions->GetOutput();
+  if (regions->GetFixedNodesExposed() > 0)
+  {
+    warnings.push_back("the craniotomy reaches into the fixed band at the skull base: its " +
+                       std::to_string(regions->GetFixedNodesExposed()) +
+                       " surface nodes there are exposed (loaded), not fixed");
+  }
 
-  // Gravity and the CSF's level are the model's, not a filter's.
+  result.model = result.pipelineModel->GetModel();
+  if (const auto exposed = result.model.nodeSets.find("exposed"); exposed != result.model.nodeSets.end())
+  {
+    result.exposedNodes = exposed->second;
+  }
+  if (cortex.valid())
+  {
+    auto [cortexSurface, cortexWarnings] = cortex.get();
+    result.cortex = std::move(cortexSurface);
+    warnings.insert(warnings.end(), cortexWarnings.begin(), cortexWarnings.end());
+  }
+  return result;
+}
+
+namespace
+{
+
+/** Gravity and the CSF's level are the model's, not a filter's. */
+void
+SetBodyLoads(BrainModel & result, const BrainModelSettings & settings)
+{
   if (!settings.gravity.isZero() || settings.csfDrainedDepth)
   {
-    Model model = regions->GetOutput()->GetModel();
+    Model model = result.pipelineModel->GetModel();
     model.bodyAcceleration = settings.gravity;
     if (settings.csfDrainedDepth)
     {
@@ -537,72 +592,119 @@ BuildBrainModel(const RegistrationImage *      image,
     result.pipelineModel = itk::BiomechanicalModelObject::New();
     result.pipelineModel->SetModel(std::move(model));
   }
+  result.model = result.pipelineModel->GetModel();
+}
+
+/** The exposed nodes' displacements from the intraoperative data ("loads"). */
+void
+LoadExposedSurface(BrainModel & result, const IntraoperativeData & intraoperative, const BrainModelSettings & settings,
+                   StageTimer & timer)
+{
+  auto &  warnings = result.warnings;
   Model & model = result.model;
-  model = result.pipelineModel->GetModel();
-  if (const auto exposed = model.nodeSets.find("exposed"); exposed != model.nodeSets.end())
+  auto    loads = itk::BiomechanicalLoadsFilter<itk::DisplacementPointSetType<3>>::New();
+  loads->SetModelInput(result.pipelineModel);
+  loads->SetMaxDistance(intraoperative.maxDistance);
+  loads->SetMatchDirection(intraoperative.surfaceMatchDirection);
+  if (model.cells.empty())
   {
-    result.exposedNodes = exposed->second;
+    // A point cloud has no cells: distances are measured to the body's surface.
+    loads->SetModelSurface(itk::MakeMeshFromContactSurface<itk::BiomechanicalSurfaceMeshType>(result.surfaces.brain));
   }
-
-  if (intraoperative != nullptr)
-  {
-    auto loads = itk::BiomechanicalLoadsFilter<itk::DisplacementPointSetType<3>>::New();
-    loads->SetModelInput(result.pipelineModel);
-    loads->SetMaxDistance(intraoperative->maxDistance);
-    loads->SetMatchDirection(intraoperative->surfaceMatchDirection);
-    if (model.cells.empty())
+  timer.Run("loads", [&] {
+    if (!intraoperative.sparse.points.empty())
     {
-      // A point cloud has no cells: distances are measured to the body's surface.
-      loads->SetModelSurface(surfaces->GetBrainOutput());
+      loads->SetSparseDisplacements(itk::MakeDisplacementPointSet<itk::DisplacementPointSetType<3>>(
+        intraoperative.sparse.points, intraoperative.sparse.displacements));
     }
-    timer.Run("loads", [&] {
-      if (!intraoperative->sparse.points.empty())
+    else
+    {
+      if (result.cortex.triangles.empty())
       {
-        loads->SetSparseDisplacements(itk::MakeDisplacementPointSet<itk::DisplacementPointSetType<3>>(
-          intraoperative->sparse.points, intraoperative->sparse.displacements));
+        throw Error("the model has no cortex surface to match the intraoperative surface to; prepare it with "
+                    "the cortex (PrepareBrainModel(..., cortex = true), as `biomech prepare` does)");
       }
-      else
-      {
-        // Surface to surface: neither the staircase of a hexahedral grid nor
-        // the walls of sulci inside the opening are brain motion. Staircase
-        // nodes lie up to about a cell from the model's smoothed surface.
-        const double elementSize = std::max(result.gridQuality.meanEdgeLength, settings.grid.elementSize);
-        const ContactSurface displaced =
-          intraoperative->surface.triangles.empty()
-            ? IntraoperativeSurfaceOfImage(*intraoperative, settings.atlas, warnings)
-            : intraoperative->surface;
-        loads->SetIntraoperativeSurface(itk::MakeMeshFromContactSurface<itk::BiomechanicalSurfaceMeshType>(displaced));
-        // A scan images the cortex, so its partner is the smooth surface of
-        // the brain mask, not that of the model's cells: a smoothed staircase
-        // of 5 mm cells lies about a millimetre off the cortex, which bent
-        // the matches and left out a quarter of them (docs/registration.md).
-        auto [cortexSurface, cortexWarnings] = cortex.get();
-        warnings.insert(warnings.end(), cortexWarnings.begin(), cortexWarnings.end());
-        loads->SetPreoperativeSurface(itk::MakeMeshFromContactSurface<itk::BiomechanicalSurfaceMeshType>(cortexSurface));
-        loads->SetScanReach(elementSize);
-        loads->SetScanSpacing(kDefaultScanSpacing);
-      }
-      UpdateStage(loads.GetPointer(), "loads");
-    });
-    result.load = loads->GetPrescribedDisplacement();
-    result.loadReport = loads->GetLoadReport();
-    warnings.insert(warnings.end(), result.loadReport.warnings.begin(), result.loadReport.warnings.end());
-    result.prescribedDisplacements = loads->GetOutput();
-    model.prescribedDisplacements = { result.load };
-  }
+      // Surface to surface: neither the staircase of a hexahedral grid nor
+      // the walls of sulci inside the opening are brain motion. Staircase
+      // nodes lie up to about a cell from the model's smoothed surface.
+      const double elementSize = std::max(result.gridQuality.meanEdgeLength, settings.grid.elementSize);
+      const ContactSurface displaced = intraoperative.surface.triangles.empty()
+                                         ? IntraoperativeSurfaceOfImage(intraoperative, settings.atlas, warnings)
+                                         : intraoperative.surface;
+      loads->SetIntraoperativeSurface(itk::MakeMeshFromContactSurface<itk::BiomechanicalSurfaceMeshType>(displaced));
+      // A scan images the cortex, so its partner is the smooth surface of
+      // the brain mask, not that of the model's cells: a smoothed staircase
+      // of 5 mm cells lies about a millimetre off the cortex, which bent
+      // the matches and left out a quarter of them (docs/registration.md).
+      loads->SetPreoperativeSurface(itk::MakeMeshFromContactSurface<itk::BiomechanicalSurfaceMeshType>(result.cortex));
+      loads->SetScanReach(elementSize);
+      loads->SetScanSpacing(kDefaultScanSpacing);
+    }
+    UpdateStage(loads.GetPointer(), "loads");
+  });
+  result.load = loads->GetPrescribedDisplacement();
+  result.loadReport = loads->GetLoadReport();
+  warnings.insert(warnings.end(), result.loadReport.warnings.begin(), result.loadReport.warnings.end());
+  result.prescribedDisplacements = loads->GetOutput();
+  model.prescribedDisplacements = { result.load };
+}
 
-  // Contact: the regions filter's "contact" nodes may touch the skull.
+/** Contact: the regions filter's "contact" nodes may touch the skull. */
+void
+SetSkullContact(BrainModel & result, const BrainModelSettings & settings)
+{
+  Model & model = result.model;
   if (settings.contact && !model.NodeSet("contact").empty())
   {
-    result.contactSurface = skull;
+    result.contactSurface = itk::MakeMeshFromContactSurface<itk::BiomechanicalSurfaceMeshType>(result.surfaces.skull);
     ContactSurface master = result.surfaces.skull;
     master.slaveNodeSet = "contact";
     model.contactSurfaces = { master };
   }
   if (result.load.nodes.empty() && settings.gravity.isZero())
   {
-    warnings.push_back("the model has no load (no intraoperative measurements and no gravity): its solution is zero");
+    result.warnings.push_back("the model has no load (no intraoperative measurements and no gravity): its solution is zero");
   }
+}
+
+} // namespace
+
+void
+LoadBrainModel(BrainModel & model, const IntraoperativeData & intraoperative, const BrainModelSettings & settings,
+               StageTimer & timer)
+{
+  CheckIntraoperativeData(intraoperative);
+  if (model.pipelineModel.IsNull())
+  {
+    throw Error("the brain model is empty: prepare it first (PrepareBrainModel, or read a model bundle)");
+  }
+  SetBodyLoads(model, settings);
+  LoadExposedSurface(model, intraoperative, settings, timer);
+  SetSkullContact(model, settings);
+}
+
+BrainModel
+BuildBrainModel(const RegistrationImage *      image,
+                const RegistrationLabelImage * brainMask,
+                const RegistrationLabelImage * tumourMask,
+                const ContactSurface &         skullSurface,
+                const IntraoperativeData *     intraoperative,
+                const BrainModelSettings &     settings,
+                StageTimer &                   timer)
+{
+  if (intraoperative != nullptr)
+  {
+    CheckIntraoperativeData(*intraoperative);
+    CheckCraniotomyChoice(settings.craniotomyRadius, settings.craniotomyMask.IsNotNull());
+  }
+  const bool surfaceLoad = intraoperative != nullptr && intraoperative->sparse.points.empty();
+  BrainModel result = PrepareBrainModel(image, brainMask, tumourMask, skullSurface, settings, timer, surfaceLoad);
+  SetBodyLoads(result, settings);
+  if (intraoperative != nullptr)
+  {
+    LoadExposedSurface(result, *intraoperative, settings, timer);
+  }
+  SetSkullContact(result, settings);
   return result;
 }
 
@@ -701,11 +803,12 @@ WarpLabelImage(const RegistrationLabelImage * labels, const itk::Transform<doubl
 // The registration.
 // ---------------------------------------------------------------------------
 
-BrainShiftRegistrationResult
-RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
-                   const BrainShiftRegistrationSettings & settings,
-                   const StageCallback &                  stageCallback,
-                   const ProgressCallback &               solverProgress)
+namespace
+{
+
+/** The checks of the intraoperative phase's inputs, before any long stage. */
+void
+CheckUpdateInputs(const BrainShiftUpdateInputs & inputs, const BrainShiftRegistrationSettings & settings)
 {
   if (inputs.preoperativeImage.IsNull())
   {
@@ -718,6 +821,7 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
       throw Error("label map " + std::to_string(k) + " is empty: give a label image on the preoperative grid");
     }
   }
+  CheckIntraoperativeData(inputs.intraoperative);
   if (settings.gravityFitCandidates != 0)
   {
     if (settings.gravityFitCandidates < 3)
@@ -735,12 +839,17 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
                   "intraoperative image (--intraoperative-image)");
     }
   }
-  BrainShiftRegistrationResult result;
-  result.timer = StageTimer(stageCallback);
-  StageTimer & timer = result.timer;
+}
 
-  result.model = BuildBrainModel(inputs.preoperativeImage, inputs.brainMask, inputs.tumourMask, inputs.skullSurface,
-                                 &inputs.intraoperative, settings.model, timer);
+/** The intraoperative phase into `result`, whose model is prepared and whose timer runs on. */
+void
+UpdateInto(BrainShiftRegistrationResult &         result,
+           const BrainShiftUpdateInputs &         inputs,
+           const BrainShiftRegistrationSettings & settings,
+           const ProgressCallback &               solverProgress)
+{
+  StageTimer & timer = result.timer;
+  LoadBrainModel(result.model, inputs.intraoperative, settings.model, timer);
   result.warnings = result.model.warnings;
   if (!settings.model.gravity.isZero())
   {
@@ -755,7 +864,7 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
       result.warnings.push_back(warning.str());
     }
   }
-  else if (settings.model.resectionMask.IsNotNull())
+  else if (result.model.resectedVolume > 0.0)
   {
     // Measured in the validation study: 5 mm hexahedra without gravity 1.56 -> 1.95 mm p95 with the resection.
     result.warnings.push_back("the resection mask frees the cavity's walls, but without gravity nothing makes them "
@@ -983,6 +1092,40 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
                                         settings.evaluationDistanceThreshold);
     });
   }
+}
+
+} // namespace
+
+BrainShiftRegistrationResult
+UpdateBrainShift(BrainModel                             model,
+                 const BrainShiftUpdateInputs &         inputs,
+                 const BrainShiftRegistrationSettings & settings,
+                 const StageCallback &                  stageCallback,
+                 const ProgressCallback &               solverProgress)
+{
+  CheckUpdateInputs(inputs, settings);
+  BrainShiftRegistrationResult result;
+  result.timer = StageTimer(stageCallback);
+  result.model = std::move(model);
+  UpdateInto(result, inputs, settings, solverProgress);
+  return result;
+}
+
+BrainShiftRegistrationResult
+RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
+                   const BrainShiftRegistrationSettings & settings,
+                   const StageCallback &                  stageCallback,
+                   const ProgressCallback &               solverProgress)
+{
+  const BrainShiftUpdateInputs update{ inputs.preoperativeImage, inputs.labelMaps, inputs.intraoperative };
+  CheckUpdateInputs(update, settings);
+  CheckCraniotomyChoice(settings.model.craniotomyRadius, settings.model.craniotomyMask.IsNotNull());
+  BrainShiftRegistrationResult result;
+  result.timer = StageTimer(stageCallback);
+  const bool surfaceLoad = inputs.intraoperative.sparse.points.empty();
+  result.model = PrepareBrainModel(inputs.preoperativeImage, inputs.brainMask, inputs.tumourMask, inputs.skullSurface,
+                                   settings.model, result.timer, surfaceLoad);
+  UpdateInto(result, update, settings, solverProgress);
   return result;
 }
 
@@ -1072,6 +1215,18 @@ SolveState(const SolveResult & solve)
 } // namespace
 
 nlohmann::json
+CsfClassJson(const BrainModel & model)
+{
+  const auto & centroids = model.classificationFit.centroids;
+  const int    csfClass = model.csfClass.csfClass;
+  return { { "contrast", TissueContrastName(model.csfClass.contrast) },
+           { "class", csfClass + 1 }, // the tissue label image's value (1..K)
+           { "centroid", csfClass < static_cast<int>(centroids.size()) ? centroids[csfClass] : 0.0 },
+           { "volume_ml", model.csfVolume / 1000.0 },
+           { "chosen", model.csfClass.reason } };
+}
+
+nlohmann::json
 RegistrationReportJson(const BrainShiftRegistrationResult & result, const BrainShiftRegistrationSettings & settings)
 {
   const ModelCounts counts = CountModel(result.model.model);
@@ -1094,6 +1249,7 @@ RegistrationReportJson(const BrainShiftRegistrationResult & result, const BrainS
                       { "contact", !result.model.model.contactSurfaces.empty() },
                       { "classes", settings.model.classifier.classes },
                       { "csf", { { "youngs_modulus_pa", csf.youngsModulus }, { "poisson_ratio", csf.poissonRatio } } } };
+  report["model"]["csf"].update(CsfClassJson(result.model));
   if (settings.model.csfDrainedDepth)
   {
     report["model"]["csf"]["drained_depth_mm"] = *settings.model.csfDrainedDepth;
@@ -1161,6 +1317,9 @@ FormatRegistrationTable(const BrainShiftRegistrationResult & result)
   {
     text << ", " << counts.integrationPoints << " integration points";
   }
+  text << "\n  CSF               class " << result.model.csfClass.csfClass + 1 << " of "
+       << result.model.classificationFit.centroids.size() << " (" << TissueContrastName(result.model.csfClass.contrast)
+       << " contrast), " << result.model.csfVolume / 1000.0 << " mL";
   text << "\n  loads             " << result.model.load.nodes.size() << " of " << result.model.exposedNodes.size()
        << " exposed nodes, correspondence up to " << result.model.loadReport.maxCorrespondenceDistance << " mm\n";
   if (!result.gravityFit.empty())

@@ -109,6 +109,14 @@ MakeFields()
                        "element edge, or the meshless nodal spacing",
                        [](const Settings & s) { return s.model.grid.elementSize; },
                        [](Settings & s, double v) { s.model.grid.elementSize = v; }));
+  Field contrast = Row("model", "contrast", Kind::Choice, "", 0, false, 0, false,
+                       "where the CSF lies on the image's intensities: t1 darkest, t2 brightest, auto from the "
+                       "classes' volumes and spacing (an image it cannot tell is an error); the report names the "
+                       "CSF class",
+                       [](const Settings & s) { return static_cast<double>(s.model.contrast); },
+                       [](Settings & s, double v) { s.model.contrast = static_cast<TissueContrast>(static_cast<int>(v)); });
+  contrast.choices = { "auto", "t1", "t2" };
+  fields.push_back(contrast);
   fields.push_back(CsfRow("csf_modulus", "Pa", 0.0, true, kInfinity, false, "Young's modulus of the CSF class",
                          &Material::youngsModulus));
   fields.push_back(CsfRow("csf_poisson_ratio", "", 0.0, false, 0.5, true,

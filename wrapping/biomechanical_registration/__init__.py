@@ -30,6 +30,7 @@ from ._bmr import (
     ImageGrid,
     Material,
     Model,
+    ModelBundle,
     OgdenMaterial,
     PrescribedDisplacement,
     RegistrationResult,
@@ -67,6 +68,7 @@ from ._bmr import (
     model_regions,
     parse_scene,
     read_mesh,
+    read_model_bundle,
     read_scene,
     read_sparse_displacements,
     read_surface,
@@ -250,6 +252,64 @@ def register(
     result, report = _bmr._register(
         preoperative_image, brain_mask, tumour_mask, skull_surface, list(label_maps), intraoperative_surface,
         sparse_points, sparse_displacements, intraoperative_image, intraoperative_mask, values, progress,
+    )
+    result.report = report
+    return result
+
+
+def prepare(
+    image,
+    *,
+    brain_mask=None,
+    tumour_mask=None,
+    skull_surface=None,
+    label_maps=(),
+    output=None,
+    progress=None,
+    **settings
+):
+    """Before surgery, as ``biomech prepare``: skull stripping (without ``brain_mask``),
+    classification, grid, materials, surfaces and regions of the preoperative image, for
+    the planned craniotomy (``craniotomy_centre`` and ``craniotomy_radius``, or
+    ``craniotomy_mask``). Returns a :class:`ModelBundle`; with ``output`` it is also
+    written there (a folder that :func:`update` and ``biomech update`` read).
+    Settings: those of :func:`register` (the solve's, fit's and evaluation's are kept as
+    the updates' defaults); gravity belongs to :func:`update`.
+    """
+    values = _checked_settings("prepare", settings)
+    for name in ("gravity", "csf_drained_depth", "max_distance"):
+        if name in values:
+            raise TypeError("prepare() takes no %s: give it to update()" % name)
+    bundle = _bmr._prepare(image, brain_mask, tumour_mask, skull_surface, list(label_maps), values, progress)
+    if output is not None:
+        bundle.write(output)
+    return bundle
+
+
+def update(
+    bundle,
+    *,
+    intraoperative_surface=None,
+    sparse_points=None,
+    sparse_displacements=None,
+    intraoperative_image=None,
+    intraoperative_mask=None,
+    progress=None,
+    **settings
+):
+    """During surgery, as ``biomech update``: loads from the intraoperative data, solve,
+    transform, warped image and label maps, evaluation, on a prepared model
+    (a :class:`ModelBundle`, or the path of a bundle folder). Settings: the bundle's,
+    with these keywords (the solve's, fit's and evaluation's, and ``gravity``,
+    ``csf_drained_depth``, ``max_distance``) over them. Returns a
+    :class:`RegistrationResult` with ``report``, as :func:`register`.
+    """
+    if not isinstance(bundle, _bmr.ModelBundle):
+        bundle = _bmr.read_model_bundle(bundle)
+    values = _checked_settings("update", settings)
+    result, report = _bmr._update(
+        bundle, intraoperative_surface, sparse_points, sparse_displacements, intraoperative_image,
+        intraoperative_mask, values, progress,
     )
     result.report = report
     return result

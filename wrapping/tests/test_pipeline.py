@@ -485,3 +485,30 @@ def test_install_command_installs_an_importable_package(tmp_path):
                            env={**os.environ, "PYTHONPATH": str(site)}, capture_output=True, text=True, cwd=tmp_path)
     assert probe.returncode == 0, probe.stderr
     assert probe.stdout.startswith(str(site)) and "8 nodes" in probe.stdout
+
+
+def test_prepare_then_update_gives_the_one_call_registration(tmp_path, colin27):
+    """bmr.prepare (written as a bundle) and bmr.update (from the folder, or the object): the same transform and
+    warped image as bmr.register, bit for bit; the update runs only the intraoperative stages; the CSF class is named."""
+    image, mask = colin27
+    points, displacements = bmr.read_sparse_displacements(sparse_csv())
+    bundle = bmr.prepare(image, brain_mask=mask, output=tmp_path / "plan", **CRANIOTOMY)
+    assert (tmp_path / "plan" / "manifest.json").exists()
+    assert bundle.brain_model.csf_class["contrast"] == "t1" and bundle.brain_model.csf_class["class"] == 1
+    assert bundle.manifest["version"] == 1
+    from_folder = bmr.update(tmp_path / "plan", sparse_points=points, sparse_displacements=displacements)
+    from_object = bmr.update(bundle, sparse_points=points, sparse_displacements=displacements)
+    one_call = bmr.register(image, brain_mask=mask, sparse_points=points, sparse_displacements=displacements,
+                            **CRANIOTOMY)
+    assert [stage for stage, _ in from_folder.stage_seconds.items() if stage != "total"] == ["loads", "solve", "fit",
+                                                                                              "warp"]
+    samples = grid_points(-60, 60, 9)
+    for result in (from_folder, from_object):
+        assert result.report["solve"]["steps"] == one_call.report["solve"]["steps"]
+        np.testing.assert_array_equal(result.transform.transform_points(samples),
+                                      one_call.transform.transform_points(samples))
+        np.testing.assert_array_equal(result.warped_image.array, one_call.warped_image.array)
+    with pytest.raises(TypeError, match="give it to update"):
+        bmr.prepare(image, brain_mask=mask, gravity=(0, 0, -9810), **CRANIOTOMY)
+    with pytest.raises(bmr.Error, match="no manifest.json|no such folder"):
+        bmr.update(tmp_path / "nothing-here", sparse_points=points, sparse_displacements=displacements)

@@ -1,0 +1,75 @@
+// The model bundle: a brain model prepared before surgery (`biomech
+// prepare`, bmr::PrepareBrainModel) written to a folder, and read back for
+// each intraoperative update (`biomech update`, bmr::UpdateBrainShift).
+//
+// A bundle is a folder (docs/registration.md, "The model bundle"):
+//   manifest.json          format name and version, the module's version, the
+//                          preoperative image's exact geometry, the settings,
+//                          the preparation's report, and every file with its
+//                          size and CRC-32
+//   model.bin              the model, lossless: nodes, cells, materials, node
+//                          sets, constraints, meshless integration points, and
+//                          the brain, skull and cortex surfaces
+//   preoperative.nii.gz    the preoperative image (float32), brain-mask.nii.gz,
+//   tissue-classes.nii.gz  the classes (1..K), labels-K.nii.gz the label maps
+//   model.vtu, brain.vtp, skull.vtp, cortex.vtp (+ integration-points.vtu):
+//                          the same model and surfaces for a viewer (ParaView,
+//                          3D Slicer); not read back
+// A bundle of another version, a missing, truncated or edited file, or a
+// manifest that does not parse is a bmr::Error that names the file and says
+// to prepare the bundle again: never a wrong solve. A bundle is written into
+// a temporary folder beside its target and renamed, so a failed `prepare`
+// leaves no half-written bundle.
+//
+// What is not in the bundle: the Total Lagrangian precomputation of the
+// solver (shape-function derivatives, hourglass vectors, MLS shape-function
+// tables, contact trees) is made again by each update's solver from the
+// stored model (docs/registration.md says what it costs).
+#ifndef bmrModelBundle_h
+#define bmrModelBundle_h
+
+#include "bmrBrainShiftRegistration.h"
+
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace bmr
+{
+
+/** The bundle format's version: a bundle of another version is not read. */
+constexpr int kModelBundleVersion = 1;
+
+struct ModelBundle
+{
+  /** As PrepareBrainModel made it (no loads, no contact yet; the cortex made). */
+  BrainModel                                   model;
+  RegistrationImage::Pointer                   preoperativeImage;
+  std::vector<RegistrationLabelImage::Pointer> labelMaps;
+  /** Their file names as given to prepare (the warped maps are named after them). */
+  std::vector<std::string>                     labelMapNames;
+  /** Every setting of the table as prepared (the model's, and the solve's,
+   *  fit's and evaluation's defaults for the updates). */
+  BrainShiftRegistrationSettings               settings;
+  /** The manifest as written or read (the preparation's report under "prepare"). */
+  nlohmann::json                               manifest;
+};
+
+/** Writes `bundle` (manifest from its parts; bundle.manifest["prepare"], when
+ *  set, is kept as the preparation's report) into `folder`, replacing a bundle
+ *  there; returns the manifest written. Throws bmr::Error naming the file
+ *  that could not be written. */
+nlohmann::json
+WriteModelBundle(const std::filesystem::path & folder, const ModelBundle & bundle);
+
+/** Reads a bundle WriteModelBundle wrote; every file's size and CRC-32 are
+ *  checked against the manifest first. Throws bmr::Error naming the folder,
+ *  the file and what to do. */
+ModelBundle
+ReadModelBundle(const std::filesystem::path & folder);
+
+} // namespace bmr
+
+#endif
