@@ -57,7 +57,8 @@ def main():
     run([biomech, "demo", "-o", truth, "--truth-only", "--quiet"], environment)
     with open(os.path.join(truth, "demo-report.json")) as handle:
         demo = json.load(handle)
-    gravity = demo["truth"]["gravity_mm_s2"] if "gravity_mm_s2" in demo.get("truth", {}) else [0, 0, -9810]
+    # 1 g along the head's down, the largest size tried (as the README demo's --registration-gravity 1).
+    gravity = [9810.0 * component for component in demo["ground_truth"]["down"]]
     tracked = os.path.join(truth, "tracked-points.csv")
     truth_transform = bmr.read_transform(os.path.join(truth, "ground-truth-transform.h5"))
     region = bmr.imread(os.path.join(truth, "intraoperative-brain-on-preoperative-grid.nii.gz"))

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Installs the Debian (bookworm) packages the module needs to build, test and
 # run its demo. Idempotent: packages already installed are left alone, and
-# apt-get runs only when something is missing.
+# apt-get runs only when something is missing. libgdcm-tools: the DICOM
+# reader's GDCM exports its tools as CMake targets (CMake warns when they are
+# missing), and gdcmdump / gdcminfo are what one reads a hospital's series with.
 set -euo pipefail
 
 packages=(
@@ -10,6 +12,7 @@ packages=(
   libgtest-dev googletest libbenchmark-dev
   nlohmann-json3-dev libcli11-dev libnanoflann-dev zlib1g-dev
   calculix-ccx mricron-data insighttoolkit5-examples elastix
+  libgdcm-tools
   python3 python3-dev python3-numpy python3-matplotlib python3-pytest
   pybind11-dev python3-nbclient python3-nbformat python3-ipykernel
   snakemake
