@@ -78,6 +78,16 @@ ThreeValues(const std::vector<double> & values, const std::string & option)
   return Vector3(values[0], values[1], values[2]);
 }
 
+/** "class 1 of 3 (t1 contrast), 183.256 mL": the summaries' line of the class that became the CSF. */
+std::string
+CsfClassText(const BrainModel & brain)
+{
+  std::ostringstream text;
+  text << "class " << brain.csfClass.csfClass + 1 << " of " << brain.classificationFit.centroids.size() << " ("
+       << TissueContrastName(brain.csfClass.contrast) << " contrast), " << brain.csfVolume / 1000.0 << " mL";
+  return text.str();
+}
+
 void
 PrintWarnings(const std::vector<std::string> & warnings)
 {
@@ -610,9 +620,7 @@ RunModel(const ModelOptions & options)
     }
     std::cout << "\n  volume error      " << 100.0 * brain.gridQuality.volumeError << " % of the mask\n"
               << "  exposed nodes     " << exposed.size() << ", fixed " << model.NodeSet("skull_base").size() << "\n"
-              << "  CSF               class " << brain.csfClass.csfClass + 1 << " of "
-              << brain.classificationFit.centroids.size() << " (" << TissueContrastName(brain.csfClass.contrast)
-              << " contrast), " << brain.csfVolume / 1000.0 << " mL\n"
+              << "  CSF               " << CsfClassText(brain) << "\n"
               << "  time              " << report["seconds"]["total"].get<double>() << " s\n"
               << "  scene             " << (outputDirectory / "scene.json").string() << "\n";
   }
@@ -878,9 +886,7 @@ RunPrepare(const PrepareOptions & options)
     }
     std::cout << "\n  exposed nodes     " << bundle.model.exposedNodes.size() << ", fixed "
               << bundle.model.model.NodeSet("skull_base").size() << "\n"
-              << "  CSF               class " << bundle.model.csfClass.csfClass + 1 << " ("
-              << TissueContrastName(bundle.model.csfClass.contrast) << " contrast), "
-              << bundle.model.csfVolume / 1000.0 << " mL\n"
+              << "  CSF               " << CsfClassText(bundle.model) << "\n"
               << "  time              ";
     for (const auto & [stage, seconds] : timer.Stages())
     {
