@@ -29,6 +29,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <iomanip>
 #include <iostream>
 #include <map>
@@ -710,13 +711,15 @@ WarpedName(const std::string & path)
  *  intraoperative image its evaluation and overlays) and the report last, so
  *  that a folder without the report holds no finished result; prints the
  *  table. `report` holds what the caller adds, `moreSeconds` stages timed
- *  outside the registration ("seconds" gains them and "write"). Returns the
+ *  outside the registration ("seconds" gains them and "write"), `writeMore`
+ *  writes the caller's files (adding them to "files"). Returns the
  *  exit status: 0 converged, 2 not converged. */
 int
 WriteRegistrationOutputs(const BrainShiftRegistrationResult & result, const BrainShiftRegistrationSettings & settings,
                          const fs::path & outputDirectory, const std::vector<std::string> & labelNames,
                          const RegistrationImage * intraoperative, int overlays, bool quiet, json report,
-                         const json & moreSeconds = json::object())
+                         const json &                                                 moreSeconds = json::object(),
+                         const std::function<void(const fs::path & folder, json & files)> & writeMore = {})
 {
   const auto     written = std::chrono::steady_clock::now();
   const fs::path reportPath = outputDirectory / "registration-report.json";
@@ -750,6 +753,10 @@ WriteRegistrationOutputs(const BrainShiftRegistrationResult & result, const Brai
       { "registered", WriteEdgeOverlays(result.registered, intraoperative, (outputDirectory / "overlays").string(),
                                         "registered", overlays) }
     };
+  }
+  if (writeMore)
+  {
+    writeMore(outputDirectory, files);
   }
   report["files"] = files;
   report["seconds"].update(moreSeconds);
@@ -905,6 +912,7 @@ struct UpdateOptions
   double                csfDrainedDepth = 0.0;
   CLI::Option *         csfDrainedDepthOption = nullptr;
   SettingOptions        settings{ { "solve", "fit", "evaluation" } };
+  std::string           previous; // an earlier update's folder: warm start
   int                   overlays = 5;
   std::string           outputDirectory = "update";
   bool                  quiet = false;
@@ -961,6 +969,12 @@ RunUpdate(const UpdateOptions & options)
   inputs.labelMaps.assign(bundle.labelMaps.begin(), bundle.labelMaps.end());
   inputs.intraoperative = options.intraoperative.Read();
   CheckMeasurementsInside(inputs.intraoperative, bundle.preoperativeImage, options.bundle);
+  std::optional<UpdateSolution> previous;
+  if (!options.previous.empty())
+  {
+    previous = ReadUpdateSolution(options.previous, bundle.manifest);
+    inputs.previous = previous->start;
+  }
 
   BrainShiftRegistrationResult result;
   {
@@ -975,16 +989,41 @@ RunUpdate(const UpdateOptions & options)
   {
     report["stages"].push_back(stage.first);
   }
+  // A warm start's saving is said against the cold solve at the head of the
+  // surgery's chain of updates (of other data: a cold solve of these data
+  // was not run).
+  const int coldSteps = previous ? previous->coldSteps : result.solve.steps;
+  if (previous)
+  {
+    report["warm_start"] = { { "previous", options.previous },
+                             { "previous_steps", previous->steps },
+                             { "cold_steps_of_first_update", coldSteps },
+                             { "steps", result.solve.steps },
+                             { "steps_saved", coldSteps - result.solve.steps },
+                             { "fraction_of_cold_steps",
+                               coldSteps > 0 ? static_cast<double>(result.solve.steps) / coldSteps : 0.0 } };
+  }
+  const UpdateSolution solution = MakeUpdateSolution(result.solve, bundle.manifest, coldSteps);
+  const auto writeSolution = [&](const fs::path & folder, json & files) {
+    WriteUpdateSolution(folder / "solution.bin", solution);
+    files["solution"] = (folder / "solution.bin").string();
+  };
   const int status = WriteRegistrationOutputs(result, settings, options.outputDirectory, bundle.labelMapNames,
                                               inputs.intraoperative.image, options.overlays, true, report,
-                                              { { "read-bundle", readSeconds } });
+                                              { { "read-bundle", readSeconds } }, writeSolution);
   // The whole update, from reading the bundle to the last file written.
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   if (!options.quiet)
   {
     std::cout << FormatRegistrationTable(result) << "  bundle read       " << std::fixed << std::setprecision(2)
-              << readSeconds << " s; update " << wall << " s from reading the bundle to the last file written\n"
-              << "  output            " << options.outputDirectory << "\n";
+              << readSeconds << " s; update " << wall << " s from reading the bundle to the last file written\n";
+    if (previous)
+    {
+      std::cout << "  warm start        from " << options.previous << ": " << result.solve.steps << " steps, "
+                << coldSteps - result.solve.steps << " fewer than the first update's cold solve (" << coldSteps
+                << ")\n";
+    }
+    std::cout << "  output            " << options.outputDirectory << "\n";
   }
   return status;
 }
@@ -1257,6 +1296,9 @@ AddModelCommands(CLI::App & app)
       ->check(CLI::NonNegativeNumber)
       ->needs(updateGravity);
   update->settings.Add(updateCommand);
+  updateCommand->add_option("--previous", update->previous,
+                            "A later update of the same surgery: start the solve from this earlier update's output "
+                            "folder (its solution.bin); the result is the cold solve's within the tolerance");
   updateCommand->add_option("--overlays", update->overlays, "Edge-overlay PNGs per evaluation (0: none)")
     ->capture_default_str();
   updateCommand->add_option("-o,--output-dir", update->outputDirectory, "Output folder")->capture_default_str();

@@ -397,6 +397,11 @@ struct BrainShiftUpdateInputs
   RegistrationImage::ConstPointer                   preoperativeImage; // warped; the gravity fit's moving image
   std::vector<RegistrationLabelImage::ConstPointer> labelMaps;         // on the preoperative grid
   IntraoperativeData                                intraoperative;
+  /** A later update of the same surgery: every solve (the gravity fit's
+   *  candidates too) starts from the previous update's steady state
+   *  (ReadUpdateSolution); empty: from rest. The result is the cold solve's
+   *  within the solver tolerance, in fewer steps. */
+  WarmStart                                         previous;
 };
 
 /** The intraoperative phase on a prepared model (PrepareBrainModel, or a

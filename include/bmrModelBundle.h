@@ -70,6 +70,39 @@ WriteModelBundle(const std::filesystem::path & folder, const ModelBundle & bundl
 ModelBundle
 ReadModelBundle(const std::filesystem::path & folder);
 
+/** An update's steady state, written beside its report (solution.bin) so
+ *  that the next update of the same surgery can start from it (`biomech
+ *  update --previous OUT`, UpdateBrainShift's `previous`). */
+struct UpdateSolution
+{
+  WarmStart start;
+  /** The steps of this update's solve, and those of the cold (not
+   *  warm-started) solve at the head of its chain of updates: a warm start's
+   *  saving is said against that one. */
+  int       steps = 0;
+  int       coldSteps = 0;
+  /** The bundle's model.bin CRC-32 and node count: a solution is read back
+   *  only with the bundle whose model it solved. */
+  std::uint32_t modelChecksum = 0;
+  Index         nodes = 0;
+};
+
+/** The solution of `solve` on the model of the bundle described by
+ *  `bundleManifest`; `coldSteps` from the chain's head (solve.steps for a cold solve). */
+UpdateSolution
+MakeUpdateSolution(const SolveResult & solve, const nlohmann::json & bundleManifest, int coldSteps);
+
+/** Writes solution.bin atomically. Throws bmr::Error naming the file. */
+void
+WriteUpdateSolution(const std::filesystem::path & file, const UpdateSolution & solution);
+
+/** Reads `folder`/solution.bin (or the file itself) and checks that it
+ *  solved the model of the bundle described by `bundleManifest`. Throws
+ *  bmr::Error naming the file and what to do (a missing file, another
+ *  bundle's solution, a damaged file). */
+UpdateSolution
+ReadUpdateSolution(const std::filesystem::path & previous, const nlohmann::json & bundleManifest);
+
 } // namespace bmr
 
 #endif

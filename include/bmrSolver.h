@@ -140,11 +140,38 @@ struct SolveResult
   double      maxPenetration = 0.0;   // mm, after the last projection
   std::vector<std::string> activeComponents;
   std::vector<ToolHistory> tools; // one per Model::tools entry
+  /** Dynamic relaxation: the lowest-eigenvalue estimate the damping ended
+   *  with, for the masses before any restart (a diagnostic). */
+  double      lowestEigenvalue = 0.0;
+  bool        warmStarted = false; // began from a WarmStart
   std::string message; // why it stopped
   /** What the solve did that the model did not ask for, e.g. contact nodes
    *  that started beyond their surface and were projected onto it. */
   std::vector<std::string> warnings;
 };
+
+/** Where a dynamic-relaxation solve begins instead of the reference state: the
+ *  steady state of an earlier solve of the same model (the previous
+ *  intraoperative update of one surgery). The loads then ramp from the ones
+ *  that state balances to the model's: prescribed values from their value in
+ *  the state, body and surface forces from its internal forces, so the solve
+ *  starts at rest in equilibrium; without body forces or tools the ramp is
+ *  shortened to the prescribed values' relative change (at least a tenth).
+ *  The equilibrium reached is the model's whatever the start; only the steps
+ *  differ, and where the contact admits neighbouring equilibria (a node
+ *  sliding on the faceted skull) which one (docs/registration.md). */
+struct WarmStart
+{
+  /** Per node: SolveResult::nodalParameters for a meshless model, else
+   *  SolveResult::displacements (mm). Empty: no warm start. */
+  std::vector<Vector3> state;
+
+  bool Empty() const { return state.empty(); }
+};
+
+/** The warm start at `result`'s steady state (its nodal parameters when meshless). */
+WarmStart
+WarmStartFrom(const SolveResult & result);
 
 /** Thrown when a solve fails (inverted element, NaN, unbounded energy). */
 class SolveError : public Error
@@ -178,6 +205,11 @@ public:
    *  multiple of SolverSettings::outputInterval, and at the end time
    *  (explicit dynamics with an output interval only). */
   SolveResult Solve(const ProgressCallback & progress = {}, const FrameCallback & frames = {});
+
+  /** Dynamic relaxation begins from `start` (WarmStart) in the next Solve;
+   *  an empty one: from the reference state. Throws bmr::Error when its size
+   *  is not the model's node count or the integrator is explicit dynamics. */
+  void SetWarmStart(const WarmStart & start);
 
   /** Components built for this model (e.g. "hexahedra", "hourglass-control",
    *  "anp-tetrahedra", "contact", "dynamic-relaxation"). */

@@ -108,6 +108,16 @@ public:
   itkSetMacro(Gravity, VectorType);
   itkGetConstMacro(Gravity, VectorType);
 
+  /** Dynamic relaxation from an earlier solve's steady state (bmr::WarmStart,
+   *  e.g. the previous intraoperative update's); empty (default): from rest. */
+  void
+  SetWarmStart(const bmr::WarmStart & start);
+  const bmr::WarmStart &
+  GetWarmStart() const
+  {
+    return m_WarmStart;
+  }
+
   /** All solver settings at once (bmrSolver.h); `threads` is taken from NumberOfWorkUnits. */
   void
   SetSolverSettings(const bmr::SolverSettings & settings);
@@ -194,6 +204,7 @@ private:
   double              m_CurrentEstimatedError{ 0.0 };
   VectorType          m_Gravity{ 0.0 };
   bmr::SolverSettings m_SolverSettings;
+  bmr::WarmStart      m_WarmStart;
   bmr::SolveResult    m_Result;
   bmr::Model          m_SolvedModel; // meshless: for EvaluateDisplacements
 };

@@ -67,6 +67,14 @@ BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::SetSolverSe
 
 template <typename TDisplacementPointSet, typename TSurfaceMesh>
 void
+BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::SetWarmStart(const bmr::WarmStart & start)
+{
+  m_WarmStart = start;
+  this->Modified();
+}
+
+template <typename TDisplacementPointSet, typename TSurfaceMesh>
+void
 BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::SetTolerance(double tolerance)
 {
   if (m_SolverSettings.tolerance != tolerance)
@@ -237,6 +245,7 @@ BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::GenerateDat
   try
   {
     bmr::Solver solver(model, settings);
+    solver.SetWarmStart(m_WarmStart);
     m_Result = solver.Solve(report);
   }
   catch (const bmr::Error & error)
@@ -304,6 +313,8 @@ BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::PrintSelf(s
   os << indent << "Gravity: " << m_Gravity << std::endl;
   os << indent << "Tolerance: " << m_SolverSettings.tolerance << " mm" << std::endl;
   os << indent << "MaximumNumberOfSteps: " << m_SolverSettings.maxSteps << std::endl;
+  os << indent << "WarmStart: " << (m_WarmStart.Empty() ? "none" : std::to_string(m_WarmStart.state.size()) + " nodes")
+     << std::endl;
   os << indent << "Converged: " << m_Result.converged << ", steps: " << m_Result.steps << std::endl;
 }
 

@@ -277,6 +277,22 @@ TightRelaxation(double tolerance = 1e-9, int maxSteps = 400000)
 }
 
 // ---------------------------------------------------------------------------
+/** The message of the bmr::Error that `call` throws; empty if it throws none. */
+template <typename Call>
+std::string
+ThrownMessage(Call && call)
+{
+  try
+  {
+    call();
+  }
+  catch (const Error & error)
+  {
+    return error.what();
+  }
+  return {};
+}
+
 // Measures.
 // ---------------------------------------------------------------------------
 

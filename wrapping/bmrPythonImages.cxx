@@ -771,13 +771,22 @@ BindRegistration(py::module_ & module)
     "_update",
     [](const ModelBundle & bundle, const py::object & surface, const py::object & points,
        const py::object & displacements, const py::object & intraoperativeImage, const py::object & intraoperativeMask,
-       const py::dict & values, const py::object & progress) {
+       const py::object & previous, const py::dict & values, const py::object & progress) {
       const BrainShiftRegistrationSettings settings = RegistrationSettingsFrom(values, bundle.settings);
       BrainShiftUpdateInputs               inputs;
       inputs.preoperativeImage = bundle.preoperativeImage;
       inputs.labelMaps.assign(bundle.labelMaps.begin(), bundle.labelMaps.end());
       inputs.intraoperative = IntraoperativeFrom(surface, points, displacements, intraoperativeImage,
                                                  intraoperativeMask, MaxDistanceFrom(values));
+      // An earlier update's result in memory, or its output folder (solution.bin).
+      if (py::isinstance<BrainShiftRegistrationResult>(previous))
+      {
+        inputs.previous = WarmStartFrom(previous.cast<const BrainShiftRegistrationResult &>().solve);
+      }
+      else if (!previous.is_none())
+      {
+        inputs.previous = ReadUpdateSolution(py::str(previous).cast<std::string>(), bundle.manifest).start;
+      }
       ProgressReporter reporter(progress);
       auto result = RunWithoutGil(reporter, [&] {
         return TranslateItkErrors([&] {
@@ -788,7 +797,8 @@ BindRegistration(py::module_ & module)
       return py::make_tuple(std::move(result), report);
     },
     py::arg("bundle"), py::arg("intraoperative_surface"), py::arg("sparse_points"), py::arg("sparse_displacements"),
-    py::arg("intraoperative_image"), py::arg("intraoperative_mask"), py::arg("settings"), py::arg("progress"));
+    py::arg("intraoperative_image"), py::arg("intraoperative_mask"), py::arg("previous"), py::arg("settings"),
+    py::arg("progress"));
 }
 
 } // namespace

@@ -249,14 +249,14 @@ Solver::Impl::ApplyConstraints(double * u, const std::vector<double> & curveFact
     constraintTargets.resize(constrained.size());
     for (std::size_t k = 0; k < constrained.size(); ++k)
     {
-      constraintTargets[k] = constrained[k].Target(curveFactors);
+      constraintTargets[k] = ConstraintTarget(k, curveFactors);
     }
     essential->Impose(u, constraintTargets);
     return;
   }
-  for (const ConstrainedDof & c : constrained)
+  for (std::size_t k = 0; k < constrained.size(); ++k)
   {
-    u[c.dof] = c.Target(curveFactors);
+    u[constrained[k].dof] = ConstraintTarget(k, curveFactors);
   }
 }
 
@@ -320,12 +320,11 @@ Solver::Impl::CentralDifferenceStep(const std::vector<double> & u,
 {
   // u+ = u + beta (u - u-) + alpha M^-1 (f_ext - f_int), then the constraints
   // and the contact projection (both integrators).
-  const Index    dofCount = static_cast<Index>(u.size());
-  const double * g = gravityForce.empty() ? nullptr : gravityForce.data();
+  const Index dofCount = static_cast<Index>(u.size());
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (Index d = 0; d < dofCount; ++d)
   {
-    uNext[d] = CentralDifferenceUpdate(u[d], uPrevious[d], f[d], g ? gravityFactor * g[d] : 0.0, inverseMass[d], alpha, beta);
+    uNext[d] = CentralDifferenceUpdate(u[d], uPrevious[d], f[d], ExternalForce(d, gravityFactor), inverseMass[d], alpha, beta);
   }
   ApplyConstraints(uNext.data(), curveFactors);
   EnforceContact(uNext.data(), inContact, inverseMass);
@@ -498,6 +497,70 @@ Solver::Solver(const Model & model, const SolverSettings & settings)
 {}
 
 Solver::~Solver() = default;
+
+WarmStart
+WarmStartFrom(const SolveResult & result)
+{
+  return { result.nodalParameters.empty() ? result.displacements : result.nodalParameters };
+}
+
+void
+Solver::SetWarmStart(const WarmStart & start)
+{
+  Impl & impl = *m_Impl;
+  impl.warmState.clear();
+  if (start.Empty())
+  {
+    return;
+  }
+  if (impl.settings.integrator != Integrator::DynamicRelaxation)
+  {
+    throw Error("a warm start is for dynamic relaxation (a steady state); explicit dynamics starts at rest");
+  }
+  if (start.state.size() != impl.model.nodes.size())
+  {
+    throw Error("the warm start has " + std::to_string(start.state.size()) + " nodes' values, the model " +
+                std::to_string(impl.model.nodes.size()) + " nodes: it is the solution of another model");
+  }
+  impl.warmState.resize(3 * start.state.size());
+  for (std::size_t n = 0; n < start.state.size(); ++n)
+  {
+    if (!start.state[n].allFinite())
+    {
+      throw Error("the warm start's value at node " + std::to_string(n) + " is not finite");
+    }
+    for (int i = 0; i < 3; ++i)
+    {
+      impl.warmState[3 * n + i] = start.state[n][i];
+    }
+  }
+}
+
+double
+Solver::Impl::WarmStartRampFraction() const
+{
+  // The ramp keeps the loads from arriving faster than the body follows;
+  // from a warm start only their change arrives. Body forces and tools keep
+  // the whole ramp (their change is not measured here).
+  constexpr double kMinimumWarmRamp = 0.1;
+  if (startTargets.empty() || !gravityForce.empty() || !tools.empty())
+  {
+    return 1.0;
+  }
+  std::vector<double> fullFactors(curves.size());
+  for (std::size_t k = 0; k < curves.size(); ++k)
+  {
+    fullFactors[k] = curves[k].Factor(1.0);
+  }
+  double change = 0.0, size = 0.0;
+  for (std::size_t k = 0; k < constrained.size(); ++k)
+  {
+    const double target = constrained[k].Target(fullFactors);
+    change = std::max(change, std::abs(target - startTargets[k]));
+    size = std::max(size, std::abs(target));
+  }
+  return size > 0.0 ? std::clamp(change / size, kMinimumWarmRamp, 1.0) : 1.0;
+}
 
 SolveResult
 Solver::Solve(const ProgressCallback & progress, const FrameCallback & frames)

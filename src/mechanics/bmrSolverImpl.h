@@ -109,10 +109,38 @@ struct Solver::Impl
   std::vector<double>                constraintTargets; // EBCIEM, per step
   std::vector<double>                dofTargets;        // per dof, the constrained dofs' targets of the step (fused update)
 
+  // Dynamic relaxation from a warm start (Solver::SetWarmStart): its state
+  // (dofs; empty: from rest); per solve, the loads it balances, which fade
+  // out with the ramp as the model's fade in: its internal forces per dof and
+  // the value of each constrained dof in it, with their weights of the step.
+  std::vector<double>                warmState;
+  std::vector<double>                startForces;
+  std::vector<double>                startTargets;
+  double                             startForceWeight = 0.0;
+  double                             startTargetWeight = 0.0;
+
   Impl(const Model & m, const SolverSettings & s);
   void        CheckSettings() const;
   void        BuildConstraints();
   void        ApplyConstraints(double * u, const std::vector<double> & curveFactors);
+  /** Constraint k's value at the curves' present factors (and, from a warm
+   *  start, its fading start value). */
+  double      ConstraintTarget(std::size_t k, const std::vector<double> & curveFactors) const
+  {
+    const double target = constrained[k].Target(curveFactors);
+    return startTargets.empty() ? target : target + startTargetWeight * startTargets[k];
+  }
+  /** The load ramp's length as a fraction of SolverSettings::loadSteps:
+   *  1 from rest; from a warm start the largest change of a prescribed value
+   *  over the largest value (at least kMinimumWarmRamp). */
+  double      WarmStartRampFraction() const;
+  /** External force on dof d besides contact (N): gravity at `gravityFactor`
+   *  and a warm start's fading forces. */
+  double      ExternalForce(Index d, double gravityFactor) const
+  {
+    const double gravity = gravityForce.empty() ? 0.0 : gravityFactor * gravityForce[d];
+    return startForces.empty() ? gravity : gravity + startForceWeight * startForces[d];
+  }
   void        PrepareEssentialBoundary(const std::vector<double> & mass);
   void        EnforceContact(double * u, std::vector<char> & inContact, const std::vector<double> & inverseMass);
   /** Dynamic relaxation: removes from each slave projected in the last step

@@ -203,6 +203,24 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   };
   scaleMasses(massScale);
   PrepareEssentialBoundary(mass);
+  startForces.clear();
+  startTargets.clear();
+  if (!warmState.empty())
+  {
+    // At rest in the warm state, under the loads it balances (its internal
+    // forces; at constrained dofs their values in it): those fade out with
+    // the ramp as the model's loads fade in.
+    u = warmState;
+    uPrevious = warmState;
+    startForces.resize(dofCount);
+    CheckForces(forces->ComputeInternalForces(u.data(), startForces.data()), 0, false, h);
+    const std::vector<double> physical = PhysicalDisplacements(u);
+    startTargets.resize(constrained.size());
+    for (std::size_t k = 0; k < constrained.size(); ++k)
+    {
+      startTargets[k] = physical[constrained[k].dof];
+    }
+  }
   std::vector<char>   inContact(model.nodes.size(), 0);
   std::vector<double> curveFactors(curves.size(), 0.0);
   // Without contact, tools or EBCIEM's projection, the constraints are values
@@ -250,8 +268,8 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   // the ramp twice as slow, as well as with heavier masses.
   double rampOrigin = 0.0;
   int    rampOriginStep = 0;
-  double rampLength = settings.loadSteps;
-  int    rampEndStep = settings.loadSteps;
+  double rampLength = settings.loadSteps * WarmStartRampFraction();
+  int    rampEndStep = static_cast<int>(std::ceil(rampLength - 1e-9));
   int    rampSlowdowns = 0;
   auto   rampPosition = [&](int k) { return std::min(1.0, rampOrigin + (k - rampOriginStep) / rampLength); };
   auto   loadFactor = [&](const LoadCurve & curve, int k) { return curve.Factor(rampPosition(k)); };
@@ -352,20 +370,21 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
       {
         curveFactors[k] = loadFactor(curves[k], step + 1);
       }
+      startForceWeight = 1.0 - LoadCurve{}.Factor(rampPosition(step));
+      startTargetWeight = 1.0 - LoadCurve{}.Factor(rampPosition(step + 1));
       IncrementStatistics increment;
       if (fusedUpdate)
       {
         // Update, constraints and the increment's size in one pass over the
         // dofs (one parallel region instead of two, u read once): nothing
         // moves the dofs between them.
-        for (const ConstrainedDof & c : constrained)
+        for (std::size_t k = 0; k < constrained.size(); ++k)
         {
-          dofTargets[c.dof] = c.Target(curveFactors);
+          dofTargets[constrained[k].dof] = ConstraintTarget(k, curveFactors);
         }
-        const double * g = gravityForce.empty() ? nullptr : gravityForce.data();
         increment = MeasureIncrements(dofCount, dofConstrained, lengthScale, threads, [&](Index d) {
           uNext[d] = dofConstrained[d] ? dofTargets[d]
-                                       : CentralDifferenceUpdate(u[d], uPrevious[d], f[d], g ? gravityFactor * g[d] : 0.0,
+                                       : CentralDifferenceUpdate(u[d], uPrevious[d], f[d], ExternalForce(d, gravityFactor),
                                                                  inverseMass[d], alpha, beta);
           return std::abs(uNext[d] - u[d]);
         });
@@ -518,6 +537,10 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   result.converged = converged;
   result.steps = step;
   result.timeStep = h;
+  result.warmStarted = !warmState.empty();
+  // For the masses before the restarts, each of which made them heavier.
+  result.lowestEigenvalue = (std::isfinite(slowestEigenvalue) ? slowestEigenvalue : lowestEigenvalue) *
+                            std::pow(kRestartMassFactor, restarts);
   result.estimatedError = estimatedError;
   result.convergenceRate = rate;
   result.restarts = restarts;

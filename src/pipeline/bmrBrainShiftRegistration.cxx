@@ -891,6 +891,7 @@ UpdateInto(BrainShiftRegistrationResult &         result,
       deformation->SetContactSurface(result.model.contactSurface);
     }
     deformation->SetSolverSettings(settings.solver);
+    deformation->SetWarmStart(inputs.previous);
     deformation->SetNumberOfWorkUnits(static_cast<itk::ThreadIdType>(threads > 0 ? threads : omp_get_max_threads()));
     return deformation;
   };
@@ -1104,6 +1105,12 @@ UpdateBrainShift(BrainModel                             model,
                  const ProgressCallback &               solverProgress)
 {
   CheckUpdateInputs(inputs, settings);
+  if (!inputs.previous.Empty() && inputs.previous.state.size() != model.model.nodes.size())
+  {
+    throw Error("the previous update's solution has " + std::to_string(inputs.previous.state.size()) +
+                " nodes, the prepared model " + std::to_string(model.model.nodes.size()) +
+                ": it is of another model; give an update of this model, or none");
+  }
   BrainShiftRegistrationResult result;
   result.timer = StageTimer(stageCallback);
   result.model = std::move(model);
@@ -1270,6 +1277,7 @@ RegistrationReportJson(const BrainShiftRegistrationResult & result, const BrainS
                       { "estimated_error_mm", solve.estimatedError },
                       { "tolerance_mm", settings.solver.tolerance },
                       { "restarts", solve.restarts },
+                      { "warm_started", solve.warmStarted },
                       { "max_displacement_mm", solve.maxDisplacement },
                       { "contact_nodes", solve.contactNodes },
                       { "max_penetration_mm", solve.maxPenetration },

@@ -26,6 +26,8 @@ namespace
 
 const char * const kFormatName = "biomechanical-registration model bundle";
 const char         kModelMagic[8] = { 'B', 'M', 'R', 'M', 'O', 'D', 'E', 'L' };
+const char         kSolutionMagic[8] = { 'B', 'M', 'R', 'S', 'O', 'L', 'V', 'E' };
+constexpr int      kSolutionVersion = 1;
 
 // ---------------------------------------------------------------------------
 // model.bin: little-endian values in the order written, no padding.
@@ -71,9 +73,11 @@ private:
 class BinaryReader
 {
 public:
-  BinaryReader(std::string bytes, std::string what)
+  /** `advice`: what to do about a damaged file. */
+  BinaryReader(std::string bytes, std::string what, std::string advice = "prepare the bundle again (biomech prepare)")
     : m_Bytes(std::move(bytes))
     , m_What(std::move(what))
+    , m_Advice(std::move(advice))
   {}
   template <typename T>
   T Value()
@@ -115,8 +119,7 @@ public:
   bool AtEnd() const { return m_Offset == m_Bytes.size(); }
   [[noreturn]] void Fail(const std::string & why) const
   {
-    throw Error(m_What + " is damaged (" + why + " at byte " + std::to_string(m_Offset) +
-                "); prepare the bundle again (biomech prepare)");
+    throw Error(m_What + " is damaged (" + why + " at byte " + std::to_string(m_Offset) + "); " + m_Advice);
   }
   /** A count of items of at least `bytesEach` bytes each that the rest of the file can hold. */
   std::size_t Count(std::size_t bytesEach)
@@ -140,6 +143,7 @@ private:
 
   std::string m_Bytes;
   std::string m_What;
+  std::string m_Advice;
   std::size_t m_Offset = 0;
 };
 
@@ -634,6 +638,98 @@ ReadModelBundle(const fs::path & folder)
                 std::string(error.what()) + "); prepare the bundle again");
   }
   return bundle;
+}
+
+namespace
+{
+
+/** The bundle's model.bin checksum from its manifest (0 when absent). */
+std::uint32_t
+ModelChecksum(const json & manifest)
+{
+  for (const json & file : manifest.value("files", json::array()))
+  {
+    if (file.value("name", std::string()) == "model.bin")
+    {
+      return file.value("crc32", std::uint32_t{ 0 });
+    }
+  }
+  return 0;
+}
+
+} // namespace
+
+UpdateSolution
+MakeUpdateSolution(const SolveResult & solve, const json & bundleManifest, int coldSteps)
+{
+  UpdateSolution solution;
+  solution.start = WarmStartFrom(solve);
+  solution.steps = solve.steps;
+  solution.coldSteps = coldSteps;
+  solution.modelChecksum = ModelChecksum(bundleManifest);
+  solution.nodes = static_cast<Index>(solution.start.state.size());
+  return solution;
+}
+
+void
+WriteUpdateSolution(const fs::path & file, const UpdateSolution & solution)
+{
+  BinaryWriter out;
+  for (const char c : kSolutionMagic)
+  {
+    out.Value(c);
+  }
+  out.Value<std::int32_t>(kSolutionVersion);
+  out.Value<std::uint32_t>(solution.modelChecksum);
+  out.Value<std::int32_t>(solution.nodes);
+  out.Value<std::int32_t>(solution.steps);
+  out.Value<std::int32_t>(solution.coldSteps);
+  out.Points(solution.start.state);
+  WriteTextFileAtomically(file.string(), out.Bytes());
+}
+
+UpdateSolution
+ReadUpdateSolution(const fs::path & previous, const json & bundleManifest)
+{
+  const fs::path file = fs::is_directory(previous) ? previous / "solution.bin" : previous;
+  const std::string what = "the previous update's solution '" + file.string() + "'";
+  if (!fs::is_regular_file(file))
+  {
+    throw Error("cannot read " + what + ": no such file; give the output folder of an earlier `biomech update` of "
+                "this bundle (--previous OUT)");
+  }
+  BinaryReader   in(ReadTextFile(file.string()), what, "solve without --previous, or give another update's folder");
+  UpdateSolution solution;
+  for (const char c : kSolutionMagic)
+  {
+    if (in.Value<char>() != c)
+    {
+      in.Fail("not a solution file");
+    }
+  }
+  const auto version = in.Value<std::int32_t>();
+  if (version != kSolutionVersion)
+  {
+    in.Fail("format version " + std::to_string(version) + ", this module reads " + std::to_string(kSolutionVersion));
+  }
+  solution.modelChecksum = in.Value<std::uint32_t>();
+  solution.nodes = in.Value<std::int32_t>();
+  solution.steps = in.Value<std::int32_t>();
+  solution.coldSteps = in.Value<std::int32_t>();
+  solution.start.state = in.Points();
+  if (!in.AtEnd() || static_cast<Index>(solution.start.state.size()) != solution.nodes)
+  {
+    in.Fail("a size that does not match its header");
+  }
+  const std::uint32_t expected = ModelChecksum(bundleManifest);
+  const Index         nodes = bundleManifest.value("model", json::object()).value("nodes", Index{ -1 });
+  if (solution.modelChecksum != expected || solution.nodes != nodes)
+  {
+    throw Error("cannot use " + what + ": it solved another model (" + std::to_string(solution.nodes) +
+                " nodes) than this bundle's (" + std::to_string(nodes) +
+                " nodes, or the same count but another model.bin); give an update of this bundle, or none");
+  }
+  return solution;
 }
 
 } // namespace bmr

@@ -294,6 +294,7 @@ def update(
     sparse_displacements=None,
     intraoperative_image=None,
     intraoperative_mask=None,
+    previous=None,
     progress=None,
     **settings
 ):
@@ -301,7 +302,10 @@ def update(
     transform, warped image and label maps, evaluation, on a prepared model
     (a :class:`ModelBundle`, or the path of a bundle folder). Settings: the bundle's,
     with these keywords (the solve's, fit's and evaluation's, and ``gravity``,
-    ``csf_drained_depth``, ``max_distance``) over them. Returns a
+    ``csf_drained_depth``, ``max_distance``) over them. ``previous``: an earlier
+    update of the same surgery (its :class:`RegistrationResult`, or the output folder
+    of ``biomech update``) to start the solve from (``result.solve.warm_started``);
+    the result is the cold solve's within the solver tolerance. Returns a
     :class:`RegistrationResult` with ``report``, as :func:`register`.
     """
     if not isinstance(bundle, _bmr.ModelBundle):
@@ -309,7 +313,7 @@ def update(
     values = _checked_settings("update", settings)
     result, report = _bmr._update(
         bundle, intraoperative_surface, sparse_points, sparse_displacements, intraoperative_image,
-        intraoperative_mask, values, progress,
+        intraoperative_mask, previous, values, progress,
     )
     result.report = report
     return result

@@ -508,6 +508,13 @@ def test_prepare_then_update_gives_the_one_call_registration(tmp_path, colin27):
         np.testing.assert_array_equal(result.transform.transform_points(samples),
                                       one_call.transform.transform_points(samples))
         np.testing.assert_array_equal(result.warped_image.array, one_call.warped_image.array)
+    # A later update of the surgery from this one (its result in memory): a warm start, fewer steps.
+    second = bmr.update(bundle, sparse_points=points, sparse_displacements=1.5 * displacements, previous=from_object)
+    assert second.solve.warm_started and not from_object.solve.warm_started
+    assert second.report["solve"]["warm_started"]
+    assert second.solve.converged and second.solve.steps < from_object.solve.steps
+    with pytest.raises(bmr.Error, match="no such file"):
+        bmr.update(bundle, sparse_points=points, sparse_displacements=displacements, previous=tmp_path / "none")
     with pytest.raises(TypeError, match="give it to update"):
         bmr.prepare(image, brain_mask=mask, gravity=(0, 0, -9810), **CRANIOTOMY)
     with pytest.raises(bmr.Error, match="no manifest.json|no such folder"):
