@@ -6,10 +6,12 @@ prepares Colin27 as a model bundle for 5 mm hexahedra, 7 mm ANP tetrahedra
 and the 5 mm meshless cloud (`biomech prepare`, its time reported), then
 runs `biomech update` from the truth's tracked points several times per
 bundle, and once more on the hexahedra with the gravity fit (5 sizes, the
-intraoperative image). The warm start (issue 60 item 2): a 15 mm truth of
-the same scene (`--shift 15`), updated on each bundle cold and warm-started
-from the 10 mm update (`--previous`); its steps against the cold solve's,
-and the two results' difference. Each update's time is the process's wall time, from
+intraoperative image). The warm start (issue 60 item 2): the truth's
+tracked displacements times 1.5 (a 15 mm measurement of the same pattern;
+the demo's own 15 mm truth folds a cell of its hexahedral truth model),
+updated on the hexahedral and tetrahedral bundles cold and warm-started
+from the 10 mm update (`--previous`); its steps against the cold solve's, and the two results'
+difference. Each update's time is the process's wall time, from
 its start (reading the bundle) to its last file written; the stages come
 from its report. The error of each update against the ground truth (inside
 the intraoperative brain, on the preoperative grid) is measured with the
@@ -64,11 +66,12 @@ def main():
     # 1 g along the head's down, the largest size tried (as the README demo's --registration-gravity 1).
     gravity = [9810.0 * component for component in demo["ground_truth"]["down"]]
     tracked = os.path.join(truth, "tracked-points.csv")
-    deeper = os.path.join(out, "truth-15mm")
-    run([biomech, "demo", "-o", deeper, "--truth-only", "--shift", "15", "--quiet"], environment)
-    deeper_tracked = os.path.join(deeper, "tracked-points.csv")
-    deeper_transform = bmr.read_transform(os.path.join(deeper, "ground-truth-transform.h5"))
-    deeper_region = bmr.imread(os.path.join(deeper, "intraoperative-brain-on-preoperative-grid.nii.gz"))
+    deeper_tracked = os.path.join(out, "tracked-points-x1.5.csv")
+    with open(tracked) as source, open(deeper_tracked, "w") as target:
+        target.write(source.readline())
+        for line in source:
+            values = [float(value) for value in line.split(",")]
+            target.write(",".join(repr(value) for value in values[:3] + [1.5 * value for value in values[3:]]) + "\n")
     truth_transform = bmr.read_transform(os.path.join(truth, "ground-truth-transform.h5"))
     region = bmr.imread(os.path.join(truth, "intraoperative-brain-on-preoperative-grid.nii.gz"))
     patient = [os.path.join(TEMPLATES, "ch2.nii.gz"), "--mask", os.path.join(TEMPLATES, "ch2bet.nii.gz"),
@@ -99,6 +102,10 @@ def main():
                      "prepare_stages": manifest["prepare"]["seconds"], "manifest": manifest, "rounds": rounds,
                      "error": error_of(os.path.join(out, "update-%s-0" % kind))})
         # The second update of the surgery: the 15 mm shift, cold and from the 10 mm update.
+        # Not the meshless cloud: its cold update of this measurement ran 16 min without
+        # finishing on 2026-12-02 (not investigated yet: see the issue 60 note).
+        if kind == "meshless":
+            continue
         second = {}
         for start in ("cold", "warm"):
             second[start] = []
@@ -112,12 +119,7 @@ def main():
         cold_transform = bmr.read_transform(os.path.join(out, "second-%s-cold-0" % kind, "transform.h5"))
         warm_transform = bmr.read_transform(os.path.join(out, "second-%s-warm-0" % kind, "transform.h5"))
         rows[-1]["second"] = second
-        rows[-1]["second_error"] = {
-            start: bmr.measure_displacement_error(
-                bmr.read_transform(os.path.join(out, "second-%s-%s-0" % (kind, start), "transform.h5")),
-                deeper_transform, deeper_region)
-            for start in ("cold", "warm")}
-        rows[-1]["warm_versus_cold"] = bmr.measure_displacement_error(warm_transform, cold_transform, deeper_region)
+        rows[-1]["warm_versus_cold"] = bmr.measure_displacement_error(warm_transform, cold_transform, region)
 
     # The gravity fit: drained CSF (weightless), 5 sizes from 0 to 1 g along the truth's gravity.
     plan = os.path.join(out, "plan-gravity")
@@ -175,13 +177,15 @@ def section(rows, machine):
                          stage("warp"), stage("write"), row["error"]["p95_mm"], row["error"]["max_mm"]))
     lines += [
         "",
-        "The second update of a surgery (issue 60 item 2): the same scene with a 15 mm shift (`biomech demo "
-        "--shift 15`), updated cold and warm-started from the 10 mm update above (`--previous`). Target: the "
-        "warm start in at most %d %% of the cold steps. Errors against the 15 mm truth; `warm - cold`: the two "
-        "transforms' difference inside the brain." % round(100 * WARM_TARGET), "",
+        "The second update of a surgery (issue 60 item 2): the tracked points' displacements times 1.5 (a 15 mm "
+        "measurement of the same pattern; `biomech demo --shift 15` folds a cell of its own hexahedral truth, so "
+        "there is no 15 mm truth to measure an error against), updated cold and warm-started from the 10 mm "
+        "update above (`--previous`). Target: the warm start in at most %d %% of the cold steps. `warm - cold`: "
+        "the two transforms' difference inside the brain (the solver tolerance is 0.01 mm; the skull contact "
+        "admits neighbouring equilibria, docs/registration.md)." % round(100 * WARM_TARGET), "",
         "| model | cold steps | warm steps | warm / cold | target | cold update (s) | warm update (s) | "
-        "error p95 cold / warm (mm) | warm - cold p95 / max (mm) |",
-        "|---|---|---|---|---|---|---|---|---|"]
+        "warm - cold p95 / max (mm) |",
+        "|---|---|---|---|---|---|---|---|"]
     for row in rows:
         if "second" not in row:
             continue
@@ -189,11 +193,10 @@ def section(rows, machine):
         warm = row["second"]["warm"][0]["report"]["solve"]["steps"]
         fraction = warm / cold
         verdict = "met" if fraction <= WARM_TARGET else "**missed** by %d points" % round(100 * (fraction - WARM_TARGET))
-        lines.append("| %s | %d | %d | %.0f %% | <= %d %%: %s | %.2f | %.2f | %.2f / %.2f | %.3f / %.3f |" % (
+        lines.append("| %s | %d | %d | %.0f %% | <= %d %%: %s | %.2f | %.2f | %.3f / %.3f |" % (
             row["name"], cold, warm, 100 * fraction, round(100 * WARM_TARGET), verdict,
             statistics.median(entry["wall"] for entry in row["second"]["cold"]),
             statistics.median(entry["wall"] for entry in row["second"]["warm"]),
-            row["second_error"]["cold"]["p95_mm"], row["second_error"]["warm"]["p95_mm"],
             row["warm_versus_cold"]["p95_mm"], row["warm_versus_cold"]["max_mm"]))
     lines += [
         "",

@@ -4,6 +4,9 @@
 # apt-get runs only when something is missing. libgdcm-tools: the DICOM
 # reader's GDCM exports its tools as CMake targets (CMake warns when they are
 # missing), and gdcmdump / gdcminfo are what one reads a hospital's series with.
+# python3-venv and python3-scipy: the ITK-Python environment
+# (scripts/install-python-environment.sh) is a venv over Debian's NumPy and
+# SciPy, which its PyPI packages must not replace.
 set -euo pipefail
 
 packages=(
@@ -15,6 +18,7 @@ packages=(
   libgdcm-tools
   python3 python3-dev python3-numpy python3-matplotlib python3-pytest
   pybind11-dev python3-nbclient python3-nbformat python3-ipykernel
+  python3-scipy python3-venv
   snakemake
 )
 

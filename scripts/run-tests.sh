@@ -5,6 +5,9 @@ set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
 bash scripts/install-dependencies.sh
+# ITK's Python wheels, itk-elastix, antspyx and pyvista in build/venv (PyPI):
+# the test Python.itk_interop runs with it.
+bash scripts/install-python-environment.sh
 
 build_dir=build
 jobs="$(nproc 2>/dev/null || echo 2)"

@@ -20,8 +20,20 @@ Quick start::
 
 import json as _json
 import os as _os
+import sys as _sys
 
-from . import _bmr
+# The extension is loaded with RTLD_LOCAL whatever the caller set (sys.setdlopenflags):
+# under RTLD_GLOBAL the binding's Debian ITK 5.2 libraries, and the ITK template
+# instantiations the extension exports, would enter the process's global scope, where
+# ITK's own 5.4 wheels (`import itk`) bind their symbols to them: wrong filter results,
+# then heap corruption (wrapping/tests/test_itk_interop.py).
+_dlopen_flags = _sys.getdlopenflags()
+_sys.setdlopenflags(_dlopen_flags & ~_os.RTLD_GLOBAL)
+try:
+    from . import _bmr
+finally:
+    _sys.setdlopenflags(_dlopen_flags)
+
 from ._bmr import (
     BrainModel,
     BSplineRegistration,
