@@ -331,4 +331,39 @@ def update(
     return result
 
 
+# ITK Python's objects (`import itk`) wherever the package's are taken, and back when given
+# (itk_bridge.py, docs/python.md).
+from . import itk_bridge as _itk_bridge
+from .itk_bridge import image_from_itk, itk_image_from_image, itk_transform_from_transform, transform_from_itk
+
+for _name, _value in list(globals().items()):
+    if not _name.startswith("_") and callable(_value) and not isinstance(_value, type) \
+            and _name not in _itk_bridge.__all__:
+        globals()[_name] = _itk_bridge.accepting_itk(_value)
+
+# ITK Python's functional names of the module's ITK filters (snake_case of the class, keywords
+# of its Set methods), beside the short names: (class, function, its primary inputs, Set
+# method -> keyword).
+for _itk_class, _function, _inputs, _keywords in [
+    ("AtlasBrainMaskImageFilter", atlas_brain_mask, ("image",),
+     dict(atlas_mask_image="atlas_mask", use_b_spline_stage="bspline_stage")),
+    ("FuzzyCMeansClassifierImageFilter", classify_tissue, ("image",),
+     dict(mask_image="mask", number_of_classes="classes", maximum_number_of_iterations="max_iterations",
+          number_of_work_units="threads")),
+    ("BiomechanicalGridImageFilter", make_grid, ("labels",), dict(grid_kind="kind", number_of_work_units="threads")),
+    ("BiomechanicalMaterialMappingFilter", map_materials, ("model",),
+     dict(model_input="model", number_of_work_units="threads")),
+    ("BiomechanicalRegionsFilter", model_regions, ("model",), dict(model_input="model")),
+    ("BrainSurfaceMeshSource", brain_surfaces, ("mask",), dict(compute_skull="skull")),
+    ("DisplacementPointSetToBSplineTransformFilter", fit_transform, ("points", "displacements"),
+     dict(reference_image="reference")),
+    ("EdgeHausdorffDistanceImageFilter", evaluate_edges, ("fixed",), dict(moving_image="moving", mask_image="mask")),
+    ("TransformWarpImageFilter", warp_image, ("image",), dict(reference_image="reference")),
+    ("BSplineIntensityRegistrationFilter", bspline_registration, ("moving",),
+     dict(moving_image="moving", fixed_image="fixed", translation_number_of_iterations="translation_iterations",
+          number_of_histogram_bins="histogram_bins")),
+]:
+    _alias = _itk_bridge.functional_alias(_itk_class, _function, _inputs, _keywords)
+    globals()[_alias.__name__] = _alias
+
 __all__ = [name for name in dir() if not name.startswith("_")]
