@@ -1,11 +1,14 @@
 #!/usr/bin/python3
 """Executes examples/BrainShiftRegistration.ipynb and fails when a cell fails.
 
-    PYTHONPATH=build/python /usr/bin/python3 examples/run_notebook.py [--coarse] [--output executed.ipynb] [--timeout S]
+    PYTHONPATH=build/python build/venv/bin/python examples/run_notebook.py [--coarse] [--output executed.ipynb] [--timeout S]
 
---coarse sets BMR_NOTEBOOK_COARSE=1 (the CI settings, under a minute on 2 cores). The kernel is this
-interpreter (Debian's python3 with numpy, matplotlib and ipykernel), started in a temporary folder with this
-environment (PYTHONPATH must name the built package). Exit status 1 and the failing cell's error when a cell fails.
+--coarse sets BMR_NOTEBOOK_COARSE=1 (the CI settings). The kernel is this interpreter (the venv of
+scripts/install-python-environment.sh: ITK's wheels, itk-elastix, antspyx and pyvista beside Debian's NumPy,
+matplotlib and ipykernel), started in a temporary folder with this environment (PYTHONPATH must name the built
+package; BMR_SOURCE_DIR, the source tree, defaults to this script's). Exit status 1 and the failing cell's
+error when a cell fails. The repository's copy is stored executed with the full settings:
+    PYTHONPATH=build/python build/venv/bin/python examples/run_notebook.py --output examples/BrainShiftRegistration.ipynb
 """
 import argparse
 import json
@@ -55,6 +58,8 @@ def main():
     # The solver's OpenMP threads synchronise often: spinning threads on a shared machine make it crawl.
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     os.environ.setdefault("PYDEVD_DISABLE_FILE_VALIDATION", "1")  # quiets the kernel's debugger warning
+    # The notebook finds the study's elastix parameter files in the source tree.
+    os.environ.setdefault("BMR_SOURCE_DIR", os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     # The kernel inherits this environment; absolute paths keep the package importable from the temporary folder.
     paths = [os.path.abspath(path) for path in os.environ.get("PYTHONPATH", "").split(os.pathsep) if path]
     os.environ["PYTHONPATH"] = os.pathsep.join(paths)

@@ -6,11 +6,13 @@
 # missing), and gdcmdump / gdcminfo are what one reads a hospital's series with.
 # python3-venv and python3-scipy: the ITK-Python environment
 # (scripts/install-python-environment.sh) is a venv over Debian's NumPy and
-# SciPy, which its PyPI packages must not replace.
+# SciPy, which its PyPI packages must not replace. ccache: the wheel that
+# `pip install .` builds (pyproject.toml) compiles the same sources with the
+# same flags as build/, so its objects come from the cache.
 set -euo pipefail
 
 packages=(
-  build-essential cmake g++ pkg-config
+  build-essential cmake g++ pkg-config ccache
   libinsighttoolkit5-dev libvtk9-dev libcgal-dev libeigen3-dev
   libgtest-dev googletest libbenchmark-dev
   nlohmann-json3-dev libcli11-dev libnanoflann-dev zlib1g-dev
