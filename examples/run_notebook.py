@@ -35,7 +35,8 @@ def kernel_manager(folder):
     program = spec.argv[0]
     if program in ("python", "python3"):  # jupyter_client runs these as sys.executable
         program = sys.executable
-    if os.path.realpath(shutil.which(program) or program) == os.path.realpath(sys.executable):
+    # Paths, not their targets: a venv's python is a link to the system's, and only its own path makes it the venv.
+    if os.path.abspath(shutil.which(program) or program) == os.path.abspath(sys.executable):
         return AsyncKernelManager(kernel_name="python3")
     kernels = os.path.join(folder, "kernels")
     os.makedirs(os.path.join(kernels, "python3"))

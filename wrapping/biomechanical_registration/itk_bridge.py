@@ -108,13 +108,18 @@ def image_from_itk(image, argument="image", allow_components=False):
     if min(size) == 0:
         raise ValueError("%s: the itk image is empty (size %s); give it voxels (itk.imread, or Allocate())"
                          % (argument, size))
-    array = itk.array_view_from_image(image)
-    return Image(
-        array,
+    result = Image(
+        itk.array_view_from_image(image),
         spacing=np.array(image.GetSpacing(), dtype=np.float64),
         origin=np.array(image.GetOrigin(), dtype=np.float64),
         direction=np.array(itk.array_from_matrix(image.GetDirection()), dtype=np.float64),
     )
+    # Image() keeps a plain ndarray view, and NumPy points a view's base at the memory's owner, skipping
+    # the NDArrayITKBase whose itk_base keeps the itk image (and, for an itk.image_view_from_array image,
+    # the NumPy array it views) alive: a temporary itk image's voxels were freed before the C++ call read
+    # them. So the Image holds the itk image itself.
+    result._itk_image = image
+    return result
 
 
 _SCALAR_PIXEL_TYPES = ("UC", "SC", "US", "SS", "UI", "SI", "UL", "SL", "ULL", "SLL", "F", "D", "B")

@@ -72,6 +72,22 @@ def test_the_bridge_shares_memory_both_ways():
     assert isinstance(back, itk.Image[itk.UC, 3]) and geometry(back) == geometry(image)[:3] + ((6, 5, 4),)
 
 
+def test_a_temporary_itk_image_lives_as_long_as_the_call_needs_it():
+    # map_materials(model, classification.memberships): the itk image exists only in the call. Before the
+    # bridge kept it, its voxels were freed (and overwritten) before the C++ side read them.
+    def temporary():
+        return bmr.itk_image_from_image(bmr.image_from_array(np.full((20, 20, 20), 3.0, dtype=np.float32)))
+
+    view = bmr.image_from_itk(temporary())
+    import gc
+
+    gc.collect()
+    clutter = [np.zeros(24000) for _ in range(50)]  # reuses freed memory
+    assert float(view.array.sum()) == 3.0 * 20**3 and len(clutter) == 50
+    warped = bmr.warp_image(temporary(), bmr.identity_transform())
+    assert float(itk.array_view_from_image(warped).sum()) == 3.0 * 20**3
+
+
 def test_multicomponent_images_come_out_as_itk_vector_images():
     field = bmr.image_from_array(np.arange(2 * 3 * 4 * 3, dtype=np.float32).reshape(2, 3, 4, 3), SPACING, ORIGIN,
                                  OBLIQUE, is_vector=True)
