@@ -64,41 +64,6 @@ struct BSplineRegisterOptions
   bool                      quiet = false;
 };
 
-/** What an image file holds, without reading its pixels. */
-struct ImageFileInfo
-{
-  unsigned int         dimension = 0;
-  itk::IOComponentEnum component = itk::IOComponentEnum::UNKNOWNCOMPONENTTYPE;
-  unsigned int         components = 1;
-};
-
-ImageFileInfo
-ReadImageFileInfo(const std::string & path, const std::string & what)
-{
-  std::error_code error;
-  if (!fs::is_regular_file(path, error))
-  {
-    throw Error("cannot read " + what + " '" + path + "': no such file");
-  }
-  const auto io = itk::ImageIOFactory::CreateImageIO(path.c_str(), itk::IOFileModeEnum::ReadMode);
-  if (io.IsNull())
-  {
-    throw Error("cannot read " + what + " '" + path +
-                "': not an image format biomech reads (.nii, .nii.gz, .nrrd, .mha, "
-                ".mhd, .png)");
-  }
-  io->SetFileName(path);
-  try
-  {
-    io->ReadImageInformation();
-  }
-  catch (const itk::ExceptionObject & exception)
-  {
-    throw Error("cannot read " + what + " '" + path + "': " + itk::PlainDescription(exception.GetDescription()));
-  }
-  return ImageFileInfo{ io->GetNumberOfDimensions(), io->GetComponentType(), io->GetNumberOfComponents() };
-}
-
 /** The warped image is written with the moving image's component type when
  *  it is an integer type of at most 16 bits (rounded and clamped), else as
  *  float (the registration's precision; 32-bit integers fit exactly up to 2^24). */

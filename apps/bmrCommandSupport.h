@@ -8,6 +8,7 @@
 // ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.
 #include "itkBiomechanicalImageIO.h"
 #include "itkImageFileWriter.h"
+#include "itkImageIOFactory.h"
 
 #include "bmrBrainShiftRegistration.h"
 #include "bmrModel.h"
@@ -109,6 +110,41 @@ typename TImage::Pointer
 ReadImage(const std::string & path, const std::string & what, const std::string & series = {})
 {
   return itk::ReadBiomechanicalImage<TImage>(path, what, series);
+}
+
+/** What an image file holds, without reading its pixels. */
+struct ImageFileInfo
+{
+  unsigned int         dimension = 0;
+  itk::IOComponentEnum component = itk::IOComponentEnum::UNKNOWNCOMPONENTTYPE;
+  unsigned int         components = 1;
+};
+
+inline ImageFileInfo
+ReadImageFileInfo(const std::string & path, const std::string & what)
+{
+  std::error_code error;
+  if (!std::filesystem::is_regular_file(path, error))
+  {
+    throw Error("cannot read " + what + " '" + path + "': no such file");
+  }
+  const auto io = itk::ImageIOFactory::CreateImageIO(path.c_str(), itk::IOFileModeEnum::ReadMode);
+  if (io.IsNull())
+  {
+    throw Error("cannot read " + what + " '" + path +
+                "': not an image format biomech reads (.nii, .nii.gz, .nrrd, .mha, "
+                ".mhd, .png)");
+  }
+  io->SetFileName(path);
+  try
+  {
+    io->ReadImageInformation();
+  }
+  catch (const itk::ExceptionObject & exception)
+  {
+    throw Error("cannot read " + what + " '" + path + "': " + itk::PlainDescription(exception.GetDescription()));
+  }
+  return ImageFileInfo{ io->GetNumberOfDimensions(), io->GetComponentType(), io->GetNumberOfComponents() };
 }
 
 /** A mask file as an image of 0 and 1: every voxel > 0 is inside (so a

@@ -28,6 +28,7 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <optional>
 #include <sstream>
@@ -72,6 +73,11 @@ struct DemoOptions
   std::string                 truthFrom;         // a --truth-only folder to read the truth from
   bool                        elastix = false;
   std::vector<std::string>    elastixParameters;
+  std::string                 peerField;  // a peer registration run elsewhere: its displacement field,
+  std::string                 peerWarped; // its warped image,
+  std::string                 peerName;   // the method's name in the report,
+  double                      peerSeconds = 0.0; // its run time
+  std::string                 peerDetails; // and a JSON object of what it was (tool, version, parameters)
   std::string                 contrast = "preoperative";
   std::string                 noiseModel = "gaussian";
   std::vector<double>         intraoperativeSpacing;
@@ -251,6 +257,23 @@ RunDemo(DemoOptions options)
       options.elastixParameters = DefaultElastixParameters();
     }
   }
+  json peerDetails = json::object();
+  if (!options.peerDetails.empty())
+  {
+    try
+    {
+      std::ifstream in(options.peerDetails);
+      peerDetails = json::parse(in);
+    }
+    catch (const json::exception & exception)
+    {
+      throw Error("--peer-details: " + options.peerDetails + " is not readable JSON (" + exception.what() + ")");
+    }
+    if (!peerDetails.is_object())
+    {
+      throw Error("--peer-details: " + options.peerDetails + " must hold a JSON object (what the peer was)");
+    }
+  }
   std::vector<ImageGridSettings> variants;
   if (options.truthOnly)
   {
@@ -309,6 +332,13 @@ RunDemo(DemoOptions options)
     cached ? std::move(cached->truth) : MakeSyntheticBrainShift(preoperative, brainMask, options.truth, stages);
   const RegistrationImage *      intraoperative = truth.intraoperativeImage;
   const RegistrationLabelImage * intraoperativeMask = truth.intraoperativeBrainMask;
+  // A peer run elsewhere on the truth's images: its files checked before anything is written.
+  std::optional<IntensityPeer> externalPeer;
+  if (!options.peerField.empty())
+  {
+    externalPeer = ReadIntensityPeer(options.peerField, options.peerWarped, preoperative, intraoperative);
+    externalPeer->seconds = options.peerSeconds;
+  }
 
   CreateFolder(output);
   std::error_code ignored;
@@ -561,13 +591,21 @@ RunDemo(DemoOptions options)
     WriteEdgeOverlays(method.edges, intraoperative, overlays.string(), "bspline", options.overlays);
   }
 
+  // A peer's method row: its error, its own warped image's edges, its overlays.
+  const auto addPeer = [&](const IntensityPeer & peer, MethodResult method, const std::string & overlayName) {
+    method.seconds = peer.seconds;
+    method.edges = EvaluateEdges(intraoperative, peer.warpedOnFixedGrid, intraoperativeMask);
+    score(peer.transform, method);
+    methods.push_back(method);
+    WriteEdgeOverlays(method.edges, intraoperative, overlays.string(), overlayName, options.overlays);
+  };
   if (options.elastix)
   {
     if (!options.quiet)
     {
       std::cerr << "elastix (peer): " << options.elastixParameters.size() << " parameter files\n";
     }
-    const ElastixPeer peer =
+    const IntensityPeer peer =
       RegisterWithElastix(output / "intraoperative.nii.gz", options.image, output / "intraoperative-brain-mask.nii.gz",
                           options.elastixParameters, preoperative, output / "elastix", options.truth.threads);
     if (peer.warpedOnFixedGrid->GetLargestPossibleRegion() != intraoperative->GetLargestPossibleRegion())
@@ -578,13 +616,19 @@ RunDemo(DemoOptions options)
     peer.warpedOnFixedGrid->CopyInformation(intraoperative);
     MethodResult method;
     method.name = "elastix B-spline";
-    method.seconds = peer.seconds;
     method.stages = { { "register", peer.seconds }, { "transformix", peer.outputSeconds } };
-    method.edges = EvaluateEdges(intraoperative, peer.warpedOnFixedGrid, intraoperativeMask);
     method.details = { { "parameter_files", options.elastixParameters }, { "folder", (output / "elastix").string() } };
-    score(peer.transform, method);
-    methods.push_back(method);
-    WriteEdgeOverlays(method.edges, intraoperative, overlays.string(), "elastix", options.overlays);
+    addPeer(peer, method, "elastix");
+  }
+  if (externalPeer)
+  {
+    MethodResult method;
+    method.name = options.peerName;
+    method.stages = { { "register", externalPeer->seconds } };
+    method.details = peerDetails;
+    method.details["field"] = options.peerField;
+    method.details["warped"] = options.peerWarped;
+    addPeer(*externalPeer, method, "peer");
   }
 
   json report;
@@ -792,6 +836,25 @@ AddDemoCommand(CLI::App & app)
   demo->add_option("--elastix-parameters", options->elastixParameters,
                    "elastix parameter files, in order (default: the module's affine.txt and bspline.txt)")
     ->check(CLI::ExistingFile);
+  // A peer registration run elsewhere (examples/validation_peers.py: ANTs SyN, itk-elastix), scored like the others.
+  CLI::Option * peerField =
+    demo->add_option("--peer-field", options->peerField,
+                     "Also score a peer registration of the --truth-from scene run elsewhere: its displacement "
+                     "field over the preoperative grid (3-vector image: the intraoperative point's preoperative "
+                     "point minus the point, LPS mm)")
+      ->check(CLI::ExistingFile);
+  CLI::Option * peerWarped =
+    demo->add_option("--peer-warped", options->peerWarped,
+                     "The peer's preoperative image warped onto the intraoperative grid (its edges are measured)")
+      ->check(CLI::ExistingFile);
+  CLI::Option * peerName = demo->add_option("--peer-name", options->peerName, "The peer's name in the report");
+  demo->add_option("--peer-seconds", options->peerSeconds, "The peer's registration time (s)")->needs(peerField);
+  demo->add_option("--peer-details", options->peerDetails, "JSON object describing the peer (tool, version, parameters)")
+    ->check(CLI::ExistingFile)
+    ->needs(peerField);
+  peerField->needs(peerWarped)->needs(peerName);
+  peerWarped->needs(peerField);
+  peerName->needs(peerField);
   demo->add_option("--baseline-shrink-factors", options->baselineShrinkFactors, "Baseline pyramid")
     ->capture_default_str();
   demo->add_option("--baseline-iterations", options->baselineIterations, "Baseline iterations per level (0: default)")
@@ -809,6 +872,7 @@ AddDemoCommand(CLI::App & app)
                      "Read the ground truth that --truth-only wrote into this folder instead of solving it; the "
                      "scene (images, craniotomy, materials, intraoperative image) is the folder's")
       ->check(CLI::ExistingDirectory);
+  peerField->needs(truthFrom);
   for (const char * scene :
        { "--image", "--mask", "--craniotomy-centre", "--craniotomy-radius", "--shift", "--free-rim", "--gravity",
          "--poisson-ratio", "--csf-modulus", "--csf-poisson-ratio", "--tumour-centre", "--tumour-radius",
@@ -821,7 +885,7 @@ AddDemoCommand(CLI::App & app)
   for (const char * registration : { "--variant", "--load", "--surface-match", "--registration-gravity",
                                      "--gravity-fit-candidates", "--no-registration-resection", "--elastix",
                                      "--elastix-parameters", "--baseline-shrink-factors", "--baseline-iterations",
-                                     "--truth-from" })
+                                     "--truth-from", "--peer-field" })
   {
     truthOnly->excludes(demo->get_option(registration));
   }

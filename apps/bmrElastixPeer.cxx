@@ -1,4 +1,4 @@
-// elastix as the intensity-registration peer (bmrElastixPeer.h).
+// The intensity-registration peers (bmrElastixPeer.h).
 #include "bmrElastixPeer.h"
 
 #include "itkCastImageFilter.h"
@@ -7,6 +7,7 @@
 #include "bmrMeshIO.h"
 
 #include <cerrno>
+#include <cmath>
 #include <chrono>
 #include <cstdlib>
 #include <cstring>
@@ -30,6 +31,26 @@ namespace app
 {
 namespace
 {
+
+using DisplacementField = itk::DisplacementFieldTransform<double, 3>::DisplacementFieldType;
+
+/** A displacement field image (3-vectors of floats or doubles), in double precision. */
+DisplacementField::Pointer
+ReadDisplacementField(const std::string & path, const std::string & what)
+{
+  auto cast = itk::CastImageFilter<itk::Image<itk::Vector<float, 3>, 3>, DisplacementField>::New();
+  cast->SetInput(ReadImage<itk::Image<itk::Vector<float, 3>, 3>>(path, what));
+  cast->Update();
+  return cast->GetOutput();
+}
+
+itk::DisplacementFieldTransform<double, 3>::Pointer
+FieldTransform(DisplacementField * field)
+{
+  auto transform = itk::DisplacementFieldTransform<double, 3>::New();
+  transform->SetDisplacementField(field);
+  return transform;
+}
 
 /** Runs `arguments` (arguments[0] found on PATH), its output into `log`;
  *  throws Error naming the program, its exit and the log's last lines. */
@@ -119,7 +140,7 @@ DefaultElastixParameters()
               "--elastix-parameters");
 }
 
-ElastixPeer
+IntensityPeer
 RegisterWithElastix(const fs::path & fixed, const fs::path & moving, const fs::path & fixedMask,
                     const std::vector<std::string> & parameterFiles, const RegistrationImage * preoperativeGrid,
                     const fs::path & folder, int threads)
@@ -146,7 +167,7 @@ RegisterWithElastix(const fs::path & fixed, const fs::path & moving, const fs::p
     threading = { "-threads", std::to_string(threads) };
   }
   elastix.insert(elastix.end(), threading.begin(), threading.end());
-  ElastixPeer peer;
+  IntensityPeer peer;
   auto        start = std::chrono::steady_clock::now();
   RunProgram(elastix, out / "elastix-output.txt", install);
   peer.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -181,17 +202,58 @@ RegisterWithElastix(const fs::path & fixed, const fs::path & moving, const fs::p
   peer.outputSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
   peer.warpedOnFixedGrid = ReadImage<RegistrationImage>((out / "warped" / "result.nii").string(), "elastix's warped image");
-  using FieldType = itk::DisplacementFieldTransform<double, 3>::DisplacementFieldType;
-  using FloatFieldType = itk::Image<itk::Vector<float, 3>, 3>;
-  const auto floatField = ReadImage<FloatFieldType>((out / "field" / "deformationField.nii").string(),
-                                                    "elastix's deformation field");
-  auto cast = itk::CastImageFilter<FloatFieldType, FieldType>::New();
-  cast->SetInput(floatField);
-  cast->Update();
-  peer.transform = itk::DisplacementFieldTransform<double, 3>::New();
-  peer.transform->SetDisplacementField(cast->GetOutput());
+  peer.transform = FieldTransform(
+    ReadDisplacementField((out / "field" / "deformationField.nii").string(), "elastix's deformation field"));
   // 85 MB on Colin27's grid; the transform parameter files make it again.
   fs::remove(out / "field" / "deformationField.nii", ignored);
+  return peer;
+}
+
+IntensityPeer
+ReadIntensityPeer(const std::string & fieldPath, const std::string & warpedPath, const RegistrationImage * preoperativeGrid,
+                  const RegistrationImage * intraoperativeGrid)
+{
+  // ITK would read a scalar image as a field with three equal components: refuse it.
+  const ImageFileInfo info = ReadImageFileInfo(fieldPath, "the peer's displacement field");
+  if (info.dimension != 3 || info.components != 3)
+  {
+    throw Error("the peer's displacement field " + fieldPath + " has " + std::to_string(info.dimension) +
+                " dimensions and " + std::to_string(info.components) + " components per voxel; give a 3D image of "
+                "3-vectors (e.g. transformix's deformationField, ANTs' composed warp)");
+  }
+  const DisplacementField::Pointer field = ReadDisplacementField(fieldPath, "the peer's displacement field");
+  // Grids compared to the precision NIfTI stores them with (single precision).
+  const auto onGrid = [](const auto * image, const RegistrationImage * grid) {
+    if (image->GetLargestPossibleRegion() != grid->GetLargestPossibleRegion())
+    {
+      return false;
+    }
+    for (unsigned int axis = 0; axis < 3; ++axis)
+    {
+      if (std::abs(image->GetSpacing()[axis] - grid->GetSpacing()[axis]) > 1e-4 ||
+          std::abs(image->GetOrigin()[axis] - grid->GetOrigin()[axis]) > 1e-3)
+      {
+        return false;
+      }
+    }
+    return true;
+  };
+  if (!onGrid(field.GetPointer(), preoperativeGrid))
+  {
+    throw Error("the peer's displacement field " + fieldPath + " is not on the preoperative image's grid (size, spacing, "
+                "origin): compute it there (the study measures errors over the whole brain)");
+  }
+  IntensityPeer peer;
+  peer.warpedOnFixedGrid = ReadImage<RegistrationImage>(warpedPath, "the peer's warped image");
+  if (!onGrid(peer.warpedOnFixedGrid.GetPointer(), intraoperativeGrid))
+  {
+    throw Error("the peer's warped image " + warpedPath + " is not on the intraoperative image's grid (size, spacing, "
+                "origin): resample the preoperative image onto intraoperative.nii.gz");
+  }
+  // The same grids, read back from single-precision NIfTI: take the exact geometry.
+  field->CopyInformation(preoperativeGrid);
+  peer.warpedOnFixedGrid->CopyInformation(intraoperativeGrid);
+  peer.transform = FieldTransform(field);
   return peer;
 }
 

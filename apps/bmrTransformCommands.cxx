@@ -329,31 +329,14 @@ RunWarp(const WarpOptions & options)
   }
 
   // The pixel type of the file is kept: label maps stay integer labels.
-  if (!fs::is_regular_file(options.image, ignored))
+  const ImageFileInfo info = ReadImageFileInfo(options.image, "image");
+  if (info.dimension != 3 || info.components != 1)
   {
-    throw Error("cannot read image '" + options.image + "': no such file");
-  }
-  auto io = itk::ImageIOFactory::CreateImageIO(options.image.c_str(), itk::ImageIOFactory::IOFileModeEnum::ReadMode);
-  if (io == nullptr)
-  {
-    throw Error("cannot read image '" + options.image + "': no ITK image reader knows this format");
-  }
-  io->SetFileName(options.image);
-  try
-  {
-    io->ReadImageInformation();
-  }
-  catch (const itk::ExceptionObject & exception)
-  {
-    throw Error("cannot read image '" + options.image + "': " + itk::PlainDescription(exception.GetDescription()));
-  }
-  if (io->GetNumberOfDimensions() != 3 || io->GetNumberOfComponents() != 1)
-  {
-    throw Error("image '" + options.image + "' has " + std::to_string(io->GetNumberOfDimensions()) + " dimensions and " +
-                std::to_string(io->GetNumberOfComponents()) + " components per voxel; warp takes 3D scalar images");
+    throw Error("image '" + options.image + "' has " + std::to_string(info.dimension) + " dimensions and " +
+                std::to_string(info.components) + " components per voxel; warp takes 3D scalar images");
   }
   using Component = itk::IOComponentEnum;
-  switch (io->GetComponentType())
+  switch (info.component)
   {
     case Component::UCHAR:
       WarpWithPixelType<unsigned char>(options, transform);

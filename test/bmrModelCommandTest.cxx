@@ -6,6 +6,8 @@
 #include "itkImage.h"
 #include "itkImageFileWriter.h"
 #include "itkImageRegionIteratorWithIndex.h"
+#include "itkTransformToDisplacementFieldFilter.h"
+#include "itkBiomechanicalTransformIO.h"
 
 #include "bmrMeshIO.h"
 #include "bmrScene.h"
@@ -657,8 +659,44 @@ TEST_F(ModelCommandTest, DemoRegistersACachedTruthAsTheWholeDemoDoes)
   EXPECT_LT(cachedReport["methods"][1]["displacement_error_mm"]["p95"].get<double>(),
             cachedReport["methods"][0]["displacement_error_mm"]["p95"].get<double>());
 
+  // A peer registration run elsewhere (--peer-field, as the study's ANTs and itk-elastix): given the truth's own
+  // backward map sampled on the preoperative grid, where the errors are measured, it scores no error (single
+  // precision), its time and details as given.
+  const fs::path peerField = m_Folder / "truth-field.nii.gz", peerDetails = m_Folder / "peer.json";
+  {
+    using FieldImage = itk::Image<itk::Vector<float, 3>, 3>;
+    auto sample = itk::TransformToDisplacementFieldFilter<FieldImage, double>::New();
+    const auto transform = itk::ReadBiomechanicalTransform((truth / "ground-truth-transform.h5").string());
+    sample->SetTransform(dynamic_cast<const itk::Transform<double, 3, 3> *>(transform.GetPointer()));
+    sample->SetReferenceImage(itk::ReadBiomechanicalImage<ImageType>((Colin27Folder / "ch2.nii.gz").string(), "Colin27"));
+    sample->UseReferenceImageOn();
+    sample->Update();
+    itk::WriteBiomechanicalImage(sample->GetOutput(), peerField);
+    std::ofstream(peerDetails) << R"({"tool": "the truth itself"})";
+  }
+  const std::string peer = "demo --quiet --overlays 0 --variant none --no-baseline --truth-from " + Quoted(truth) +
+                           " --peer-name exact --peer-seconds 1.5 --peer-details " + Quoted(peerDetails);
+  run = Biomech(peer + " --peer-field " + Quoted(peerField) + " --peer-warped " + Quoted(truth / "intraoperative.nii.gz") +
+                " -o " + Quoted(m_Folder / "peer"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const json peerReport = json::parse(ReadText(m_Folder / "peer" / "demo-report.json"));
+  ASSERT_EQ(peerReport["methods"].size(), 2u);
+  const json & exact = peerReport["methods"][1];
+  EXPECT_EQ(exact["name"], "exact");
+  EXPECT_EQ(exact["seconds"].get<double>(), 1.5);
+  EXPECT_EQ(exact["details"]["tool"], "the truth itself");
+  EXPECT_LT(exact["displacement_error_mm"]["max"].get<double>(), 1e-3);
+  EXPECT_GT(peerReport["methods"][0]["displacement_error_mm"]["p95"].get<double>(), 1.0);
+
   const fs::path output = m_Folder / "out";
   const std::vector<std::pair<std::string, std::string>> cases = {
+    { peer + " --peer-field " + Quoted(truth / "intraoperative.nii.gz") + " --peer-warped " +
+        Quoted(truth / "intraoperative.nii.gz"),
+      "has 3 dimensions and 1 components per voxel; give a 3D image of 3-vectors" },
+    { peer + " --peer-field " + Quoted(peerField) + " --peer-warped " + Quoted(Colin27Folder / "ch2.nii.gz"),
+      "is not on the intraoperative image's grid" },
+    { "demo --peer-field " + Quoted(peerField) + " --peer-warped " + Quoted(peerField) + " --peer-name x",
+      "--truth-from" },
     { "demo --truth-from " + Quoted(cached), "not the report of a reusable ground truth" },
     { "demo --truth-from " + Quoted(m_Folder), "demo-report.json is missing; make the folder with `biomech demo --truth-only" },
     { "demo --truth-from " + Quoted(truth) + " --shift 5", "--shift" },
