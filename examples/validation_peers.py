@@ -22,6 +22,7 @@ import importlib.metadata
 import json
 import os
 import sys
+import tempfile
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -125,8 +126,11 @@ def debian_elastix_parameters(folder):
 
 def field_array(parameter_object, preoperative):
     import itk
-    return itk.array_from_image(itk.transformix_deformation_field(preoperative, on_grid(parameter_object,
-                                                                                         preoperative)))
+    # transformix also writes the field as deformationField.nii (85 MB) into its output directory, the current one
+    # unless told: a temporary one.
+    with tempfile.TemporaryDirectory() as scratch:
+        return itk.array_from_image(itk.transformix_deformation_field(
+            preoperative, on_grid(parameter_object, preoperative), output_directory=scratch))
 
 
 def register_itk_elastix(truth, folder, reduced, threads, debian_folder):
