@@ -874,6 +874,7 @@ RunPrepare(const PrepareOptions & options)
   StageTimer           timer(progress.Stages());
   bundle.model = PrepareBrainModel(patient.image, patient.brainMask, patient.tumourMask, patient.skullSurface,
                                    bundle.settings.model, timer, true);
+  PrecomputeBrainModel(bundle.model, bundle.settings, timer);
   timer.Run("write", [&] {
     bundle.manifest["prepare"] = { { "preoperative_image", options.patient.image },
                                    { "seconds", timer.Json() },

@@ -12,7 +12,7 @@
 get_filename_component(BMR_LAYERING_ROOT ${CMAKE_CURRENT_LIST_DIR}/.. ABSOLUTE)
 
 # Public headers (include/) by the layer that implements them.
-set(BMR_MECHANICS_HEADERS bmrModel.h bmrSolver.h bmrMeshless.h bmrOgden.h bmrUnits.h bmrAtomicWrite.h
+set(BMR_MECHANICS_HEADERS bmrModel.h bmrSolver.h bmrBinaryStream.h bmrMeshless.h bmrOgden.h bmrUnits.h bmrAtomicWrite.h
                           bmrSettingsTable.h bmrSolverSettingsTable.h)
 set(BMR_FORMATS_HEADERS bmrMeshIO.h bmrScene.h bmrMeshGenerators.h)
 set(BMR_MODELBUILDING_HEADERS bmrFuzzyCMeans.h bmrMaterialMapping.h bmrImageGrids.h bmrBrainSurfaces.h

@@ -313,6 +313,13 @@ struct BrainShiftRegistrationSettings
   double evaluationDistanceThreshold = 1.7;
 };
 
+/** The prepared model's Total Lagrangian precomputation (the "precompute"
+ *  stage; bmr::SolverPrecomputation with settings.solver's formulation), set
+ *  on model.pipelineModel so that every solve of the model uses it: the last
+ *  step of `biomech prepare`, stored in the model bundle. Throws bmr::Error. */
+void
+PrecomputeBrainModel(BrainModel & model, const BrainShiftRegistrationSettings & settings, StageTimer & timer);
+
 /** The registration's settings as one table (bmrSettingsTable.h), read by
  *  `biomech model` and `biomech register` (--name-with-dashes; a flag whose
  *  default is true is --no-name), Python's register() and

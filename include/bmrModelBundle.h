@@ -10,6 +10,10 @@
 //   model.bin              the model, lossless: nodes, cells, materials, node
 //                          sets, constraints, meshless integration points, and
 //                          the brain, skull and cortex surfaces
+//   precomputation.bin     the solver's Total Lagrangian precomputation
+//                          (bmr::SolverPrecomputation: shape-function
+//                          derivatives, hourglass vectors, ANP averaging, the
+//                          kernels' schedules, the meshless MLS tables)
 //   preoperative.nii.gz    the preoperative image (float32), brain-mask.nii.gz,
 //   tissue-classes.nii.gz  the classes (1..K), labels-K.nii.gz the label maps
 //   model.vtu, brain.vtp, skull.vtp, cortex.vtp (+ integration-points.vtu):
@@ -21,10 +25,9 @@
 // a temporary folder beside its target and renamed, so a failed `prepare`
 // leaves no half-written bundle.
 //
-// What is not in the bundle: the Total Lagrangian precomputation of the
-// solver (shape-function derivatives, hourglass vectors, MLS shape-function
-// tables, contact trees) is made again by each update's solver from the
-// stored model (docs/registration.md says what it costs).
+// What is not in the bundle: the masses (they follow each solve's time step)
+// and the contact search trees (CGAL's AABB trees point into the surfaces),
+// which each update's solver builds (docs/registration.md says what it costs).
 #ifndef bmrModelBundle_h
 #define bmrModelBundle_h
 
@@ -40,7 +43,7 @@ namespace bmr
 {
 
 /** The bundle format's version: a bundle of another version is not read. */
-constexpr int kModelBundleVersion = 1;
+constexpr int kModelBundleVersion = 2; // 2: precomputation.bin
 
 struct ModelBundle
 {

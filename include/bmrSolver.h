@@ -190,13 +190,61 @@ private:
   Index m_Element;
 };
 
+class BinaryWriter; // bmrBinaryStream.h
+class BinaryReader;
+
+/** What a Solver computes from the model's reference configuration alone
+ *  (the Total Lagrangian precomputation): the force model's shape-function
+ *  derivatives, volumes, hourglass vectors and stiffnesses, the ANP
+ *  tetrahedra's nodal averaging, the kernels' schedules and, for a meshless
+ *  model, the MLS shape-function tables at the integration points and at the
+ *  nodes. Made once (before surgery: `biomech prepare`), stored (Write / Read:
+ *  the model bundle's precomputation.bin) and handed to every Solver of the
+ *  same model, whatever its loads, constraints, contact and gravity.
+ *  Not in it: the masses (they follow the solve's time step and collapse
+ *  barrier) and the contact search trees (CGAL's AABB trees point into the
+ *  surfaces and cannot be stored; the skull's takes about 0.01 s to build). */
+class SolverPrecomputation
+{
+public:
+  /** Validates the model first (Model::Validate). */
+  SolverPrecomputation(const Model & model, const SolverSettings & settings);
+  ~SolverPrecomputation();
+  SolverPrecomputation(SolverPrecomputation &&) noexcept;
+  SolverPrecomputation & operator=(SolverPrecomputation &&) noexcept;
+
+  /** Empty when it was made from `model`'s reference configuration (nodes,
+   *  cells, materials, integration points and shape-function settings) with
+   *  `settings`' tetrahedron formulation, hourglass coefficient and collapse
+   *  bulk modulus; else what differs, in words. */
+  std::string Mismatch(const Model & model, const SolverSettings & settings) const;
+
+  /** The settings it was made with: those it depends on (the rest are the defaults). */
+  SolverSettings Settings() const;
+
+  void Write(BinaryWriter & out) const;
+  /** Throws bmr::Error (the reader's) for a damaged or inconsistent one. */
+  static SolverPrecomputation Read(BinaryReader & in);
+
+  struct Impl; // private to the core (bmrSolverImpl.h)
+  const Impl & State() const { return *m_Impl; }
+
+private:
+  explicit SolverPrecomputation(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> m_Impl;
+};
+
 /** Precomputes everything the Total Lagrangian formulation allows (shape
  *  function derivatives, volumes, hourglass vectors, masses, contact trees) on
- *  construction; Solve() then only time-steps. Validates the model first. */
+ *  construction, or takes what `precomputed` holds of it (a
+ *  SolverPrecomputation of the same model: results bitwise the same);
+ *  Solve() then only time-steps. Validates the model first; throws bmr::Error
+ *  naming the difference when `precomputed` was made for another model or
+ *  other settings. */
 class Solver
 {
 public:
-  Solver(const Model & model, const SolverSettings & settings);
+  Solver(const Model & model, const SolverSettings & settings, const SolverPrecomputation * precomputed = nullptr);
   ~Solver();
   Solver(const Solver &) = delete;
   Solver & operator=(const Solver &) = delete;

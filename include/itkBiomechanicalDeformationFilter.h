@@ -25,7 +25,9 @@ namespace itk
  *  - "Model" (SetModelInput, required): a BiomechanicalModelObject, e.g.
  *    BiomechanicalGridImageFilter::GetModelOutput() after material mapping,
  *    or SetModel() with a bmr::Model. Its fixed and prescribed displacements,
- *    contact surfaces and gravity are used as they are.
+ *    contact surfaces and gravity are used as they are, and its
+ *    precomputation (BiomechanicalModelObject::SetPrecomputation, e.g. from a
+ *    model bundle) instead of computing the shape functions again.
  *  - "PrescribedDisplacements" (optional): a point set whose points are
  *    model nodes (the nearest node, within 1e-6 of the model's size) and
  *    whose point data are their displacements (mm), e.g. from a loads filter.

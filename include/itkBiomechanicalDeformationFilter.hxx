@@ -244,7 +244,8 @@ BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::GenerateDat
   };
   try
   {
-    bmr::Solver solver(model, settings);
+    // The model object's precomputation, made before surgery, when it has one.
+    bmr::Solver solver(model, settings, this->GetModelInput()->GetPrecomputation().get());
     solver.SetWarmStart(m_WarmStart);
     m_Result = solver.Solve(report);
   }

@@ -12,9 +12,15 @@
 
 #include "bmrModel.h"
 
+namespace bmr
+{
+class SolverPrecomputation; // bmrSolver.h
+}
+
 #include <algorithm>
 #include <array>
 #include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -45,6 +51,14 @@ using BiomechanicalSurfaceMeshType = Mesh<double, 3, DefaultStaticMeshTraits<dou
  * travels between filters in this object: BiomechanicalGridImageFilter
  * produces it (GetModelOutput()) and BiomechanicalDeformationFilter consumes
  * it.
+ *
+ * It may also carry the model's Total Lagrangian precomputation
+ * (bmr::SolverPrecomputation: shape-function derivatives, hourglass vectors,
+ * MLS tables), made before surgery and read back from a model bundle; every
+ * BiomechanicalDeformationFilter that solves the model then uses it instead
+ * of computing its own. SetModel keeps it: a solve of a model whose reference
+ * configuration it does not fit fails with an exception that names the
+ * difference.
  *
  * \ingroup BiomechanicalRegistration
  */
@@ -79,11 +93,25 @@ public:
     return m_Model;
   }
 
+  /** The model's precomputation (null: none; each solve makes its own). */
+  void
+  SetPrecomputation(std::shared_ptr<const bmr::SolverPrecomputation> precomputation)
+  {
+    m_Precomputation = std::move(precomputation);
+    this->Modified();
+  }
+  const std::shared_ptr<const bmr::SolverPrecomputation> &
+  GetPrecomputation() const
+  {
+    return m_Precomputation;
+  }
+
   void
   Initialize() override
   {
     Superclass::Initialize();
     m_Model = bmr::Model{};
+    m_Precomputation.reset();
   }
 
   void
@@ -92,6 +120,7 @@ public:
     if (const auto * other = dynamic_cast<const Self *>(data))
     {
       m_Model = other->m_Model;
+      m_Precomputation = other->m_Precomputation;
     }
   }
 
@@ -106,10 +135,12 @@ protected:
     os << indent << "Nodes: " << m_Model.nodes.size() << ", cells: " << m_Model.cells.size()
        << ", integration points: " << m_Model.meshless.integrationPoints.size()
        << ", materials: " << m_Model.materials.size() << std::endl;
+    os << indent << "Precomputation: " << (m_Precomputation ? "yes" : "none") << std::endl;
   }
 
 private:
-  bmr::Model m_Model;
+  bmr::Model                                       m_Model;
+  std::shared_ptr<const bmr::SolverPrecomputation> m_Precomputation;
 };
 
 /** A triangle itk::Mesh (mm) as the core's surface (bmr::ContactSurface with

@@ -189,6 +189,13 @@ LargestDifference(const std::vector<bmr::Vector3> & a, const std::vector<bmr::Ve
   return largest;
 }
 
+bool
+HasStage(const bmr::StageTimer & timer, const std::string & stage)
+{
+  const auto & stages = timer.Stages();
+  return std::any_of(stages.begin(), stages.end(), [&](const auto & entry) { return entry.first == stage; });
+}
+
 /** The two phases through a bundle on disk: PrepareBrainModel, WriteModelBundle into `folder`, ReadModelBundle, UpdateBrainShift. */
 bmr::BrainShiftRegistrationResult
 PrepareWriteReadAndUpdate(const bmr::RegistrationImage * image, const bmr::RegistrationLabelImage * brainMask,
@@ -200,12 +207,31 @@ PrepareWriteReadAndUpdate(const bmr::RegistrationImage * image, const bmr::Regis
   bundle.preoperativeImage = const_cast<bmr::RegistrationImage *>(image);
   bmr::StageTimer timer;
   bundle.model = bmr::PrepareBrainModel(image, brainMask, nullptr, {}, settings.model, timer, true);
+  bmr::PrecomputeBrainModel(bundle.model, settings, timer);
   bmr::WriteModelBundle(folder / "bundle", bundle);
   const bmr::ModelBundle read = bmr::ReadModelBundle(folder / "bundle");
+  EXPECT_TRUE(read.model.pipelineModel->GetPrecomputation() != nullptr);
   bmr::BrainShiftUpdateInputs inputs;
   inputs.preoperativeImage = read.preoperativeImage;
   inputs.intraoperative.sparse = sag;
-  return bmr::UpdateBrainShift(read.model, inputs, read.settings);
+  auto update = bmr::UpdateBrainShift(read.model, inputs, read.settings);
+  // Nothing of the preoperative phase, the shape functions included, is made again.
+  EXPECT_TRUE(HasStage(timer, "precompute"));
+  for (const char * stage : { "skull-strip", "classify", "grid", "materials", "surfaces", "precompute" })
+  {
+    EXPECT_FALSE(HasStage(update.timer, stage)) << stage;
+  }
+  // Solved with another formulation than prepared: the update makes its own and says so.
+  bmr::BrainShiftRegistrationSettings other = read.settings;
+  other.solver.hourglassCoefficient = 0.5 * read.settings.solver.hourglassCoefficient;
+  other.solver.collapseBulkModulus = 2e5;
+  const auto redone = bmr::UpdateBrainShift(read.model, inputs, other);
+  EXPECT_TRUE(HasStage(redone.timer, "precompute"));
+  EXPECT_TRUE(std::any_of(redone.warnings.begin(), redone.warnings.end(), [](const std::string & warning) {
+    return warning.find("precomputation was made with") != std::string::npos;
+  }));
+  EXPECT_TRUE(redone.solve.converged);
+  return update;
 }
 
 // ---------------------------------------------------------------------------
@@ -280,6 +306,7 @@ TEST_F(ModelBundleTest, WarmStartedUpdateEqualsTheColdSolveInFewerSteps)
     bundle.preoperativeImage = colin.image;
     bmr::StageTimer timer;
     bundle.model = bmr::PrepareBrainModel(colin.image, colin.mask, nullptr, {}, bundle.settings.model, timer, true);
+    bmr::PrecomputeBrainModel(bundle.model, bundle.settings, timer);
     const json manifest = bmr::WriteModelBundle(m_Folder / "bundle", bundle);
     const bmr::ModelBundle read = bmr::ReadModelBundle(m_Folder / "bundle");
     const auto update = [&](double depth, const bmr::WarmStart & previous) {
@@ -357,7 +384,7 @@ TEST_F(ModelBundleTest, PrepareThenUpdateFromTheCommandLine)
   ASSERT_EQ(run.exitCode, 0) << run.err;
   const json manifest = json::parse(bmr::test::ReadText(plan / "manifest.json"));
   EXPECT_EQ(manifest["version"], bmr::kModelBundleVersion);
-  for (const char * stage : { "classify", "grid", "materials", "surfaces" })
+  for (const char * stage : { "classify", "grid", "materials", "surfaces", "precompute" })
   {
     EXPECT_TRUE(manifest["prepare"]["seconds"].contains(stage)) << stage;
   }
@@ -429,6 +456,10 @@ TEST_F(ModelBundleTest, PrepareThenUpdateFromTheCommandLine)
   edited[edited.size() / 2] = static_cast<char>(edited[edited.size() / 2] ^ 0x10);
   std::ofstream(plan / "model.bin", std::ios::binary) << edited;
   expectBundleError("does not match the manifest's checksum");
+  std::ofstream(plan / "model.bin", std::ios::binary) << model;
+  const std::string precomputation = bmr::test::ReadText(plan / "precomputation.bin");
+  std::ofstream(plan / "precomputation.bin", std::ios::binary) << precomputation.substr(0, precomputation.size() - 8);
+  expectBundleError("precomputation.bin has");
   fs::remove(plan / "manifest.json");
   expectBundleError("no manifest.json");
 }

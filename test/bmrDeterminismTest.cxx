@@ -1,7 +1,10 @@
 // Same input, same result, for 1 or N threads: displacements, reaction forces
-// and step counts bitwise identical (forces are assembled in a fixed order).
+// and step counts bitwise identical (forces are assembled in a fixed order);
+// and the same again from a stored precomputation (a model bundle's).
+#include "bmrBinaryStream.h"
 #include "bmrForceModel.h"
 #include "bmrMeshless.h"
+#include "bmrTemporaryFolderTest.h" // EXPECT_CONTAINS
 #include "bmrTestUtilities.h"
 
 #include <gtest/gtest.h>
@@ -181,6 +184,155 @@ TEST(Determinism, MeshlessForcesDoNotDependOnTheNodeNumbering)
   };
   MeshlessForceModel forcesA(a, table(a), settings, 2), forcesB(b, table(b), settings, 2);
   ExpectSameNodalQuantities(forcesA, forcesB, newId, 1e-12);
+}
+
+// ---------------------------------------------------------------------------
+// The Total Lagrangian precomputation made apart (before surgery, from the
+// model without its loads), written, read back and handed to the solver: the
+// same solve bit for bit. Made for another model or other settings, or
+// damaged: a named error, never a solve.
+// ---------------------------------------------------------------------------
+
+/** The model as `biomech prepare` has it: no loads, no contact, no gravity. */
+Model
+Unloaded(Model model)
+{
+  model.prescribedDisplacements.clear();
+  model.fixedConstraints.clear();
+  model.contactSurfaces.clear();
+  model.bodyAcceleration.setZero();
+  return model;
+}
+
+std::string
+Stored(const SolverPrecomputation & precomputation)
+{
+  BinaryWriter out;
+  precomputation.Write(out);
+  return out.Bytes();
+}
+
+SolverPrecomputation
+ReadBack(const std::string & bytes)
+{
+  BinaryReader in(bytes, "the precomputation", "make it again");
+  return SolverPrecomputation::Read(in);
+}
+
+/** Precomputed with 1 thread and read back, the solve with 2 equals the one that computes its own. */
+void
+ExpectStoredPrecomputationSolvesTheSame(const Model & model, SolverSettings settings)
+{
+  settings.threads = 1;
+  const std::string          bytes = Stored(SolverPrecomputation(Unloaded(model), settings));
+  const SolverPrecomputation read = ReadBack(bytes);
+  EXPECT_EQ(Stored(read), bytes) << "written again: the same bytes";
+  EXPECT_EQ(read.Mismatch(model, settings), "");
+  settings.threads = 2;
+  const SolveResult own = Solver(model, settings).Solve();
+  const SolveResult stored = Solver(model, settings, &read).Solve();
+  EXPECT_TRUE(own.converged);
+  EXPECT_GT(own.maxDisplacement, 0.1);
+  EXPECT_EQ(own.steps, stored.steps);
+  EXPECT_TRUE(BitwiseEqual(own.displacements, stored.displacements));
+  EXPECT_TRUE(BitwiseEqual(own.reactionForces, stored.reactionForces));
+  EXPECT_TRUE(BitwiseEqual(own.nodalParameters, stored.nodalParameters));
+  EXPECT_EQ(own.strainEnergy, stored.strainEnergy);
+  EXPECT_EQ(own.activeComponents, stored.activeComponents);
+}
+
+TEST(StoredPrecomputation, HexahedraSolveBitwiseTheSame)
+{
+  ExpectStoredPrecomputationSolvesTheSame(ContactScene(GridCells::Hexahedra), TightRelaxation(1e-6, 100000));
+}
+
+TEST(StoredPrecomputation, AnpTetrahedraSolveBitwiseTheSame)
+{
+  ExpectStoredPrecomputationSolvesTheSame(ContactScene(GridCells::Tetrahedra), TightRelaxation(1e-6, 100000));
+}
+
+TEST(StoredPrecomputation, MixedCellsSolveBitwiseTheSame)
+{
+  ExpectStoredPrecomputationSolvesTheSame(ContactScene(GridCells::Mixed), TightRelaxation(1e-6, 100000));
+}
+
+Model
+MeshlessBlock()
+{
+  Model model = MakeBlockMesh(Vector3(6.0, 5.0, 4.0), { 6, 5, 4 }, GridCells::Hexahedra, MakeMaterial(3000.0, 0.45));
+  DistortInteriorNodes(model, 0.2, 5);
+  MakeMeshlessFromCells(model, {}, {}, 1);
+  Prescribe(model, model.NodeSet("zmax"), [](const Vector3 & X) { return Vector3(0.05 * X.y(), 0.0, -0.4); });
+  Prescribe(model, model.NodeSet("zmin"), [](const Vector3 &) { return Vector3::Zero(); });
+  model.bodyAcceleration = Vector3(0.0, 0.0, -9810.0);
+  return model;
+}
+
+TEST(StoredPrecomputation, MeshlessSolvesBitwiseTheSame)
+{
+  ExpectStoredPrecomputationSolvesTheSame(MeshlessBlock(), TightRelaxation(1e-6, 100000));
+}
+
+TEST(StoredPrecomputation, AnotherModelOrOtherSettingsAreNamed)
+{
+  const Model                hexahedra = ContactScene(GridCells::Hexahedra);
+  const SolverSettings       settings = TightRelaxation(1e-6, 100000);
+  const SolverPrecomputation precomputation(Unloaded(hexahedra), settings);
+  const auto expectRefused = [&](const Model & model, const SolverSettings & other, const std::string & words) {
+    EXPECT_CONTAINS(precomputation.Mismatch(model, other), words);
+    try
+    {
+      Solver solver(model, other, &precomputation);
+      ADD_FAILURE() << "a solver took a precomputation made " << words;
+    }
+    catch (const Error & error)
+    {
+      EXPECT_CONTAINS(error.what(), "precomputation was made");
+      EXPECT_CONTAINS(error.what(), words);
+    }
+  };
+  Model moved = hexahedra;
+  moved.nodes[7].x() += 1e-9;
+  expectRefused(moved, settings, "for another model");
+  Model stiffer = hexahedra;
+  stiffer.materials[0].youngsModulus *= 2.0;
+  expectRefused(stiffer, settings, "for another model");
+  SolverSettings hourglass = settings;
+  hourglass.hourglassCoefficient = 0.1;
+  expectRefused(hexahedra, hourglass, "hourglass coefficient 0.2, not 0.1");
+  SolverSettings collapse = settings;
+  collapse.collapseBulkModulus = 1e5;
+  expectRefused(hexahedra, collapse, "collapse bulk modulus");
+  expectRefused(MeshlessBlock(), settings, "for a finite-element model, not a meshless one");
+  // What a solve may change freely: loads, contact, gravity, tolerance, threads.
+  SolverSettings looser = settings;
+  looser.tolerance = 0.01;
+  looser.threads = 2;
+  EXPECT_EQ(precomputation.Mismatch(hexahedra, looser), "");
+}
+
+TEST(StoredPrecomputation, DamagedIsNamed)
+{
+  const std::string bytes = Stored(SolverPrecomputation(Unloaded(MeshlessBlock()), SolverSettings{}));
+  const auto expectDamaged = [&](const std::string & damaged, const std::string & words) {
+    try
+    {
+      ReadBack(damaged);
+      ADD_FAILURE() << "read a damaged precomputation: " << words;
+    }
+    catch (const Error & error)
+    {
+      EXPECT_CONTAINS(error.what(), "the precomputation is damaged");
+      EXPECT_CONTAINS(error.what(), words);
+      EXPECT_CONTAINS(error.what(), "make it again");
+    }
+  };
+  expectDamaged(bytes.substr(0, bytes.size() / 2), "");
+  expectDamaged(bytes + "x", "bytes after the end");
+  expectDamaged("BMRMODEL" + bytes.substr(8), "not a solver precomputation");
+  std::string otherVersion = bytes;
+  otherVersion[8] = 9;
+  expectDamaged(otherVersion, "format version 9");
 }
 
 } // namespace

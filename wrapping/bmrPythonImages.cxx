@@ -759,6 +759,7 @@ BindRegistration(py::module_ & module)
           CheckCraniotomyChoice(bundle.settings.model.craniotomyRadius, bundle.settings.model.craniotomyMask.IsNotNull());
           bundle.model = PrepareBrainModel(bundle.preoperativeImage, mask, tumour, skullSurface.value_or(ContactSurface{}),
                                            bundle.settings.model, timer, true);
+          PrecomputeBrainModel(bundle.model, bundle.settings, timer);
         });
         bundle.manifest["prepare"] = { { "seconds", timer.Json() } };
         return bundle;

@@ -12,11 +12,13 @@
 #include "bmrMeshless.h"
 #include "bmrModel.h"
 #include "bmrNodeOrder.h"
+#include "bmrBinaryStream.h"
 #include "bmrSolver.h"
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -165,6 +167,11 @@ public:
 
   /** Names of the parts in use, for SolveResult::activeComponents. */
   virtual void AddComponents(std::vector<std::string> & components) const = 0;
+  /** A copy working with `threads` threads (a stored SolverPrecomputation's for one solve). */
+  virtual std::unique_ptr<ForceModel> Clone(int threads) const = 0;
+
+  /** Its tables (everything but the threads), for SolverPrecomputation. */
+  virtual void Write(BinaryWriter & out) const = 0;
 };
 
 /** Hexahedra with hourglass control and linear or ANP tetrahedra. */
@@ -190,7 +197,54 @@ public:
   /** Model cell index of the given kernel cell (hexahedra first, then tetrahedra). */
   Index ModelCell(Index kernelCell) const { return m_ModelCell[kernelCell]; }
 
+  std::unique_ptr<ForceModel> Clone(int threads) const override;
+  void                        Write(BinaryWriter & out) const override;
+  /** The inverse of Write; checks that every index lies in range (bmr::Error otherwise). */
+  static std::unique_ptr<FiniteElementForceModel> Read(BinaryReader & in, int threads);
+
+  /** Lists every member but the threads to `visit` (bmrBinaryStream.h), in
+   *  one order for writing and reading. */
+  template <typename Self, typename Visitor>
+  static void VisitMembers(Self & self, Visitor & visit)
+  {
+    visit(self.m_NodeCount);
+    visit(self.m_AverageNodalPressure);
+    visit(self.m_HourglassControl);
+    visit(self.m_CellTypes);
+    visit(self.m_HexNodes);
+    visit(self.m_HexB);
+    visit(self.m_HexXH);
+    visit(self.m_HexHourglassStiffness);
+    visit(self.m_TetNodes);
+    visit(self.m_TetB);
+    visit(self.m_TetAveraged);
+    visit(self.m_TetJacobian);
+    visit(self.m_NodalPressure);
+    visit(self.m_NodeTetOffsets);
+    visit(self.m_NodeTets);
+    visit(self.m_NodeTetWeights);
+    visit(self.m_NodalVolume);
+    visit(self.m_NodalBulkModulus);
+    visit(self.m_Volume);
+    visit(self.m_Mu);
+    visit(self.m_Kappa);
+    visit(self.m_Collapse);
+    visit(self.m_Density);
+    visit(self.m_WaveBound);
+    visit(self.m_CollapseWaveBound);
+    visit(self.m_ModelCell);
+    visit(self.m_HexBlockOffsets);
+    visit(self.m_HexColourOffsets);
+    visit(self.m_TetBlockOffsets);
+    visit(self.m_TetColourOffsets);
+    visit(self.m_FirstTouchOffsets);
+    visit(self.m_FirstTouchNodes);
+    visit(self.m_UntouchedNodes);
+  }
+
 private:
+  FiniteElementForceModel() = default;
+
   /** Cells per chunk of a slab, and per block where ScheduleCells falls back
    *  to colours; measured with colours on the brain-sized benchmark
    *  (2026-11-26, docs/thread-scaling.md): hexahedra in blocks of 256 made
@@ -221,10 +275,10 @@ private:
   /** Adds the forces of tetrahedra [begin, end) to f; returns the first inverted one or -1. */
   Index AddTetrahedronForces(Index begin, Index end, const double * u, double * f) const;
 
-  int   m_Threads;
-  Index m_NodeCount;
-  bool  m_AverageNodalPressure;
-  bool  m_HourglassControl;
+  int   m_Threads = 1;
+  Index m_NodeCount = 0;
+  bool  m_AverageNodalPressure = false;
+  bool  m_HourglassControl = false;
   std::vector<CellType> m_CellTypes; // model cells, for messages
 
   // Hexahedra: nodes, B = (1/V) integral dN/dX (8x3) and X^T h (3x4), from
@@ -315,7 +369,37 @@ public:
   /** Deformation gradient at an integration point. */
   Eigen::Matrix3d DeformationGradientAt(Index point, const double * u) const;
 
+  std::unique_ptr<ForceModel> Clone(int threads) const override;
+  void                        Write(BinaryWriter & out) const override;
+  /** The inverse of Write; checks that every index lies in range (bmr::Error otherwise). */
+  static std::unique_ptr<MeshlessForceModel> Read(BinaryReader & in, int threads);
+
+  /** Lists every member but the threads and the per-step buffers to `visit`. */
+  template <typename Self, typename Visitor>
+  static void VisitMembers(Self & self, Visitor & visit)
+  {
+    visit(self.m_NodeCount);
+    visit(self.m_Positions);
+    visit(self.m_Weight);
+    visit(self.m_Mu);
+    visit(self.m_Kappa);
+    visit(self.m_Collapse);
+    visit(self.m_Density);
+    visit(self.m_WaveBound);
+    visit(self.m_KernelPoint);
+    visit(self.m_KernelBlockOffsets);
+    visit(self.m_KernelColourOffsets);
+    visit(self.m_KernelOffsets);
+    visit(self.m_Numbering);
+    visit(self.m_KernelNodes);
+    visit(self.m_KernelGradients);
+    visit(self.m_KernelMaterial);
+    visit(self.m_KernelIndexOfPoint);
+  }
+
 private:
+  MeshlessForceModel() = default;
+
   /** Adds the forces of kernel points [first, last) (at most kPointsPerBlock)
    *  to the padded forces; returns the first inverted point in the kernel's
    *  order (its index there, not the point's) or -1. */
@@ -328,8 +412,8 @@ private:
    *  (2026-11-26; 64: 50, 256: 45.0 and 87.8 ns). */
   static constexpr Index kPointsPerBlock = 128;
 
-  int                  m_Threads;
-  Index                m_NodeCount;
+  int                  m_Threads = 1;
+  Index                m_NodeCount = 0;
   std::vector<Vector3> m_Positions;
   std::vector<double>  m_Weight;    // mm^3
   std::vector<double>  m_Mu;        // internal units

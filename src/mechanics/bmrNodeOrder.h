@@ -37,6 +37,32 @@ public:
   /** Per-node values (one per node) given in slot order, in node order. */
   std::vector<double> InNodeOrder(const std::vector<double> & valuesOfSlots) const;
 
+  /** Whether it numbers `count` nodes one to one (a numbering read from a file). */
+  bool IsPermutation(Index count) const
+  {
+    if (m_SlotOfNode.size() != static_cast<std::size_t>(count) || m_NodeOfSlot.size() != m_SlotOfNode.size())
+    {
+      return false;
+    }
+    for (Index n = 0; n < count; ++n)
+    {
+      const Index slot = m_SlotOfNode[n];
+      if (slot < 0 || slot >= count || m_NodeOfSlot[slot] != n)
+      {
+        return false;
+      }
+    }
+    return true;
+  }
+
+  /** Lists its members to `visit` (bmrBinaryStream.h). */
+  template <typename Self, typename Visitor>
+  static void VisitMembers(Self & self, Visitor & visit)
+  {
+    visit(self.m_SlotOfNode);
+    visit(self.m_NodeOfSlot);
+  }
+
 private:
   std::vector<Index> m_SlotOfNode;
   std::vector<Index> m_NodeOfSlot;

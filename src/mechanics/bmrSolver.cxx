@@ -16,7 +16,7 @@
 namespace bmr
 {
 
-Solver::Impl::Impl(const Model & m, const SolverSettings & s)
+Solver::Impl::Impl(const Model & m, const SolverSettings & s, const SolverPrecomputation * precomputed)
   : model(m)
   , settings(s)
 {
@@ -24,9 +24,19 @@ Solver::Impl::Impl(const Model & m, const SolverSettings & s)
   model.Validate();
   threads = settings.threads > 0 ? settings.threads : omp_get_max_threads();
   meshless = model.discretization == Discretization::Meshless;
-  if (meshless)
+  if (precomputed != nullptr)
   {
-    shapeFunctions = MovingLeastSquares::ForModel(model);
+    if (const std::string mismatch = precomputed->Mismatch(model, settings); !mismatch.empty())
+    {
+      throw Error("the solver's precomputation was made " + mismatch +
+                  ": make it again for this model and these settings, or solve without it");
+    }
+    forces = precomputed->State().forces->Clone(threads);
+    nodeShapes = precomputed->State().nodeShapes;
+  }
+  else if (meshless)
+  {
+    const auto shapeFunctions = MovingLeastSquares::ForModel(model);
     forces = std::make_unique<MeshlessForceModel>(
       model, shapeFunctions->Evaluate(model.meshless.integrationPoints, true, threads, "integration point"), settings,
       threads);
@@ -492,8 +502,8 @@ Solver::Impl::Finish(const std::vector<double> & u, const std::vector<char> & in
 }
 
 
-Solver::Solver(const Model & model, const SolverSettings & settings)
-  : m_Impl(std::make_unique<Impl>(model, settings))
+Solver::Solver(const Model & model, const SolverSettings & settings, const SolverPrecomputation * precomputed)
+  : m_Impl(std::make_unique<Impl>(model, settings, precomputed))
 {}
 
 Solver::~Solver() = default;

@@ -14,6 +14,7 @@
 #include "bmrToolContact.h"
 #include "bmrToolStress.h"
 
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -46,6 +47,26 @@ StepLabel(int step)
   return "step " + std::to_string(step);
 }
 
+struct SolverPrecomputation::Impl
+{
+  /** Of what it was made from (SolverPrecomputation::Mismatch). */
+  std::uint64_t          modelKey = 0;
+  Index                  nodeCount = 0;
+  bool                   meshless = false;
+  TetrahedronFormulation tetrahedron = TetrahedronFormulation::AverageNodalPressure;
+  double                 hourglassCoefficient = 0.0;
+  double                 collapseBulkModulus = 0.0;
+
+  std::unique_ptr<ForceModel> forces;
+  ShapeFunctionTable          nodeShapes; // meshless: at the nodes (physical displacement = Phi u)
+};
+
+/** A fingerprint (64-bit FNV-1a) of what the force model reads from a
+ *  model: nodes, cells, materials' constants, the meshless integration points
+ *  and shape-function settings. */
+std::uint64_t
+ReferenceConfigurationKey(const Model & model);
+
 struct Solver::Impl
 {
   Model                                      model;
@@ -77,7 +98,6 @@ struct Solver::Impl
   // Phi u), the EBCIEM projection (built per solve, with that solve's masses),
   // and the contact slave nodes with a buffer of their physical displacements.
   bool                               meshless = false;
-  std::unique_ptr<MovingLeastSquares> shapeFunctions;
   ShapeFunctionTable                 nodeShapes;
   std::unique_ptr<EssentialBoundary> essential;
   std::vector<Index>                 contactSlaves;
@@ -119,7 +139,7 @@ struct Solver::Impl
   double                             startForceWeight = 0.0;
   double                             startTargetWeight = 0.0;
 
-  Impl(const Model & m, const SolverSettings & s);
+  Impl(const Model & m, const SolverSettings & s, const SolverPrecomputation * precomputed);
   void        CheckSettings() const;
   void        BuildConstraints();
   void        ApplyConstraints(double * u, const std::vector<double> & curveFactors);

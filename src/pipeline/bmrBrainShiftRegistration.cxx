@@ -589,8 +589,10 @@ SetBodyLoads(BrainModel & result, const BrainModelSettings & settings)
       }
       model.fluidSurface = model.nodes[top] - *settings.csfDrainedDepth * up;
     }
+    const auto precomputation = result.pipelineModel->GetPrecomputation();
     result.pipelineModel = itk::BiomechanicalModelObject::New();
     result.pipelineModel->SetModel(std::move(model));
+    result.pipelineModel->SetPrecomputation(precomputation); // gravity leaves the reference configuration as it is
   }
   result.model = result.pipelineModel->GetModel();
 }
@@ -681,6 +683,24 @@ LoadBrainModel(BrainModel & model, const IntraoperativeData & intraoperative, co
   SetBodyLoads(model, settings);
   LoadExposedSurface(model, intraoperative, settings, timer);
   SetSkullContact(model, settings);
+}
+
+void
+PrecomputeBrainModel(BrainModel & model, const BrainShiftRegistrationSettings & settings, StageTimer & timer)
+{
+  if (model.pipelineModel.IsNull())
+  {
+    throw Error("the brain model is empty: prepare it first (PrepareBrainModel)");
+  }
+  timer.Run("precompute", [&] {
+    SolverSettings solver = settings.solver;
+    solver.threads = solver.threads != 0 ? solver.threads : settings.model.threads;
+    // A model object of its own: the one given may be shared (a read bundle's, updated again later).
+    auto object = itk::BiomechanicalModelObject::New();
+    object->Graft(model.pipelineModel);
+    object->SetPrecomputation(std::make_shared<const SolverPrecomputation>(object->GetModel(), solver));
+    model.pipelineModel = object;
+  });
 }
 
 BrainModel
@@ -849,6 +869,24 @@ UpdateInto(BrainShiftRegistrationResult &         result,
            const ProgressCallback &               solverProgress)
 {
   StageTimer & timer = result.timer;
+  if (result.model.pipelineModel.IsNotNull())
+  {
+    // A bundle's precomputation serves every update made with its settings;
+    // other solver settings, or a model prepared without it, make their own.
+    const auto & stored = result.model.pipelineModel->GetPrecomputation();
+    const std::string mismatch =
+      stored ? stored->Mismatch(result.model.pipelineModel->GetModel(), settings.solver) : std::string();
+    if (!stored || !mismatch.empty())
+    {
+      if (stored)
+      {
+        result.model.warnings.push_back("the prepared model's precomputation was made " + mismatch +
+                                        ": made again for this update (stage precompute); prepare the bundle with "
+                                        "these settings to save it");
+      }
+      PrecomputeBrainModel(result.model, settings, timer);
+    }
+  }
   LoadBrainModel(result.model, inputs.intraoperative, settings.model, timer);
   result.warnings = result.model.warnings;
   if (!settings.model.gravity.isZero())
@@ -918,6 +956,7 @@ UpdateInto(BrainShiftRegistrationResult &         result,
       weightless.bodyAcceleration.setZero();
       auto weightlessModel = itk::BiomechanicalModelObject::New();
       weightlessModel->SetModel(std::move(weightless));
+      weightlessModel->SetPrecomputation(result.model.pipelineModel->GetPrecomputation());
       const auto samples = BrainSamplePoints(inputs.intraoperative.image,
                                              inputs.intraoperative.imageBrainMask.IsNotNull()
                                                ? inputs.intraoperative.imageBrainMask.GetPointer()
@@ -1016,6 +1055,7 @@ UpdateInto(BrainShiftRegistrationResult &         result,
       solved.bodyAcceleration = result.gravity;
       result.model.pipelineModel = itk::BiomechanicalModelObject::New();
       result.model.pipelineModel->SetModel(std::move(solved));
+      result.model.pipelineModel->SetPrecomputation(weightlessModel->GetPrecomputation());
     });
   }
   if (solverProgress)
@@ -1132,6 +1172,7 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
   const bool surfaceLoad = inputs.intraoperative.sparse.points.empty();
   result.model = PrepareBrainModel(inputs.preoperativeImage, inputs.brainMask, inputs.tumourMask, inputs.skullSurface,
                                    settings.model, result.timer, surfaceLoad);
+  PrecomputeBrainModel(result.model, settings, result.timer);
   UpdateInto(result, update, settings, solverProgress);
   return result;
 }

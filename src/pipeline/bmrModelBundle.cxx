@@ -1,5 +1,6 @@
 #include "bmrModelBundle.h"
 
+#include "bmrBinaryStream.h"
 #include "bmrMeshIO.h"
 #include "bmrScene.h"
 #include "itkBiomechanicalImageConversion.h"
@@ -28,124 +29,9 @@ const char * const kFormatName = "biomechanical-registration model bundle";
 const char         kModelMagic[8] = { 'B', 'M', 'R', 'M', 'O', 'D', 'E', 'L' };
 const char         kSolutionMagic[8] = { 'B', 'M', 'R', 'S', 'O', 'L', 'V', 'E' };
 constexpr int      kSolutionVersion = 1;
+const char * const kPrepareAgain = "prepare the bundle again (biomech prepare)";
 
-// ---------------------------------------------------------------------------
-// model.bin: little-endian values in the order written, no padding.
-// ---------------------------------------------------------------------------
-
-class BinaryWriter
-{
-public:
-  template <typename T>
-  void Value(const T & value)
-  {
-    static_assert(std::is_trivially_copyable_v<T>);
-    m_Bytes.append(reinterpret_cast<const char *>(&value), sizeof(T));
-  }
-  void Text(const std::string & text)
-  {
-    Value<std::uint64_t>(text.size());
-    m_Bytes.append(text);
-  }
-  template <typename T>
-  void Values(const std::vector<T> & values)
-  {
-    static_assert(std::is_trivially_copyable_v<T>);
-    Value<std::uint64_t>(values.size());
-    m_Bytes.append(reinterpret_cast<const char *>(values.data()), values.size() * sizeof(T));
-  }
-  void Points(const std::vector<Vector3> & points)
-  {
-    Value<std::uint64_t>(points.size());
-    for (const Vector3 & p : points)
-    {
-      Value(p.x());
-      Value(p.y());
-      Value(p.z());
-    }
-  }
-  const std::string & Bytes() const { return m_Bytes; }
-
-private:
-  std::string m_Bytes;
-};
-
-class BinaryReader
-{
-public:
-  /** `advice`: what to do about a damaged file. */
-  BinaryReader(std::string bytes, std::string what, std::string advice = "prepare the bundle again (biomech prepare)")
-    : m_Bytes(std::move(bytes))
-    , m_What(std::move(what))
-    , m_Advice(std::move(advice))
-  {}
-  template <typename T>
-  T Value()
-  {
-    T value;
-    Need(sizeof(T));
-    std::memcpy(&value, m_Bytes.data() + m_Offset, sizeof(T));
-    m_Offset += sizeof(T);
-    return value;
-  }
-  std::string Text()
-  {
-    const auto size = Count(1);
-    std::string text = m_Bytes.substr(m_Offset, size);
-    m_Offset += size;
-    return text;
-  }
-  template <typename T>
-  std::vector<T> Values()
-  {
-    const auto     size = Count(sizeof(T));
-    std::vector<T> values(size);
-    std::memcpy(values.data(), m_Bytes.data() + m_Offset, size * sizeof(T));
-    m_Offset += size * sizeof(T);
-    return values;
-  }
-  std::vector<Vector3> Points()
-  {
-    const auto           size = Count(3 * sizeof(double));
-    std::vector<Vector3> points(size);
-    for (Vector3 & p : points)
-    {
-      p.x() = Value<double>();
-      p.y() = Value<double>();
-      p.z() = Value<double>();
-    }
-    return points;
-  }
-  bool AtEnd() const { return m_Offset == m_Bytes.size(); }
-  [[noreturn]] void Fail(const std::string & why) const
-  {
-    throw Error(m_What + " is damaged (" + why + " at byte " + std::to_string(m_Offset) + "); " + m_Advice);
-  }
-  /** A count of items of at least `bytesEach` bytes each that the rest of the file can hold. */
-  std::size_t Count(std::size_t bytesEach)
-  {
-    const auto count = Value<std::uint64_t>();
-    if (bytesEach > 0 && count > (m_Bytes.size() - m_Offset) / bytesEach)
-    {
-      Fail("a count of " + std::to_string(count) + " beyond the file's end");
-    }
-    return static_cast<std::size_t>(count);
-  }
-
-private:
-  void Need(std::size_t bytes) const
-  {
-    if (m_Bytes.size() - m_Offset < bytes)
-    {
-      Fail("the file ends early");
-    }
-  }
-
-  std::string m_Bytes;
-  std::string m_What;
-  std::string m_Advice;
-  std::size_t m_Offset = 0;
-};
+// model.bin: little-endian values in the order written, no padding (bmrBinaryStream.h).
 
 void
 WriteSurfaceBinary(BinaryWriter & out, const ContactSurface & surface)
@@ -414,6 +300,11 @@ WriteModelBundle(const fs::path & folder, const ModelBundle & bundle)
   {
     throw Error("the prepared model has no cortex surface: prepare it with the cortex (PrepareBrainModel(..., true))");
   }
+  if (!brain.pipelineModel->GetPrecomputation())
+  {
+    throw Error("the prepared model has no solver precomputation: make it (PrecomputeBrainModel) before writing the "
+                "bundle");
+  }
   // Written beside the target and renamed at the end: never a half-written bundle.
   fs::path target = fs::absolute(folder).lexically_normal();
   if (!target.has_filename())
@@ -434,6 +325,12 @@ WriteModelBundle(const fs::path & folder, const ModelBundle & bundle)
   {
     WriteTextFileAtomically((partial / "model.bin").string(), ModelBytes(brain));
     add("model.bin", "model");
+    {
+      BinaryWriter precomputation;
+      brain.pipelineModel->GetPrecomputation()->Write(precomputation);
+      WriteTextFileAtomically((partial / "precomputation.bin").string(), precomputation.Bytes());
+    }
+    add("precomputation.bin", "solver precomputation");
     itk::WriteBiomechanicalImage(bundle.preoperativeImage.GetPointer(), partial / "preoperative.nii.gz");
     add("preoperative.nii.gz", "preoperative image");
     itk::WriteBiomechanicalImage(
@@ -585,8 +482,22 @@ ReadModelBundle(const fs::path & folder)
     }
 
     BrainModel & brain = bundle.model;
-    BinaryReader model(ReadTextFile((folder / "model.bin").string()), "the " + where + "'s model.bin");
+    BinaryReader model(ReadTextFile((folder / "model.bin").string()), "the " + where + "'s model.bin",
+                       kPrepareAgain);
     ReadModelBytes(model, brain);
+    {
+      BinaryReader precomputation(ReadTextFile((folder / "precomputation.bin").string()),
+                                  "the " + where + "'s precomputation.bin", kPrepareAgain);
+      auto stored = std::make_shared<const SolverPrecomputation>(SolverPrecomputation::Read(precomputation));
+      // Of this model (settings aside: an update may solve with others, and then makes its own).
+      if (const std::string mismatch = stored->Mismatch(brain.pipelineModel->GetModel(), stored->Settings());
+          !mismatch.empty())
+      {
+        throw Error("cannot read the " + where + ": its precomputation.bin does not belong to its model.bin (made " +
+                    mismatch + "); " + kPrepareAgain);
+      }
+      brain.pipelineModel->SetPrecomputation(std::move(stored));
+    }
 
     for (const auto & [name, text] : manifest.at("settings").items())
     {
