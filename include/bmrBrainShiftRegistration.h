@@ -370,6 +370,15 @@ struct BrainShiftRegistrationResult
    *  (mm/s^2) with the mutual information of each (higher: better), in the
    *  order solved; empty without a fit. */
   std::vector<std::pair<double, double>> gravityFit;
+  /** Each size's solve, in gravityFit's order: its dynamic-relaxation steps
+   *  (0: it failed) and the size (mm/s^2) whose steady state it started from
+   *  (negative: the update's own start, rest or `previous`). */
+  struct GravityFitSolve
+  {
+    int    steps = 0;
+    double startSize = -1.0;
+  };
+  std::vector<GravityFitSolve>   gravityFitSolves;
   Vector3                        gravity = Vector3::Zero(); // the solve's body acceleration (mm/s^2)
   RegistrationTransform::Pointer transform;      // backward map
   double                         fitMaxResidual = 0.0, fitRmsResidual = 0.0; // mm, at the nodes

@@ -167,6 +167,27 @@ TEST(BrainShiftRegistration, GravityFitFindsTheWeightTheImageShows)
     ASSERT_GE(fitted.gravityFit.size(), 5u);
     ASSERT_LE(fitted.gravityFit.size(), 8u);
     EXPECT_EQ(fitted.gravityFit[4].first, bmr::units::StandardGravity);
+    // Sizes start from the nearest size solved when its weight is nearer theirs than none:
+    // 0 and 0.25 g from rest, 0.5 g from 0.25 g and so on; a refinement from a solved size or from rest.
+    ASSERT_EQ(fitted.gravityFitSolves.size(), fitted.gravityFit.size());
+    EXPECT_LT(fitted.gravityFitSolves[0].startSize, 0.0);
+    EXPECT_LT(fitted.gravityFitSolves[1].startSize, 0.0);
+    for (std::size_t k = 2; k < 5; ++k)
+    {
+      EXPECT_EQ(fitted.gravityFitSolves[k].startSize, fitted.gravityFit[k - 1].first) << k;
+    }
+    for (std::size_t k = 0; k < fitted.gravityFit.size(); ++k)
+    {
+      const double start = fitted.gravityFitSolves[k].startSize;
+      EXPECT_GT(fitted.gravityFitSolves[k].steps, 0) << k;
+      if (start >= 0.0)
+      {
+        EXPECT_TRUE(std::any_of(fitted.gravityFit.begin(), fitted.gravityFit.begin() + static_cast<std::ptrdiff_t>(k),
+                                [&](const auto & solved) { return solved.first == start; }))
+          << "size " << k << " started from " << start;
+        EXPECT_LT(std::abs(start - fitted.gravityFit[k].first), fitted.gravityFit[k].first) << k;
+      }
+    }
     const auto best = std::max_element(fitted.gravityFit.begin(), fitted.gravityFit.end(),
                                        [](const auto & a, const auto & b) { return a.second < b.second; });
     EXPECT_EQ(fitted.gravity.norm(), best->first);
