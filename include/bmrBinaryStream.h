@@ -16,6 +16,14 @@
 namespace bmr
 {
 
+/** Whether T is a std::vector (the members' dispatch below). */
+template <typename T>
+struct IsVector : std::false_type
+{};
+template <typename T, typename A>
+struct IsVector<std::vector<T, A>> : std::true_type
+{};
+
 class BinaryWriter
 {
 public:
@@ -72,13 +80,6 @@ public:
   const std::string & Bytes() const { return m_Bytes; }
 
 private:
-  template <typename T>
-  struct IsVector : std::false_type
-  {};
-  template <typename T, typename A>
-  struct IsVector<std::vector<T, A>> : std::true_type
-  {};
-
   std::string m_Bytes;
 };
 
@@ -171,13 +172,6 @@ public:
   }
 
 private:
-  template <typename T>
-  struct IsVector : std::false_type
-  {};
-  template <typename T, typename A>
-  struct IsVector<std::vector<T, A>> : std::true_type
-  {};
-
   void Need(std::size_t bytes) const
   {
     if (m_Bytes.size() - m_Offset < bytes)

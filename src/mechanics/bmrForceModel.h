@@ -199,8 +199,9 @@ public:
 
   std::unique_ptr<ForceModel> Clone(int threads) const override;
   void                        Write(BinaryWriter & out) const override;
-  /** The inverse of Write; checks that every index lies in range (bmr::Error otherwise). */
-  static std::unique_ptr<FiniteElementForceModel> Read(BinaryReader & in, int threads);
+  /** The inverse of Write (one thread: a stored model is used through Clone); checks that every index lies in
+   *  range (bmr::Error otherwise). */
+  static std::unique_ptr<FiniteElementForceModel> Read(BinaryReader & in);
 
   /** Lists every member but the threads to `visit` (bmrBinaryStream.h), in
    *  one order for writing and reading. */
@@ -371,8 +372,9 @@ public:
 
   std::unique_ptr<ForceModel> Clone(int threads) const override;
   void                        Write(BinaryWriter & out) const override;
-  /** The inverse of Write; checks that every index lies in range (bmr::Error otherwise). */
-  static std::unique_ptr<MeshlessForceModel> Read(BinaryReader & in, int threads);
+  /** The inverse of Write (one thread: a stored model is used through Clone); checks that every index lies in
+   *  range (bmr::Error otherwise). */
+  static std::unique_ptr<MeshlessForceModel> Read(BinaryReader & in);
 
   /** Lists every member but the threads and the per-step buffers to `visit`. */
   template <typename Self, typename Visitor>

@@ -34,17 +34,9 @@ Solver::Impl::Impl(const Model & m, const SolverSettings & s, const SolverPrecom
     forces = precomputed->State().forces->Clone(threads);
     nodeShapes = precomputed->State().nodeShapes;
   }
-  else if (meshless)
-  {
-    const auto shapeFunctions = MovingLeastSquares::ForModel(model);
-    forces = std::make_unique<MeshlessForceModel>(
-      model, shapeFunctions->Evaluate(model.meshless.integrationPoints, true, threads, "integration point"), settings,
-      threads);
-    nodeShapes = shapeFunctions->Evaluate(model.nodes, false, threads, "node");
-  }
   else
   {
-    forces = std::make_unique<FiniteElementForceModel>(model, settings, threads);
+    forces = MakeForceModel(model, settings, threads, nodeShapes);
   }
   physicalMass = forces->LumpedMasses();
   criticalTimeStep = forces->CriticalTimeStep(&criticalCell);

@@ -61,6 +61,12 @@ struct SolverPrecomputation::Impl
   ShapeFunctionTable          nodeShapes; // meshless: at the nodes (physical displacement = Phi u)
 };
 
+/** The force model of `model` and, for a meshless model, the shape
+ *  functions at its nodes (into `nodeShapes`): the costly part of the Total
+ *  Lagrangian precomputation, for Solver and SolverPrecomputation alike. */
+std::unique_ptr<ForceModel>
+MakeForceModel(const Model & model, const SolverSettings & settings, int threads, ShapeFunctionTable & nodeShapes);
+
 /** A fingerprint (64-bit FNV-1a) of what the force model reads from a
  *  model: nodes, cells, materials' constants, the meshless integration points
  *  and shape-function settings. */

@@ -171,11 +171,10 @@ FiniteElementForceModel::Write(BinaryWriter & out) const
 }
 
 std::unique_ptr<FiniteElementForceModel>
-FiniteElementForceModel::Read(BinaryReader & in, int threads)
+FiniteElementForceModel::Read(BinaryReader & in)
 {
   std::unique_ptr<FiniteElementForceModel> model(new FiniteElementForceModel());
   VisitMembers(*model, in);
-  model->m_Threads = std::max(1, threads);
   const FiniteElementForceModel & m = *model;
   const std::size_t hexCount = m.m_HexNodes.size();
   const std::size_t tetCount = m.m_TetNodes.size();
@@ -234,11 +233,10 @@ MeshlessForceModel::Write(BinaryWriter & out) const
 }
 
 std::unique_ptr<MeshlessForceModel>
-MeshlessForceModel::Read(BinaryReader & in, int threads)
+MeshlessForceModel::Read(BinaryReader & in)
 {
   std::unique_ptr<MeshlessForceModel> model(new MeshlessForceModel());
   VisitMembers(*model, in);
-  model->m_Threads = std::max(1, threads);
   const MeshlessForceModel & m = *model;
   const std::size_t pointCount = m.m_Positions.size();
   const auto        nodeCount = static_cast<std::size_t>(m.m_NodeCount);
@@ -266,6 +264,21 @@ MeshlessForceModel::Read(BinaryReader & in, int threads)
   return model;
 }
 
+std::unique_ptr<ForceModel>
+MakeForceModel(const Model & model, const SolverSettings & settings, int threads, ShapeFunctionTable & nodeShapes)
+{
+  if (model.discretization != Discretization::Meshless)
+  {
+    return std::make_unique<FiniteElementForceModel>(model, settings, threads);
+  }
+  const auto shapeFunctions = MovingLeastSquares::ForModel(model);
+  auto       forces = std::make_unique<MeshlessForceModel>(
+    model, shapeFunctions->Evaluate(model.meshless.integrationPoints, true, threads, "integration point"), settings,
+    threads);
+  nodeShapes = shapeFunctions->Evaluate(model.nodes, false, threads, "node");
+  return forces;
+}
+
 // ---------------------------------------------------------------------------
 // SolverPrecomputation
 // ---------------------------------------------------------------------------
@@ -282,18 +295,7 @@ SolverPrecomputation::SolverPrecomputation(const Model & model, const SolverSett
   state.tetrahedron = settings.tetrahedron;
   state.hourglassCoefficient = settings.hourglassCoefficient;
   state.collapseBulkModulus = settings.collapseBulkModulus;
-  if (state.meshless)
-  {
-    const auto shapeFunctions = MovingLeastSquares::ForModel(model);
-    state.forces = std::make_unique<MeshlessForceModel>(
-      model, shapeFunctions->Evaluate(model.meshless.integrationPoints, true, threads, "integration point"), settings,
-      threads);
-    state.nodeShapes = shapeFunctions->Evaluate(model.nodes, false, threads, "node");
-  }
-  else
-  {
-    state.forces = std::make_unique<FiniteElementForceModel>(model, settings, threads);
-  }
+  state.forces = MakeForceModel(model, settings, threads, state.nodeShapes);
 }
 
 SolverPrecomputation::SolverPrecomputation(std::unique_ptr<Impl> impl)
@@ -392,14 +394,13 @@ SolverPrecomputation::Read(BinaryReader & in)
   in(state->tetrahedron);
   in(state->hourglassCoefficient);
   in(state->collapseBulkModulus);
-  const int threads = omp_get_max_threads();
   if (state->meshless)
   {
-    state->forces = MeshlessForceModel::Read(in, threads);
+    state->forces = MeshlessForceModel::Read(in);
   }
   else
   {
-    state->forces = FiniteElementForceModel::Read(in, threads);
+    state->forces = FiniteElementForceModel::Read(in);
   }
   if (state->forces->NodeCount() != state->nodeCount)
   {

@@ -685,6 +685,16 @@ LoadBrainModel(BrainModel & model, const IntraoperativeData & intraoperative, co
   SetSkullContact(model, settings);
 }
 
+namespace
+{
+/** The solves' threads: the solver's setting, else the model building's (0: OpenMP's default). */
+int
+SolverThreads(const BrainShiftRegistrationSettings & settings)
+{
+  return settings.solver.threads != 0 ? settings.solver.threads : settings.model.threads;
+}
+} // namespace
+
 void
 PrecomputeBrainModel(BrainModel & model, const BrainShiftRegistrationSettings & settings, StageTimer & timer)
 {
@@ -694,7 +704,7 @@ PrecomputeBrainModel(BrainModel & model, const BrainShiftRegistrationSettings & 
   }
   timer.Run("precompute", [&] {
     SolverSettings solver = settings.solver;
-    solver.threads = solver.threads != 0 ? solver.threads : settings.model.threads;
+    solver.threads = SolverThreads(settings);
     // A model object of its own: the one given may be shared (a read bundle's, updated again later).
     auto object = itk::BiomechanicalModelObject::New();
     object->Graft(model.pipelineModel);
@@ -916,7 +926,7 @@ UpdateInto(BrainShiftRegistrationResult &         result,
   using PointSetType = itk::DisplacementPointSetType<3>;
   using DeformationType = itk::BiomechanicalDeformationFilter<PointSetType>;
   // 0: OpenMP's default (OMP_NUM_THREADS), as the solver's own default.
-  const int  threads = settings.solver.threads != 0 ? settings.solver.threads : settings.model.threads;
+  const int  threads = SolverThreads(settings);
   const auto makeDeformation = [&](const itk::BiomechanicalModelObject * model) {
     auto deformation = DeformationType::New();
     deformation->SetModelInput(model);
