@@ -75,9 +75,10 @@ constexpr const char * ImageSectionEnd = "<!-- image-benchmark: end -->";
  *  `<!-- NAME:end -->` (scripts/docsection.py): the surgical simulation
  *  (scripts/benchmark-simulation.py) and issue 20's targets on Colin27
  *  (scripts/benchmark-registration.py, scripts/benchmark-model-building.py) and the
- *  update latency on a prepared bundle (scripts/benchmark-update.py). */
+ *  update latency on a prepared bundle (scripts/benchmark-update.py) with its solves
+ *  by part (scripts/benchmark-solve-parts.py). */
 constexpr const char * ScriptSections[] = { "simulation-benchmark", "colin27-meshless", "colin27-registration",
-                                             "update-latency" };
+                                             "update-latency", "solve-parts" };
 
 /** The section of `report` between two markers (included), or "" when it has none. */
 inline std::string

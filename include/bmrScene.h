@@ -56,6 +56,11 @@ CountModel(const Model & model);
 std::string
 MakeReportJson(const Scene & scene, const SolveResult & result, const std::string & resultVtuPath = "");
 
+/** The solve's wall time by part (SolveResult::parts and the rest, s) and
+ *  its contact sweeps, as the JSON object the reports carry under "parts". */
+std::string
+MakeSolvePartsJson(const SolveResult & result);
+
 /** A short human-readable summary of the run; says NOT CONVERGED loudly. */
 std::string
 FormatReportTable(const Scene & scene, const SolveResult & result);

@@ -113,6 +113,22 @@ struct SolveFrame
 };
 using FrameCallback = std::function<void(const SolveFrame & frame)>;
 
+/** Where a solve's wall time went (s), measured around each part of every
+ *  step: for profiling and the benchmarks' roofline of the whole step. The
+ *  rest of the wall time is the update, the convergence measure and the
+ *  damping's estimates. */
+struct SolvePartSeconds
+{
+  double internalForces = 0.0;    // the force kernel (ForceModel::ComputeInternalForces)
+  double essentialBoundary = 0.0; // prescribed values (meshless with EBCIEM: its projection)
+  double contact = 0.0;           // contact surfaces and tools
+  /** Meshless contact: Kaczmarz sweeps over the slaves in contact, all steps. */
+  long long contactSweeps = 0;
+  /** Bytes of the tables each force pass streams (ForceModel), the memory
+   *  roofline's numerator per step. */
+  std::size_t forceTableBytes = 0;
+};
+
 struct SolveResult
 {
   std::vector<Vector3>         displacements;  // mm, per node
@@ -132,6 +148,7 @@ struct SolveResult
   double      convergenceRate = 0.0;  // dynamic relaxation: estimated spectral radius per step
   int         restarts = 0;           // dynamic relaxation: restarts with heavier masses after divergence
   double      wallSeconds = 0.0;
+  SolvePartSeconds parts;             // of wallSeconds
   double      maxDisplacement = 0.0;  // mm
   double      strainEnergy = 0.0;     // J (N*m)
   double      hourglassEnergy = 0.0;  // J, hexahedra only

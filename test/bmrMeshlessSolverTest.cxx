@@ -710,6 +710,43 @@ TEST(MeshlessContact, UniaxialCompressionAgainstAPlaneBesideEbciemConstraints)
   EXPECT_EQ(result.contactNodes, static_cast<int>(model.NodeSet("xmin").size()));
 }
 
+TEST(MeshlessSolveParts, TimedByPartAndTheForcePassStreamsTheMlsTable)
+{
+  // The contact-and-EBCIEM block above: every part of the step runs.
+  const Material material = MakeMaterial(3000.0, 0.45);
+  Model          model = MakeBlockMesh(Vector3(4.0, 8.0, 6.0), { 2, 4, 3 }, GridCells::Hexahedra, material);
+  MakeMeshlessFromCells(model, MlsSettings{}, IntegrationSettings{}, 1);
+  model.fixedConstraints.push_back({ "ymin", { false, true, false } });
+  model.fixedConstraints.push_back({ "zmin", { false, false, true } });
+  AddRigidPlane(model, Vector3(0.0, 4.0, 3.0), Vector3(1.0, 0.0, 0.0), "xmin");
+  Prescribe(model, model.NodeSet("xmax"), [](const Vector3 &) { return Vector3(-0.4, 0.0, 0.0); },
+            { true, false, false });
+  Solver            solver(model, TightRelaxation(1e-6, 20000));
+  const SolveResult result = solver.Solve();
+  ASSERT_TRUE(result.converged) << result.message;
+  const SolvePartSeconds & parts = result.parts;
+  EXPECT_GT(parts.internalForces, 0.0);
+  EXPECT_GT(parts.essentialBoundary, 0.0);
+  EXPECT_GT(parts.contact, 0.0);
+  EXPECT_LE(parts.internalForces + parts.essentialBoundary + parts.contact, result.wallSeconds);
+  // At least one Kaczmarz sweep in each step with a slave in contact.
+  EXPECT_GE(parts.contactSweeps, result.steps / 2);
+  // Per integration point its offset and 4 constants; per MLS neighbour its
+  // node and 3 single-precision gradients (and one float of padding): the
+  // table the shape functions give, evaluated here on their own.
+  const ShapeFunctionTable table =
+    MovingLeastSquares::ForModel(model)->Evaluate(model.meshless.integrationPoints, false);
+  const std::size_t points = model.meshless.integrationPoints.size();
+  const std::size_t entries = table.nodes.size();
+  EXPECT_EQ(parts.forceTableBytes,
+            (points + 1) * sizeof(Index) + points * 4 * sizeof(double) + entries * sizeof(Index) +
+              (3 * entries + 1) * sizeof(float));
+  // A second solve of the same solver counts its own parts only.
+  const SolveResult again = solver.Solve();
+  EXPECT_EQ(again.parts.contactSweeps, parts.contactSweeps);
+  EXPECT_LE(again.parts.internalForces + again.parts.essentialBoundary + again.parts.contact, again.wallSeconds);
+}
+
 // ---------------------------------------------------------------------------
 // Supports cover integration points, not only nodes.
 // ---------------------------------------------------------------------------

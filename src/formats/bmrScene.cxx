@@ -136,6 +136,20 @@ CountModel(const Model & model)
 }
 
 std::string
+MakeSolvePartsJson(const SolveResult & result)
+{
+  const SolvePartSeconds & parts = result.parts;
+  json                     seconds;
+  seconds["internal_forces_s"] = parts.internalForces;
+  seconds["essential_boundary_s"] = parts.essentialBoundary;
+  seconds["contact_s"] = parts.contact;
+  seconds["rest_s"] = result.wallSeconds - parts.internalForces - parts.essentialBoundary - parts.contact;
+  seconds["contact_sweeps"] = parts.contactSweeps;
+  seconds["force_table_bytes"] = parts.forceTableBytes;
+  return seconds.dump();
+}
+
+std::string
 MakeReportJson(const Scene & scene, const SolveResult & result, const std::string & resultVtuPath)
 {
   const ModelCounts counts = CountModel(scene.model);
@@ -158,6 +172,7 @@ MakeReportJson(const Scene & scene, const SolveResult & result, const std::strin
   report["time_step"] = result.timeStep;
   report["critical_time_step"] = result.criticalTimeStep;
   report["wall_seconds"] = result.wallSeconds;
+  report["parts"] = json::parse(MakeSolvePartsJson(result));
   report["estimated_error_mm"] = result.estimatedError;
   report["convergence_rate"] = result.convergenceRate;
   report["restarts"] = result.restarts;

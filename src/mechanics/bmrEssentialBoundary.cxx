@@ -3,6 +3,7 @@
 #include <Eigen/Sparse>
 #include <Eigen/SparseCholesky>
 
+#include <algorithm>
 #include <sstream>
 
 namespace bmr
@@ -83,11 +84,14 @@ EssentialBoundary::EssentialBoundary(const ShapeFunctionTable & nodeShapes,
 EssentialBoundary::~EssentialBoundary() = default;
 
 void
-EssentialBoundary::Impose(double * u, const std::vector<double> & targets) const
+EssentialBoundary::Impose(double * u, const std::vector<double> & targets, int threads) const
 {
   // Runs every step: only the constrained rows and their neighbours are touched.
-  for (const auto & component : m_Components)
+  const int componentCount = static_cast<int>(m_Components.size());
+#pragma omp parallel for num_threads(std::max(1, std::min(threads, componentCount))) schedule(static, 1)
+  for (int c = 0; c < componentCount; ++c)
   {
+    const auto &    component = m_Components[static_cast<std::size_t>(c)];
     const auto &    phi = component->phi;
     const Index     rows = phi.rows();
     Eigen::VectorXd residual(rows);

@@ -32,8 +32,10 @@ public:
   ~EssentialBoundary();
 
   /** Corrects the parameters u (3 per node) so that the interpolated
-   *  displacement at constrained dof k equals targets[k]. */
-  void Impose(double * u, const std::vector<double> & targets) const;
+   *  displacement at constrained dof k equals targets[k]. The three axes'
+   *  solves are independent and write their own components of u, so up to
+   *  three threads share them; the result does not depend on `threads`. */
+  void Impose(double * u, const std::vector<double> & targets, int threads) const;
 
   /** What EBCIEM's projection would take back from a change of the
    *  parameters along one node's shape functions, per axis i:

@@ -716,4 +716,22 @@ FiniteElementForceModel::AddTetrahedronForces(Index begin, Index end, const doub
 
 #undef BMR_TETRAHEDRON_DEFORMATION_GRADIENT
 
+
+std::size_t
+FiniteElementForceModel::StreamedBytesPerStep() const
+{
+  const std::size_t cellConstants = BytesOf(m_Volume) + BytesOf(m_Mu) + BytesOf(m_Kappa) + BytesOf(m_Collapse);
+  std::size_t       bytes = cellConstants + BytesOf(m_HexNodes) + BytesOf(m_HexB) + BytesOf(m_HexXH) +
+                      BytesOf(m_HexHourglassStiffness) + BytesOf(m_FirstTouchOffsets) + BytesOf(m_FirstTouchNodes);
+  // Tetrahedra: F in the dilatation pass and again in the force pass; with
+  // ANP the cells' J written and read, and the nodal averaging's tables.
+  bytes += 2 * (BytesOf(m_TetNodes) + BytesOf(m_TetB)) + BytesOf(m_TetAveraged);
+  if (UsesAverageNodalPressure())
+  {
+    bytes += 2 * BytesOf(m_TetJacobian) + BytesOf(m_NodeTetOffsets) + BytesOf(m_NodeTets) + BytesOf(m_NodeTetWeights) +
+             BytesOf(m_NodalVolume) + BytesOf(m_NodalBulkModulus);
+  }
+  return bytes;
+}
+
 } // namespace bmr

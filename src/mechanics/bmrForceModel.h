@@ -128,6 +128,14 @@ private:
   std::vector<double> m_EqualShares;
 };
 
+/** Bytes held by a table (StreamedBytesPerStep). */
+template <typename Table>
+std::size_t
+BytesOf(const Table & table)
+{
+  return table.size() * sizeof(table[0]);
+}
+
 /** Internal forces, masses and stable time steps of one discretization; the
  *  integrators see only this. Failures are reported by the index of the
  *  integration unit (model cell, or integration point), which Describe() names. */
@@ -167,6 +175,10 @@ public:
 
   /** Names of the parts in use, for SolveResult::activeComponents. */
   virtual void AddComponents(std::vector<std::string> & components) const = 0;
+  /** Bytes of the tables one force pass reads or writes, each counted once per
+   *  pass that streams it; the node arrays (u, f and the like) are not
+   *  counted. The memory roofline's numerator (SolvePartSeconds). */
+  virtual std::size_t StreamedBytesPerStep() const = 0;
   /** A copy working with `threads` threads (a stored SolverPrecomputation's for one solve). */
   virtual std::unique_ptr<ForceModel> Clone(int threads) const = 0;
 
@@ -193,6 +205,7 @@ public:
   std::vector<Eigen::Matrix3d> CauchyStress(const double * u) const override;
   std::string                  Describe(Index cell) const override;
   void                         AddComponents(std::vector<std::string> & components) const override;
+  std::size_t                  StreamedBytesPerStep() const override;
 
   /** Model cell index of the given kernel cell (hexahedra first, then tetrahedra). */
   Index ModelCell(Index kernelCell) const { return m_ModelCell[kernelCell]; }
@@ -366,6 +379,7 @@ public:
   std::vector<Eigen::Matrix3d> CauchyStress(const double * u) const override;
   std::string                  Describe(Index point) const override;
   void                         AddComponents(std::vector<std::string> & components) const override;
+  std::size_t                  StreamedBytesPerStep() const override;
 
   /** Deformation gradient at an integration point. */
   Eigen::Matrix3d DeformationGradientAt(Index point, const double * u) const;

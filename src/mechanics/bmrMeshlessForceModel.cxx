@@ -409,4 +409,10 @@ MeshlessForceModel::AddComponents(std::vector<std::string> & components) const
   components.push_back("meshless-integration-points");
 }
 
+std::size_t
+MeshlessForceModel::StreamedBytesPerStep() const
+{
+  return BytesOf(m_KernelOffsets) + BytesOf(m_KernelNodes) + BytesOf(m_KernelGradients) + BytesOf(m_KernelMaterial);
+}
+
 } // namespace bmr

@@ -253,7 +253,7 @@ Solver::Impl::ApplyConstraints(double * u, const std::vector<double> & curveFact
     {
       constraintTargets[k] = ConstraintTarget(k, curveFactors);
     }
-    essential->Impose(u, constraintTargets);
+    essential->Impose(u, constraintTargets, threads);
     return;
   }
   for (std::size_t k = 0; k < constrained.size(); ++k)
@@ -328,12 +328,14 @@ Solver::Impl::CentralDifferenceStep(const std::vector<double> & u,
   {
     uNext[d] = CentralDifferenceUpdate(u[d], uPrevious[d], f[d], ExternalForce(d, gravityFactor), inverseMass[d], alpha, beta);
   }
-  ApplyConstraints(uNext.data(), curveFactors);
-  EnforceContact(uNext.data(), inContact, inverseMass);
-  if (!tools.empty())
-  {
-    EnforceTools(uNext.data(), u.data(), inContact, inverseMass, alpha, toolTime);
-  }
+  TimePart(parts.essentialBoundary, [&] { ApplyConstraints(uNext.data(), curveFactors); });
+  TimePart(parts.contact, [&] {
+    EnforceContact(uNext.data(), inContact, inverseMass);
+    if (!tools.empty())
+    {
+      EnforceTools(uNext.data(), u.data(), inContact, inverseMass, alpha, toolTime);
+    }
+  });
 }
 
 void
@@ -568,10 +570,13 @@ SolveResult
 Solver::Solve(const ProgressCallback & progress, const FrameCallback & frames)
 {
   const auto  start = std::chrono::steady_clock::now();
+  m_Impl->parts = SolvePartSeconds{};
   SolveResult result = m_Impl->settings.integrator == Integrator::DynamicRelaxation
                          ? m_Impl->SolveDynamicRelaxation(progress)
                          : m_Impl->SolveExplicitDynamics(progress, frames);
   result.wallSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  result.parts = m_Impl->parts;
+  result.parts.forceTableBytes = m_Impl->forces->StreamedBytesPerStep();
   return result;
 }
 

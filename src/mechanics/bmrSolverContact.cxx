@@ -268,6 +268,7 @@ Solver::Impl::EnforceMeshlessContact(double * u, std::vector<char> & inContact, 
     // Kaczmarz sweeps until the gaps close.
     for (int sweep = 0; sweep < kSweeps; ++sweep)
     {
+      ++parts.contactSweeps;
       double largest = 0.0;
       for (std::size_t a = 0; a < activeSlaves.size(); ++a)
       {

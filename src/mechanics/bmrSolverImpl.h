@@ -14,6 +14,7 @@
 #include "bmrToolContact.h"
 #include "bmrToolStress.h"
 
+#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -39,6 +40,20 @@ CentralDifferenceUpdate(double u, double uPrevious, double force, double externa
                         double beta)
 {
   return u + beta * (u - uPrevious) + alpha * (externalForce - force) * inverseMass;
+}
+
+/** Runs `work` and adds its wall time to `seconds` (SolvePartSeconds). */
+template <typename Work>
+decltype(auto)
+TimePart(double & seconds, Work && work)
+{
+  struct Add
+  {
+    double &                              seconds;
+    std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now();
+    ~Add() { seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(); }
+  } add{ seconds };
+  return work();
 }
 
 inline std::string
@@ -99,6 +114,7 @@ struct Solver::Impl
   double                                     criticalTimeStep = 0.0;
   Index                                      criticalCell = -1;
   double                                     lengthScale = 1.0;
+  SolvePartSeconds                           parts; // of the present solve
 
   // Meshless only: shape functions at the nodes (physical displacement =
   // Phi u), the EBCIEM projection (built per solve, with that solve's masses),

@@ -317,7 +317,8 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   {
     try
     {
-      CheckForces(forces->ComputeInternalForces(u.data(), f.data()), step, false, h);
+      CheckForces(TimePart(parts.internalForces, [&] { return forces->ComputeInternalForces(u.data(), f.data()); }),
+                  step, false, h);
       if (step > 0 && step % window == 0)
       {
         // Rayleigh quotient of the last increment: tends to the lowest eigenvalue
@@ -661,7 +662,8 @@ Solver::Impl::SolveExplicitDynamics(const ProgressCallback & progress, const Fra
 
   for (int step = 0; step < steps; ++step)
   {
-    CheckForces(forces->ComputeInternalForces(u.data(), f.data()), step, true, h);
+    CheckForces(TimePart(parts.internalForces, [&] { return forces->ComputeInternalForces(u.data(), f.data()); }),
+                step, true, h);
     gravityFactor = gravityForce.empty() ? 0.0 : loadFactor(model.bodyForceCurve, step * h);
     if (step == 0)
     {

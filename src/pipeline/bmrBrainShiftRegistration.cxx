@@ -1356,7 +1356,9 @@ RegistrationReportJson(const BrainShiftRegistrationResult & result, const BrainS
                       { "max_displacement_mm", solve.maxDisplacement },
                       { "contact_nodes", solve.contactNodes },
                       { "max_penetration_mm", solve.maxPenetration },
-                      { "active_components", solve.activeComponents } };
+                      { "active_components", solve.activeComponents },
+                      { "seconds", solve.wallSeconds },
+                      { "parts", nlohmann::json::parse(MakeSolvePartsJson(solve)) } };
   report["gravity_mm_s2"] = { result.gravity.x(), result.gravity.y(), result.gravity.z() };
   if (!result.gravityFit.empty())
   {
