@@ -188,7 +188,7 @@ def main():
     md.append("The force pass per unit-step: " + "; ".join(
         "%s, %d thread(s): %.0f ns, %.0f bytes" % entry for entry in per_unit) + ".")
     md.append("")
-    write_section(arguments.benchmarks, "solve-parts", "\n".join(md))
+    write_section(arguments.benchmarks, "solve-parts", md)
     print("\n".join(md))
 
 
