@@ -12,6 +12,7 @@
 
 #include "bmrCommandSupport.h"
 
+#include "bmrBrainShiftUncertainty.h"
 #include "bmrBrainSurfaces.h"
 #include "bmrFuzzyCMeans.h"
 #include "bmrImageGrids.h"
@@ -917,7 +918,32 @@ struct UpdateOptions
   int                   overlays = 5;
   std::string           outputDirectory = "update";
   bool                  quiet = false;
+  UncertaintySettings   uncertainty;          // members 0: no ensemble
+  std::vector<double>   uncertaintyGravity;   // low, high
+  std::vector<double>   uncertaintyPoisson;   // low, high
 };
+
+/** `--uncertainty-gravity` and `--uncertainty-poisson` into the settings, then their check (before any work). */
+UncertaintySettings
+UncertaintyOf(const UpdateOptions & options)
+{
+  UncertaintySettings settings = options.uncertainty;
+  if (!options.uncertaintyGravity.empty())
+  {
+    settings.gravityLow = options.uncertaintyGravity.at(0);
+    settings.gravityHigh = options.uncertaintyGravity.at(1);
+  }
+  if (!options.uncertaintyPoisson.empty())
+  {
+    settings.poissonLow = options.uncertaintyPoisson.at(0);
+    settings.poissonHigh = options.uncertaintyPoisson.at(1);
+  }
+  if (settings.members != 0)
+  {
+    CheckUncertaintySettings(settings);
+  }
+  return settings;
+}
 
 /** Intraoperative measurements must lie on the bundle's preoperative image: a
  *  point outside it is from another patient, scan or coordinate frame. */
@@ -952,8 +978,9 @@ CheckMeasurementsInside(const IntraoperativeData & data, const RegistrationImage
 int
 RunUpdate(const UpdateOptions & options)
 {
-  const auto started = std::chrono::steady_clock::now();
-  ModelBundle bundle = ReadModelBundle(options.bundle);
+  const auto                started = std::chrono::steady_clock::now();
+  const UncertaintySettings uncertainty = UncertaintyOf(options);
+  ModelBundle               bundle = ReadModelBundle(options.bundle);
   const double readSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   BrainShiftRegistrationSettings settings = bundle.settings;
   options.settings.Apply(settings);
@@ -978,9 +1005,20 @@ RunUpdate(const UpdateOptions & options)
   }
 
   BrainShiftRegistrationResult result;
+  // The ensemble loads the model as prepared, before the update's loads.
+  const std::optional<BrainModel> prepared =
+    uncertainty.members > 0 ? std::optional<BrainModel>(bundle.model) : std::nullopt;
+  std::optional<BrainShiftUncertaintyResult> ensemble;
   {
     RegistrationProgress progress(!options.quiet && ::isatty(STDERR_FILENO) != 0);
     result = UpdateBrainShift(std::move(bundle.model), inputs, settings, progress.Stages(), progress.Steps());
+    if (prepared)
+    {
+      ensemble = result.timer.Run("uncertainty", [&] {
+        return EstimateBrainShiftUncertainty(*prepared, result, inputs, settings, uncertainty);
+      });
+      result.warnings.insert(result.warnings.end(), ensemble->warnings.begin(), ensemble->warnings.end());
+    }
   }
   json report = { { "bundle", options.bundle },
                   { "preoperative_image",
@@ -1005,9 +1043,22 @@ RunUpdate(const UpdateOptions & options)
                                coldSteps > 0 ? static_cast<double>(result.solve.steps) / coldSteps : 0.0 } };
   }
   const UpdateSolution solution = MakeUpdateSolution(result.solve, bundle.manifest, coldSteps);
+  if (ensemble)
+  {
+    report["uncertainty"] = UncertaintyReportJson(*ensemble, uncertainty);
+  }
   const auto writeSolution = [&](const fs::path & folder, json & files) {
     WriteUpdateSolution(folder / "solution.bin", solution);
     files["solution"] = (folder / "solution.bin").string();
+    if (ensemble)
+    {
+      WriteImageAtomically(ensemble->uncertaintyImage.GetPointer(), folder / "displacement-uncertainty.nii.gz");
+      files["displacement_uncertainty"] = (folder / "displacement-uncertainty.nii.gz").string();
+      itk::WriteBiomechanicalTransform(ensemble->meanTransform, (folder / "mean-transform.h5").string());
+      files["mean_transform"] = (folder / "mean-transform.h5").string();
+      WriteUncertaintyOverlay(*ensemble, inputs.preoperativeImage, (folder / "uncertainty-overlay.png").string());
+      files["uncertainty_overlay"] = (folder / "uncertainty-overlay.png").string();
+    }
   };
   const int status = WriteRegistrationOutputs(result, settings, options.outputDirectory, bundle.labelMapNames,
                                               inputs.intraoperative.image, options.overlays, true, report,
@@ -1300,6 +1351,27 @@ AddModelCommands(CLI::App & app)
   updateCommand->add_option("--previous", update->previous,
                             "A later update of the same surgery: start the solve from this earlier update's output "
                             "folder (its solution.bin); the result is the cold solve's within the tolerance");
+  updateCommand
+    ->add_option("--uncertainty", update->uncertainty.members,
+                 "An ensemble of this many solves with the uncertain inputs drawn (measurement noise, gravity's "
+                 "size, Young's moduli, Poisson's ratio: docs/registration.md, Uncertainty); writes "
+                 "displacement-uncertainty.nii.gz (per voxel the 95th percentile of |u_i - u_mean|, mm), "
+                 "mean-transform.h5 and uncertainty-overlay.png")
+    ->check(CLI::Range(2, 1000));
+  updateCommand->add_option("--uncertainty-noise", update->uncertainty.noiseSigma,
+                            "Measurement noise (mm, standard deviation per component); negative: the loads' RMS "
+                            "correspondence distance; 0: none")
+    ->capture_default_str();
+  updateCommand->add_option("--uncertainty-gravity", update->uncertaintyGravity,
+                            "Gravity's size drawn uniformly between these fractions of the registration's, e.g. 0.5 1.5")
+    ->expected(2);
+  updateCommand->add_option("--uncertainty-modulus-spread", update->uncertainty.youngsModulusSpread,
+                            "Standard deviation of the logarithm of one factor on every Young's modulus; 0: none")
+    ->capture_default_str();
+  updateCommand->add_option("--uncertainty-poisson", update->uncertaintyPoisson,
+                            "The parenchyma's Poisson's ratio drawn uniformly in this range (default 0.45 0.499; 0 0: none)")
+    ->expected(2);
+  updateCommand->add_option("--uncertainty-seed", update->uncertainty.seed, "Seed of the draws")->capture_default_str();
   updateCommand->add_option("--overlays", update->overlays, "Edge-overlay PNGs per evaluation (0: none)")
     ->capture_default_str();
   updateCommand->add_option("-o,--output-dir", update->outputDirectory, "Output folder")->capture_default_str();

@@ -12,6 +12,7 @@
 
 #include "bmrColin27.h"
 #include "bmrModelBundle.h"
+#include "bmrSagScenes.h"
 #include "bmrSyntheticBrainShift.h"
 #include "bmrTemporaryFolderTest.h"
 #include "bmrTestUtilities.h"
@@ -48,108 +49,9 @@ using bmr_test::HaveColin27;
 
 const fs::path RealBrainsFolder = fs::path(BMR_SOURCE_DIR) / "test" / "data" / "real-brains";
 
-bmr::Vector3
-MaskCentroid(const bmr::LabelVolume & mask)
-{
-  bmr::Vector3 sum = bmr::Vector3::Zero();
-  double       count = 0.0;
-  const auto & g = mask.geometry;
-  for (int k = 0; k < g.size[2]; ++k)
-  {
-    for (int j = 0; j < g.size[1]; ++j)
-    {
-      for (int i = 0; i < g.size[0]; ++i)
-      {
-        if (mask.At(i, j, k) != 0)
-        {
-          sum += g.IndexToPoint(bmr::Vector3(i, j, k));
-          count += 1.0;
-        }
-      }
-    }
-  }
-  return sum / count;
-}
-
-bool
-InsideMask(const bmr::LabelVolume & mask, const bmr::Vector3 & point)
-{
-  const bmr::Vector3 index = mask.geometry.PointToIndex(point);
-  const int          i = static_cast<int>(std::lround(index.x()));
-  const int          j = static_cast<int>(std::lround(index.y()));
-  const int          k = static_cast<int>(std::lround(index.z()));
-  const auto &       size = mask.geometry.size;
-  return i >= 0 && j >= 0 && k >= 0 && i < size[0] && j < size[1] && k < size[2] && mask.At(i, j, k) != 0;
-}
-
-/** The outermost point of the mask on the ray from its centroid along `direction` (patient LPS). */
-bmr::Vector3
-SurfacePointAlong(const bmr::LabelVolume & mask, const bmr::Vector3 & direction)
-{
-  const bmr::Vector3 centroid = MaskCentroid(mask);
-  const bmr::Vector3 unit = direction.normalized();
-  bmr::Vector3       last = centroid;
-  for (double t = 0.0; t < 250.0; t += 0.25)
-  {
-    if (InsideMask(mask, centroid + t * unit))
-    {
-      last = centroid + t * unit;
-    }
-  }
-  return last;
-}
-
-/** Sparse measurements of a sag of the exposed surface: the mask's surface
- *  voxels within 0.8 of the craniotomy's radius (every `stride`-th), moved
- *  towards the brain's centroid by depth * (1 - (d / 0.8 R)^2). */
-bmr::SparseDisplacements
-SagOfTheOpening(const bmr::LabelVolume & mask, const bmr::Vector3 & centre, double radius, double depth)
-{
-  const bmr::Vector3       inward = (MaskCentroid(mask) - centre).normalized();
-  const auto &             g = mask.geometry;
-  bmr::SparseDisplacements sag;
-  std::vector<bmr::Vector3> points;
-  const double              reach = 0.8 * radius;
-  for (int k = 1; k + 1 < g.size[2]; ++k)
-  {
-    for (int j = 1; j + 1 < g.size[1]; ++j)
-    {
-      for (int i = 1; i + 1 < g.size[0]; ++i)
-      {
-        if (mask.At(i, j, k) == 0)
-        {
-          continue;
-        }
-        const bool surface = mask.At(i - 1, j, k) == 0 || mask.At(i + 1, j, k) == 0 || mask.At(i, j - 1, k) == 0 ||
-                             mask.At(i, j + 1, k) == 0 || mask.At(i, j, k - 1) == 0 || mask.At(i, j, k + 1) == 0;
-        const bmr::Vector3 x = g.IndexToPoint(bmr::Vector3(i, j, k));
-        if (surface && (x - centre).norm() <= reach)
-        {
-          points.push_back(x);
-        }
-      }
-    }
-  }
-  const std::size_t stride = std::max<std::size_t>(1, points.size() / 60);
-  for (std::size_t n = 0; n < points.size(); n += stride)
-  {
-    const double d = (points[n] - centre).norm() / reach;
-    sag.points.push_back(points[n]);
-    sag.displacements.push_back(depth * (1.0 - d * d) * inward);
-  }
-  return sag;
-}
-
-bmr::BrainShiftRegistrationSettings
-CoarseRegistration(bmr::ImageGridKind kind, double elementSize, const bmr::Vector3 & centre, double radius)
-{
-  bmr::BrainShiftRegistrationSettings settings;
-  settings.model.grid.kind = kind;
-  settings.model.grid.elementSize = elementSize;
-  settings.model.craniotomyCentre = centre;
-  settings.model.craniotomyRadius = radius;
-  return settings;
-}
+using bmr_test::CoarseRegistration;
+using bmr_test::SagOfTheOpening;
+using bmr_test::SurfacePointAlong;
 
 bool
 HasWarning(const std::vector<std::string> & warnings, const std::string & part)
@@ -439,6 +341,27 @@ TEST_F(ModelBundleTest, PrepareThenUpdateFromTheCommandLine)
   EXPECT_CONTAINS(run.err, "solution.bin");
   EXPECT_CONTAINS(run.err, "no such file");
   EXPECT_FALSE(fs::exists(m_Folder / "unwarm"));
+
+  // An ensemble for the uncertainty map: its files and report; a bad spread is named before any work.
+  run = bmr::test::RunBiomech(m_Folder, "update " + quoted(plan) + " --sparse-displacements " + quoted(csv) +
+                                          " --uncertainty 3 --uncertainty-seed 7 -q -o " + quoted(m_Folder / "ensemble"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const json ensemble = json::parse(bmr::test::ReadText(m_Folder / "ensemble" / "registration-report.json"));
+  EXPECT_EQ(ensemble["uncertainty"]["members"], 3);
+  EXPECT_EQ(ensemble["uncertainty"]["used_members"], 3);
+  EXPECT_EQ(ensemble["uncertainty"]["seed"], 7);
+  EXPECT_GT(ensemble["uncertainty"]["map_mm"]["brain_max"].get<double>(), 0.0);
+  EXPECT_TRUE(ensemble["seconds"].contains("uncertainty"));
+  for (const char * file : { "displacement-uncertainty.nii.gz", "mean-transform.h5", "uncertainty-overlay.png" })
+  {
+    EXPECT_TRUE(fs::exists(m_Folder / "ensemble" / file)) << file;
+  }
+  run = bmr::test::RunBiomech(m_Folder, "update " + quoted(plan) + " --sparse-displacements " + quoted(csv) +
+                                          " --uncertainty 3 --uncertainty-modulus-spread -1 -q -o " +
+                                          quoted(m_Folder / "badensemble"));
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_CONTAINS(run.err, "Young's modulus spread");
+  EXPECT_FALSE(fs::exists(m_Folder / "badensemble"));
 
   // Measurements outside the bundle's image: named, nothing written.
   std::ofstream(m_Folder / "far.csv") << "x,y,z,ux,uy,uz\n5000,0,0,0,0,-3\n";

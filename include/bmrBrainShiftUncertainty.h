@@ -1,0 +1,122 @@
+// Where to trust an update: an ensemble of intraoperative solves with the
+// uncertain inputs drawn from stated distributions, and the spread of their
+// displacements as a map on the preoperative grid.
+#ifndef bmrBrainShiftUncertainty_h
+#define bmrBrainShiftUncertainty_h
+
+#include "bmrBrainShiftRegistration.h"
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace bmr
+{
+
+/** The uncertain inputs and how each is drawn; a member draws each one
+ *  independently (one random stream, seeded, so the ensemble repeats
+ *  exactly). A spread of 0 (or an empty range) turns that input off. */
+struct UncertaintySettings
+{
+  /** Ensemble members (at least 2). */
+  int members = 0;
+  std::uint64_t seed = 1;
+  /** Measurement noise: a normal deviate of this standard deviation (mm) added
+   *  to each component of each measured displacement (sparse points) or
+   *  vertex (a displaced surface); 0.5 mm a component is about the 1 mm RMS
+   *  of a tracked stylus or a laser range scan. Negative: the loads' RMS
+   *  correspondence distance (the measured points' distance to the model's
+   *  surface), which also holds the model surface's discretisation: on
+   *  Colin27's 5 mm hexahedra 1.2 mm, under which 3 of 8 members folded a
+   *  cell, the interpolating spline through independently perturbed close
+   *  points being rough. */
+  double noiseSigma = 0.5;
+  /** Gravity's size as a fraction of the registration's (given or fitted):
+   *  uniform in [gravityLow, gravityHigh]; equal: not perturbed. */
+  double gravityLow = 1.0;
+  double gravityHigh = 1.0;
+  /** Young's moduli: every material's scaled by exp(N(0, youngsModulusSpread^2));
+   *  one factor per member for all materials (the stiffness of the whole
+   *  brain is what the literature's ranges vary, e.g. Miller's 3 kPa within a
+   *  factor of 2). 0: not perturbed. */
+  double youngsModulusSpread = 0.3;
+  /** Poisson's ratio of the nearly incompressible tissues (the materials with
+   *  nu > 0.4; the soft CSF keeps its own): shifted by one offset per member,
+   *  so that the parenchyma's nu is uniform in [poissonLow, poissonHigh].
+   *  Both 0: not perturbed. */
+  double poissonLow = 0.45;
+  double poissonHigh = 0.499;
+  /** Worker threads over the members (0: OpenMP's default); with at least
+   *  as many members as threads each member's solve is single-threaded. */
+  int threads = 0;
+};
+
+/** Throws bmr::Error naming the setting that is out of range. */
+void
+CheckUncertaintySettings(const UncertaintySettings & settings);
+
+/** What one member drew and how its solve ended. */
+struct UncertaintyMember
+{
+  double      noiseSigma = 0.0;     // mm
+  double      gravityFactor = 1.0;  // of the registration's gravity
+  double      modulusFactor = 1.0;
+  double      poissonOffset = 0.0;
+  bool        converged = false;
+  bool        failed = false;       // the solve threw (e.g. an inverted cell)
+  int         steps = 0;
+  std::string message;
+};
+
+struct BrainShiftUncertaintyResult
+{
+  std::vector<UncertaintyMember> members;
+  int                            usedMembers = 0; // converged, in the statistics
+  /** The mean of the converged members' nodal displacements, fitted as the
+   *  registration's transform is (backward map). */
+  RegistrationTransform::Pointer meanTransform;
+  /** Per node: the 95th percentile over the converged members of
+   *  |u_i - u_mean| (mm). */
+  std::vector<double> nodalUncertainty;
+  /** The same on the preoperative grid (mm; 0 outside the brain), between the
+   *  nodes by the B-spline fit the transforms use. */
+  RegistrationImage::Pointer uncertaintyImage;
+  /** Nodal uncertainty's median and largest at the exposed nodes and at the
+   *  others (mm). */
+  double exposedMedian = 0.0, exposedMax = 0.0, interiorMedian = 0.0, interiorMax = 0.0;
+  /** Map percentiles inside the brain (mm). */
+  double brainMedian = 0.0, brainP95 = 0.0, brainMax = 0.0;
+  double seconds = 0.0;
+  std::vector<std::string> warnings;
+};
+
+/** The ensemble around an update: `prepared` is the model before its loads
+ *  (as UpdateBrainShift takes it), `nominal` the update's result with the
+ *  same inputs and settings. Each member loads the prepared model from its
+ *  own noisy measurements, takes its drawn gravity and materials, and solves
+ *  from the nominal steady state (members differ from it by small
+ *  perturbations, so they take fewer steps than a cold solve); members run in
+ *  parallel. A member that fails or does not converge is reported and left
+ *  out of the statistics; fewer than two converged members throw bmr::Error,
+ *  as do bad settings. */
+BrainShiftUncertaintyResult
+EstimateBrainShiftUncertainty(const BrainModel &                     prepared,
+                              const BrainShiftRegistrationResult &   nominal,
+                              const BrainShiftUpdateInputs &         inputs,
+                              const BrainShiftRegistrationSettings & settings,
+                              const UncertaintySettings &            uncertainty);
+
+/** The report's "uncertainty" entry: settings, members, statistics. */
+nlohmann::json
+UncertaintyReportJson(const BrainShiftUncertaintyResult & result, const UncertaintySettings & settings);
+
+/** An axial slice through the largest uncertainty: the preoperative image in
+ *  grey with the map over it (transparent at 0, yellow to red up to its
+ *  maximum) as a PNG at `path`. */
+void
+WriteUncertaintyOverlay(const BrainShiftUncertaintyResult & result, const RegistrationImage * preoperative,
+                        const std::string & path);
+
+} // namespace bmr
+
+#endif

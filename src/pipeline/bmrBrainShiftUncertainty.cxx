@@ -1,0 +1,462 @@
+// The deformation filter first: ITK's bundled Eigen before the core's (its header says why).
+#include "itkBiomechanicalDeformationFilter.h"
+
+#include "bmrBrainShiftUncertainty.h"
+
+#include "bmrBSplineField.h"
+
+#include "itkBiomechanicalImageConversion.h"
+#include "itkBiomechanicalImageIO.h"
+#include "itkDisplacementPointSetToBSplineTransformFilter.h"
+#include "itkEdgeHausdorffDistanceImageFilter.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <random>
+#include <sstream>
+
+namespace bmr
+{
+
+void
+CheckUncertaintySettings(const UncertaintySettings & settings)
+{
+  const auto fail = [](const std::string & message) { throw Error("uncertainty: " + message); };
+  if (settings.members < 2)
+  {
+    fail(std::to_string(settings.members) + " members; an ensemble needs at least 2 (16 is a good start)");
+  }
+  if (!std::isfinite(settings.noiseSigma))
+  {
+    fail("the measurement noise is not a number; give a standard deviation in mm (0: none; negative: from the "
+         "loads' correspondence distances)");
+  }
+  if (!(settings.gravityLow >= 0.0 && settings.gravityLow <= settings.gravityHigh))
+  {
+    std::ostringstream message;
+    message << "the gravity range [" << settings.gravityLow << ", " << settings.gravityHigh
+            << "] is not a range of non-negative fractions; give low <= high, e.g. 0.5 1.5";
+    fail(message.str());
+  }
+  if (!(settings.youngsModulusSpread >= 0.0))
+  {
+    std::ostringstream message;
+    message << "the Young's modulus spread is " << settings.youngsModulusSpread
+            << "; give the standard deviation of its logarithm, 0 or more (0.3: within a factor of 1.8 at 2 sigma)";
+    fail(message.str());
+  }
+  const bool poisson = settings.poissonLow != 0.0 || settings.poissonHigh != 0.0;
+  if (poisson && !(settings.poissonLow > 0.0 && settings.poissonLow <= settings.poissonHigh && settings.poissonHigh < 0.5))
+  {
+    std::ostringstream message;
+    message << "the Poisson's ratio range [" << settings.poissonLow << ", " << settings.poissonHigh
+            << "] is not within (0, 0.5) with low <= high; give e.g. 0.45 0.499, or 0 0 to keep the model's";
+    fail(message.str());
+  }
+  if (settings.threads < 0)
+  {
+    fail(std::to_string(settings.threads) + " threads; give 0 (OpenMP's default) or more");
+  }
+}
+
+namespace
+{
+
+/** The parenchyma's Poisson's ratio the offsets are measured from: the
+ *  largest among the nearly incompressible materials. */
+constexpr double kIncompressibleFrom = 0.4;
+
+double
+NominalPoissonRatio(const Model & model)
+{
+  double largest = 0.0;
+  for (const Material & material : model.materials)
+  {
+    largest = std::max(largest, material.poissonRatio);
+  }
+  return largest;
+}
+
+/** Linear-interpolation percentile (q in [0, 1]) of `values`, which it sorts. */
+double
+Percentile(std::vector<double> & values, double q)
+{
+  std::sort(values.begin(), values.end());
+  const double      position = q * static_cast<double>(values.size() - 1);
+  const std::size_t below = static_cast<std::size_t>(std::floor(position));
+  const std::size_t above = std::min(values.size() - 1, below + 1);
+  return values[below] + (position - static_cast<double>(below)) * (values[above] - values[below]);
+}
+
+double
+Median(std::vector<double> values)
+{
+  return values.empty() ? 0.0 : Percentile(values, 0.5);
+}
+
+/** The member's measurements: each measured displacement (or displaced
+ *  surface vertex) moved by a normal deviate per component. */
+IntraoperativeData
+NoisyMeasurements(const IntraoperativeData & data, double sigma, std::mt19937_64 & random)
+{
+  IntraoperativeData noisy = data;
+  if (!(sigma > 0.0))
+  {
+    return noisy;
+  }
+  std::normal_distribution<double> deviate(0.0, sigma);
+  for (Vector3 & displacement : noisy.sparse.displacements)
+  {
+    for (int i = 0; i < 3; ++i)
+    {
+      displacement[i] += deviate(random);
+    }
+  }
+  for (Vector3 & vertex : noisy.surface.vertices)
+  {
+    for (int i = 0; i < 3; ++i)
+    {
+      vertex[i] += deviate(random);
+    }
+  }
+  return noisy;
+}
+
+using PointSetType = itk::DisplacementPointSetType<3>;
+
+/** Each member's draws (into `members`, one seeded stream in member order:
+ *  the ensemble repeats exactly whatever the threads) and the prepared model
+ *  loaded from its noisy measurements (serial: the loads are cheap, the
+ *  solves are what runs in parallel). */
+std::vector<BrainModel>
+DrawAndLoadMembers(const BrainModel & prepared, const BrainShiftRegistrationResult & nominal,
+                   const BrainShiftUpdateInputs & inputs, const BrainShiftRegistrationSettings & settings,
+                   const UncertaintySettings & uncertainty, std::vector<UncertaintyMember> & members)
+{
+  const bool   noisy = uncertainty.noiseSigma != 0.0;
+  const bool   gravity = uncertainty.gravityLow != uncertainty.gravityHigh;
+  const bool   poisson = uncertainty.poissonLow != 0.0 || uncertainty.poissonHigh != 0.0;
+  const double sigma = uncertainty.noiseSigma < 0.0 ? nominal.model.loadReport.rmsCorrespondenceDistance
+                                                    : uncertainty.noiseSigma;
+  std::mt19937_64                        random(uncertainty.seed);
+  std::normal_distribution<double>       logModulus(0.0, uncertainty.youngsModulusSpread);
+  std::uniform_real_distribution<double> gravityFactor(uncertainty.gravityLow, uncertainty.gravityHigh);
+  std::uniform_real_distribution<double> poissonRatio(uncertainty.poissonLow, uncertainty.poissonHigh);
+  const double                           nominalPoisson = NominalPoissonRatio(nominal.model.model);
+  members.assign(static_cast<std::size_t>(uncertainty.members), {});
+  std::vector<BrainModel> models(members.size());
+  for (std::size_t m = 0; m < members.size(); ++m)
+  {
+    UncertaintyMember & member = members[m];
+    member.noiseSigma = noisy ? sigma : 0.0;
+    member.modulusFactor = uncertainty.youngsModulusSpread > 0.0 ? std::exp(logModulus(random)) : 1.0;
+    member.gravityFactor = gravity ? gravityFactor(random) : 1.0;
+    member.poissonOffset = poisson ? poissonRatio(random) - nominalPoisson : 0.0;
+    models[m] = prepared;
+    StageTimer timer;
+    LoadBrainModel(models[m], NoisyMeasurements(inputs.intraoperative, member.noiseSigma, random), settings.model, timer);
+  }
+  return models;
+}
+
+/** One member's solve from the nominal steady state, with its gravity and
+ *  materials; its nodal displacements (the interpolated values when meshless). */
+std::vector<Vector3>
+SolveMember(const BrainModel & model, UncertaintyMember & member, const Vector3 & nominalGravity,
+            const WarmStart & nominalState, SolverSettings solver, int threads)
+{
+  Model solved = model.pipelineModel->GetModel();
+  solved.bodyAcceleration = member.gravityFactor * nominalGravity;
+  for (Material & material : solved.materials)
+  {
+    material.youngsModulus *= member.modulusFactor;
+    if (material.poissonRatio > kIncompressibleFrom)
+    {
+      material.poissonRatio = std::clamp(material.poissonRatio + member.poissonOffset, kIncompressibleFrom, 0.4999);
+    }
+  }
+  auto object = itk::BiomechanicalModelObject::New();
+  object->SetModel(std::move(solved));
+  if (member.modulusFactor == 1.0 && member.poissonOffset == 0.0)
+  {
+    object->SetPrecomputation(model.pipelineModel->GetPrecomputation()); // the same reference configuration
+  }
+  using DeformationType = itk::BiomechanicalDeformationFilter<PointSetType>;
+  auto deformation = DeformationType::New();
+  deformation->SetModelInput(object);
+  if (model.prescribedDisplacements.IsNotNull())
+  {
+    deformation->SetPrescribedDisplacements(model.prescribedDisplacements);
+  }
+  if (model.contactSurface.IsNotNull())
+  {
+    deformation->SetContactSurface(model.contactSurface);
+  }
+  solver.threads = threads;
+  deformation->SetSolverSettings(solver);
+  deformation->SetWarmStart(nominalState);
+  deformation->SetNumberOfWorkUnits(static_cast<itk::ThreadIdType>(threads));
+  deformation->Update();
+  const SolveResult & solve = deformation->GetSolveResult();
+  member.converged = solve.converged;
+  member.steps = solve.steps;
+  member.message = solve.message;
+  return solve.displacements;
+}
+
+/** Per node the mean of the converged members and the 95th percentile of
+ *  the distances from it; the medians and largest values at the exposed
+ *  nodes and the others. Returns the mean. */
+std::vector<Vector3>
+NodalSpread(const std::vector<std::vector<Vector3>> & displacements, const std::vector<std::size_t> & used,
+            const std::vector<Index> & exposedNodes, BrainShiftUncertaintyResult & result)
+{
+  const std::size_t    nodeCount = displacements[used.front()].size();
+  std::vector<Vector3> mean(nodeCount, Vector3::Zero());
+  for (const std::size_t m : used)
+  {
+    for (std::size_t n = 0; n < nodeCount; ++n)
+    {
+      mean[n] += displacements[m][n] / static_cast<double>(used.size());
+    }
+  }
+  result.nodalUncertainty.resize(nodeCount);
+  std::vector<double> distances(used.size());
+  for (std::size_t n = 0; n < nodeCount; ++n)
+  {
+    for (std::size_t k = 0; k < used.size(); ++k)
+    {
+      distances[k] = (displacements[used[k]][n] - mean[n]).norm();
+    }
+    result.nodalUncertainty[n] = Percentile(distances, 0.95);
+  }
+  std::vector<char> exposed(nodeCount, 0);
+  for (const Index node : exposedNodes)
+  {
+    exposed[static_cast<std::size_t>(node)] = 1;
+  }
+  std::vector<double> atExposed, atInterior;
+  for (std::size_t n = 0; n < nodeCount; ++n)
+  {
+    (exposed[n] ? atExposed : atInterior).push_back(result.nodalUncertainty[n]);
+  }
+  const auto largest = [](const std::vector<double> & values) {
+    return values.empty() ? 0.0 : *std::max_element(values.begin(), values.end());
+  };
+  result.exposedMedian = Median(atExposed);
+  result.exposedMax = largest(atExposed);
+  result.interiorMedian = Median(atInterior);
+  result.interiorMax = largest(atInterior);
+  return mean;
+}
+
+/** The nodal values on the brain of the preoperative grid, between the
+ *  nodes by the multilevel B-spline approximation the transforms use; the
+ *  map's percentiles inside the brain. */
+void
+MapUncertainty(const std::vector<Vector3> & nodes, const LabelVolume & brain,
+               const BrainShiftRegistrationSettings & settings, int threads, BrainShiftUncertaintyResult & result)
+{
+  std::vector<Vector3> values(nodes.size(), Vector3::Zero());
+  for (std::size_t n = 0; n < nodes.size(); ++n)
+  {
+    values[n].x() = result.nodalUncertainty[n];
+  }
+  BSplineFitSettings fit;
+  fit.tolerance = settings.fitTolerance;
+  fit.minimumSpacing = settings.minimumControlPointSpacing;
+  const BSplineFitResult field = FitMultilevelBSpline(nodes, values, brain.geometry, fit);
+  std::vector<double>    sampled(3 * brain.geometry.VoxelCount());
+  SampleBSplineField(field.lattice, brain.geometry, sampled.data(), threads);
+  ScalarVolume map;
+  map.geometry = brain.geometry;
+  map.values.assign(brain.geometry.VoxelCount(), 0.0f);
+  std::vector<double> inBrain;
+  for (std::size_t v = 0; v < map.values.size(); ++v)
+  {
+    if (brain.values[v] != 0)
+    {
+      map.values[v] = static_cast<float>(std::max(0.0, sampled[3 * v])); // the spline's undershoot is no spread
+      inBrain.push_back(map.values[v]);
+    }
+  }
+  result.uncertaintyImage = itk::MakeImageFromBiomechanicalVolume<RegistrationImage>(map);
+  if (!inBrain.empty())
+  {
+    result.brainMedian = Percentile(inBrain, 0.5);
+    result.brainP95 = Percentile(inBrain, 0.95);
+    result.brainMax = inBrain.back();
+  }
+}
+
+} // namespace
+
+BrainShiftUncertaintyResult
+EstimateBrainShiftUncertainty(const BrainModel &                     prepared,
+                              const BrainShiftRegistrationResult &   nominal,
+                              const BrainShiftUpdateInputs &         inputs,
+                              const BrainShiftRegistrationSettings & settings,
+                              const UncertaintySettings &            uncertainty)
+{
+  CheckUncertaintySettings(uncertainty);
+  const auto started = std::chrono::steady_clock::now();
+  if (uncertainty.noiseSigma != 0.0 && inputs.intraoperative.sparse.points.empty() &&
+      inputs.intraoperative.surface.vertices.empty())
+  {
+    throw Error("uncertainty: measurement noise needs measured points or a displaced surface, and this update "
+                "takes its surface from an image; give the noise as 0 (--uncertainty-noise 0)");
+  }
+  if (uncertainty.gravityLow != uncertainty.gravityHigh && nominal.gravity.isZero())
+  {
+    throw Error("uncertainty: a gravity range is given but the registration has no gravity; give gravity "
+                "(--gravity) or no range");
+  }
+  BrainShiftUncertaintyResult result;
+  std::vector<BrainModel>     models = DrawAndLoadMembers(prepared, nominal, inputs, settings, uncertainty, result.members);
+
+  // The solves in parallel: single-threaded members when there are at least
+  // as many as threads.
+  const int threads = uncertainty.threads > 0 ? uncertainty.threads : omp_get_max_threads();
+  const int count = uncertainty.members;
+  const int concurrent = std::max(1, std::min(count, threads));
+  const int memberThreads = std::max(1, threads / concurrent);
+  const WarmStart                   nominalState = WarmStartFrom(nominal.solve);
+  std::vector<std::vector<Vector3>> displacements(static_cast<std::size_t>(count));
+#pragma omp parallel for num_threads(concurrent) schedule(dynamic, 1)
+  for (int m = 0; m < count; ++m)
+  {
+    UncertaintyMember & member = result.members[static_cast<std::size_t>(m)];
+    try
+    {
+      displacements[static_cast<std::size_t>(m)] = SolveMember(models[static_cast<std::size_t>(m)], member,
+                                                               nominal.gravity, nominalState, settings.solver, memberThreads);
+    }
+    catch (const std::exception & error)
+    {
+      member.failed = true;
+      member.message = error.what();
+    }
+  }
+  models.clear();
+
+  std::vector<std::size_t> used;
+  for (int m = 0; m < count; ++m)
+  {
+    const UncertaintyMember & member = result.members[static_cast<std::size_t>(m)];
+    if (member.converged)
+    {
+      used.push_back(static_cast<std::size_t>(m));
+    }
+    else
+    {
+      result.warnings.push_back("uncertainty: member " + std::to_string(m + 1) +
+                                (member.failed ? " failed" : " did not converge") + " and is left out (" +
+                                member.message + ")");
+    }
+  }
+  result.usedMembers = static_cast<int>(used.size());
+  if (used.size() < 2)
+  {
+    throw Error("uncertainty: " + std::to_string(used.size()) + " of " + std::to_string(count) +
+                " members converged, too few for a spread (" +
+                (result.warnings.empty() ? std::string() : result.warnings.front()) +
+                "); narrow the distributions or raise max_steps");
+  }
+  const std::vector<Vector3> & nodes = nominal.model.model.nodes;
+  const std::vector<Vector3>   mean = NodalSpread(displacements, used, nominal.model.exposedNodes, result);
+
+  // The mean transform, fitted as the registration's is.
+  auto fitter = itk::DisplacementPointSetToBSplineTransformFilter<PointSetType>::New();
+  fitter->SetInput(itk::MakeDisplacementPointSet<PointSetType>(nodes, mean));
+  fitter->SetReferenceImage(inputs.preoperativeImage);
+  fitter->SetTolerance(settings.fitTolerance);
+  fitter->SetMinimumControlPointSpacing(settings.minimumControlPointSpacing);
+  fitter->Update();
+  result.meanTransform = const_cast<RegistrationTransform *>(fitter->GetTransform());
+  MapUncertainty(nodes, nominal.model.brainMask, settings, threads, result);
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  return result;
+}
+
+nlohmann::json
+UncertaintyReportJson(const BrainShiftUncertaintyResult & result, const UncertaintySettings & settings)
+{
+  nlohmann::json members = nlohmann::json::array();
+  for (const UncertaintyMember & member : result.members)
+  {
+    members.push_back({ { "noise_sigma_mm", member.noiseSigma },
+                        { "gravity_factor", member.gravityFactor },
+                        { "youngs_modulus_factor", member.modulusFactor },
+                        { "poisson_ratio_offset", member.poissonOffset },
+                        { "converged", member.converged },
+                        { "failed", member.failed },
+                        { "steps", member.steps },
+                        { "message", member.message } });
+  }
+  return { { "members", settings.members },
+           { "used_members", result.usedMembers },
+           { "seed", settings.seed },
+           { "distributions",
+             { { "noise_sigma_mm", settings.noiseSigma },
+               { "gravity_fraction", { settings.gravityLow, settings.gravityHigh } },
+               { "youngs_modulus_log_sd", settings.youngsModulusSpread },
+               { "poisson_ratio", { settings.poissonLow, settings.poissonHigh } } } },
+           { "map_mm", { { "brain_p50", result.brainMedian }, { "brain_p95", result.brainP95 }, { "brain_max", result.brainMax } } },
+           { "nodes_mm",
+             { { "exposed_median", result.exposedMedian },
+               { "exposed_max", result.exposedMax },
+               { "interior_median", result.interiorMedian },
+               { "interior_max", result.interiorMax } } },
+           { "seconds", result.seconds },
+           { "member_results", members },
+           { "warnings", result.warnings } };
+}
+
+void
+WriteUncertaintyOverlay(const BrainShiftUncertaintyResult & result, const RegistrationImage * preoperative,
+                        const std::string & path)
+{
+  const RegistrationImage * map = result.uncertaintyImage.GetPointer();
+  if (map == nullptr || preoperative->GetLargestPossibleRegion() != map->GetLargestPossibleRegion())
+  {
+    throw Error("uncertainty overlay: the map and the preoperative image do not share a grid (internal error; please "
+                "report it)");
+  }
+  const auto         region = map->GetLargestPossibleRegion();
+  const float *      values = map->GetBufferPointer();
+  const std::size_t  voxels = region.GetNumberOfPixels();
+  const std::size_t  peak = static_cast<std::size_t>(std::max_element(values, values + voxels) - values);
+  const double       largest = values[peak];
+  const auto         size = region.GetSize();
+  const std::size_t  slice = peak / (size[0] * size[1]);
+  const auto [grey0, grey1] = OverlayGreyRange(preoperative);
+  auto overlay = itk::EdgeOverlayImageType::New();
+  itk::EdgeOverlayImageType::SizeType planeSize{ { size[0], size[1] } };
+  overlay->SetRegions(itk::EdgeOverlayImageType::RegionType(planeSize));
+  overlay->Allocate();
+  const float * grey = preoperative->GetBufferPointer();
+  const double  greyScale = grey1 > grey0 ? 255.0 / (grey1 - grey0) : 0.0;
+  for (std::size_t j = 0; j < size[1]; ++j)
+  {
+    for (std::size_t i = 0; i < size[0]; ++i)
+    {
+      const std::size_t v = i + size[0] * (j + size[1] * slice);
+      const double      g = std::clamp((grey[v] - grey0) * greyScale, 0.0, 255.0);
+      // Transparent at 0; yellow (low) to red (the map's largest value) above.
+      const double t = largest > 0.0 ? values[v] / largest : 0.0;
+      const double alpha = t > 0.0 ? 0.35 + 0.65 * t : 0.0;
+      const double red = 255.0, green = 255.0 * (1.0 - t), blue = 0.0;
+      itk::RGBPixel<unsigned char> pixel;
+      pixel.Set(static_cast<unsigned char>(std::lround((1 - alpha) * g + alpha * red)),
+                static_cast<unsigned char>(std::lround((1 - alpha) * g + alpha * green)),
+                static_cast<unsigned char>(std::lround((1 - alpha) * g + alpha * blue)));
+      overlay->SetPixel({ { static_cast<itk::IndexValueType>(i), static_cast<itk::IndexValueType>(j) } }, pixel);
+    }
+  }
+  itk::WriteBiomechanicalImage(overlay.GetPointer(), path);
+}
+
+} // namespace bmr
