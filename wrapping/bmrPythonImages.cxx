@@ -8,6 +8,7 @@
 // ITK before the core: ITK's bundled Eigen must be seen before the system
 // Eigen (the pipeline headers include ITK's first).
 #include "bmrBrainShiftRegistration.h"
+#include "bmrBrainShiftUncertainty.h"
 #include "bmrModelBundle.h"
 
 #include "itkBiomechanicalImageConversion.h"
@@ -640,6 +641,21 @@ BindRegistration(py::module_ & module)
     py::arg("intraoperative_surface"), py::arg("sparse_points"), py::arg("sparse_displacements"), py::arg("settings"),
     py::arg("progress"));
 
+  py::class_<UncertaintySettings>(module, "UncertaintySettings",
+                                  "The uncertain inputs of update(uncertainty=N) and their distributions "
+                                  "(docs/registration.md, Uncertainty).")
+    .def(py::init<>())
+    .def_readwrite("members", &UncertaintySettings::members)
+    .def_readwrite("seed", &UncertaintySettings::seed)
+    .def_readwrite("noise_sigma", &UncertaintySettings::noiseSigma, "mm per component; negative: the loads' RMS "
+                                                                     "correspondence distance; 0: none")
+    .def_readwrite("gravity_low", &UncertaintySettings::gravityLow)
+    .def_readwrite("gravity_high", &UncertaintySettings::gravityHigh)
+    .def_readwrite("youngs_modulus_spread", &UncertaintySettings::youngsModulusSpread)
+    .def_readwrite("poisson_low", &UncertaintySettings::poissonLow)
+    .def_readwrite("poisson_high", &UncertaintySettings::poissonHigh)
+    .def_readwrite("threads", &UncertaintySettings::threads);
+
   py::class_<BrainShiftRegistrationResult>(module, "RegistrationResult", py::dynamic_attr(),
                                            "Everything `biomech register` writes, in memory.")
     .def_readonly("brain_model", &BrainShiftRegistrationResult::model)
@@ -772,8 +788,13 @@ BindRegistration(py::module_ & module)
     "_update",
     [](const ModelBundle & bundle, const py::object & surface, const py::object & points,
        const py::object & displacements, const py::object & intraoperativeImage, const py::object & intraoperativeMask,
-       const py::object & previous, const py::dict & values, const py::object & progress) {
+       const py::object & previous, const py::dict & values, const std::optional<UncertaintySettings> & uncertainty,
+       const py::object & progress) {
       const BrainShiftRegistrationSettings settings = RegistrationSettingsFrom(values, bundle.settings);
+      if (uncertainty)
+      {
+        CheckUncertaintySettings(*uncertainty);
+      }
       BrainShiftUpdateInputs               inputs;
       inputs.preoperativeImage = bundle.preoperativeImage;
       inputs.labelMaps.assign(bundle.labelMaps.begin(), bundle.labelMaps.end());
@@ -788,18 +809,34 @@ BindRegistration(py::module_ & module)
       {
         inputs.previous = ReadUpdateSolution(py::str(previous).cast<std::string>(), bundle.manifest).start;
       }
-      ProgressReporter reporter(progress);
+      ProgressReporter                           reporter(progress);
+      std::optional<BrainShiftUncertaintyResult> ensemble;
       auto result = RunWithoutGil(reporter, [&] {
         return TranslateItkErrors([&] {
-          return UpdateBrainShift(bundle.model, inputs, settings, reporter.StageCallback(), reporter.SolverCallback());
+          auto update = UpdateBrainShift(bundle.model, inputs, settings, reporter.StageCallback(), reporter.SolverCallback());
+          if (uncertainty)
+          {
+            ensemble = update.timer.Run("uncertainty", [&] {
+              return EstimateBrainShiftUncertainty(bundle.model, update, inputs, settings, *uncertainty);
+            });
+            update.warnings.insert(update.warnings.end(), ensemble->warnings.begin(), ensemble->warnings.end());
+          }
+          return update;
         });
       });
-      py::object report = JsonToDict(RegistrationReportJson(result, settings));
-      return py::make_tuple(std::move(result), report);
+      nlohmann::json report = RegistrationReportJson(result, settings);
+      py::object     spread = py::none();
+      if (ensemble)
+      {
+        report["uncertainty"] = UncertaintyReportJson(*ensemble, *uncertainty);
+        spread = py::make_tuple(PythonImage(ensemble->uncertaintyImage.GetPointer()),
+                                PythonTransform{ ensemble->meanTransform.GetPointer() }, ensemble->nodalUncertainty);
+      }
+      return py::make_tuple(std::move(result), JsonToDict(report), spread);
     },
     py::arg("bundle"), py::arg("intraoperative_surface"), py::arg("sparse_points"), py::arg("sparse_displacements"),
     py::arg("intraoperative_image"), py::arg("intraoperative_mask"), py::arg("previous"), py::arg("settings"),
-    py::arg("progress"));
+    py::arg("uncertainty"), py::arg("progress"));
 }
 
 } // namespace

@@ -307,6 +307,12 @@ def update(
     intraoperative_image=None,
     intraoperative_mask=None,
     previous=None,
+    uncertainty=None,
+    uncertainty_noise=None,
+    uncertainty_gravity=None,
+    uncertainty_modulus_spread=None,
+    uncertainty_poisson=None,
+    uncertainty_seed=None,
     progress=None,
     **settings
 ):
@@ -319,15 +325,42 @@ def update(
     of ``biomech update``) to start the solve from (``result.solve.warm_started``);
     the result is the cold solve's within the solver tolerance. Returns a
     :class:`RegistrationResult` with ``report``, as :func:`register`.
+
+    ``uncertainty=N``, as ``biomech update --uncertainty N``: an ensemble of N solves with
+    the uncertain inputs drawn (``uncertainty_noise`` mm, ``uncertainty_gravity`` (low,
+    high) fractions, ``uncertainty_modulus_spread``, ``uncertainty_poisson`` (low, high),
+    ``uncertainty_seed``; defaults and meaning in docs/registration.md, Uncertainty).
+    The result then has ``uncertainty_map`` (an :class:`Image` on the preoperative grid:
+    per voxel the 95th percentile of |u_i - u_mean| in mm), ``mean_transform``,
+    ``nodal_uncertainty`` (mm per node) and the report's ``uncertainty``.
     """
     if not isinstance(bundle, _bmr.ModelBundle):
         bundle = _bmr.read_model_bundle(bundle)
     values = _checked_settings("update", settings)
-    result, report = _bmr._update(
+    ensemble = None
+    if uncertainty is not None:
+        ensemble = _bmr.UncertaintySettings()
+        ensemble.members = int(uncertainty)
+        if uncertainty_noise is not None:
+            ensemble.noise_sigma = float(uncertainty_noise)
+        if uncertainty_gravity is not None:
+            ensemble.gravity_low, ensemble.gravity_high = (float(value) for value in uncertainty_gravity)
+        if uncertainty_modulus_spread is not None:
+            ensemble.youngs_modulus_spread = float(uncertainty_modulus_spread)
+        if uncertainty_poisson is not None:
+            ensemble.poisson_low, ensemble.poisson_high = (float(value) for value in uncertainty_poisson)
+        if uncertainty_seed is not None:
+            ensemble.seed = int(uncertainty_seed)
+    elif any(value is not None for value in (uncertainty_noise, uncertainty_gravity, uncertainty_modulus_spread,
+                                                 uncertainty_poisson, uncertainty_seed)):
+        raise TypeError("update() got uncertainty_* settings without uncertainty=N (the ensemble's members)")
+    result, report, spread = _bmr._update(
         bundle, intraoperative_surface, sparse_points, sparse_displacements, intraoperative_image,
-        intraoperative_mask, previous, values, progress,
+        intraoperative_mask, previous, values, ensemble, progress,
     )
     result.report = report
+    if spread is not None:
+        result.uncertainty_map, result.mean_transform, result.nodal_uncertainty = spread
     return result
 
 

@@ -521,3 +521,17 @@ def test_prepare_then_update_gives_the_one_call_registration(tmp_path, colin27):
         bmr.prepare(image, brain_mask=mask, gravity=(0, 0, -9810), **CRANIOTOMY)
     with pytest.raises(bmr.Error, match="no manifest.json|no such folder"):
         bmr.update(tmp_path / "nothing-here", sparse_points=points, sparse_displacements=displacements)
+    # The uncertainty map: an ensemble of 3 with the defaults' draws, as `biomech update --uncertainty 3`.
+    ensemble = bmr.update(bundle, sparse_points=points, sparse_displacements=displacements, uncertainty=3,
+                          uncertainty_seed=5)
+    assert ensemble.report["uncertainty"]["used_members"] == 3 and ensemble.report["uncertainty"]["seed"] == 5
+    spread = ensemble.uncertainty_map.array
+    assert spread.shape == from_object.warped_image.array.shape
+    assert spread.min() >= 0.0 and spread.max() > 0.0
+    assert len(ensemble.nodal_uncertainty) == len(ensemble.brain_model.model.nodes)
+    np.testing.assert_allclose(ensemble.mean_transform.transform_points(samples),
+                               from_object.transform.transform_points(samples), atol=2.0)
+    with pytest.raises(TypeError, match="without uncertainty=N"):
+        bmr.update(bundle, sparse_points=points, sparse_displacements=displacements, uncertainty_seed=3)
+    with pytest.raises(bmr.Error, match="at least 2"):
+        bmr.update(bundle, sparse_points=points, sparse_displacements=displacements, uncertainty=1)
