@@ -1018,6 +1018,13 @@ RunUpdate(const UpdateOptions & options)
         return EstimateBrainShiftUncertainty(*prepared, result, inputs, settings, uncertainty);
       });
       result.warnings.insert(result.warnings.end(), ensemble->warnings.begin(), ensemble->warnings.end());
+      for (auto & region : ensemble->regions)
+      {
+        if (region.labelMap >= 0)
+        {
+          region.name = bundle.labelMapNames.at(static_cast<std::size_t>(region.labelMap));
+        }
+      }
     }
   }
   json report = { { "bundle", options.bundle },

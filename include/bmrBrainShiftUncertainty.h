@@ -68,6 +68,9 @@ struct UncertaintyMember
   std::string message;
 };
 
+/** How deep inside the brain (mm) CSF counts as the ventricles' rather than the sulci's. */
+constexpr double kVentricleDepth = 10.0;
+
 struct BrainShiftUncertaintyResult
 {
   std::vector<UncertaintyMember> members;
@@ -86,6 +89,18 @@ struct BrainShiftUncertaintyResult
   double exposedMedian = 0.0, exposedMax = 0.0, interiorMedian = 0.0, interiorMax = 0.0;
   /** Map percentiles inside the brain (mm). */
   double brainMedian = 0.0, brainP95 = 0.0, brainMax = 0.0;
+  /** The map inside regions (mm): the ventricles (voxels of the CSF class at
+   *  least kVentricleDepth mm inside the brain) and each of the update's
+   *  label maps (voxels > 0; "label map 1", ... in their order: the tumour or
+   *  a resection margin, when given). */
+  struct Region
+  {
+    std::string name;
+    int         labelMap = -1; // its index in the update's label maps, or -1
+    std::size_t voxels = 0;
+    double      median = 0.0, p95 = 0.0, max = 0.0;
+  };
+  std::vector<Region> regions;
   double seconds = 0.0;
   std::vector<std::string> warnings;
 };

@@ -352,6 +352,14 @@ TEST_F(ModelBundleTest, PrepareThenUpdateFromTheCommandLine)
   EXPECT_EQ(ensemble["uncertainty"]["seed"], 7);
   EXPECT_GT(ensemble["uncertainty"]["map_mm"]["brain_max"].get<double>(), 0.0);
   EXPECT_TRUE(ensemble["seconds"].contains("uncertainty"));
+  // The map in regions: the ventricles, and the bundle's label map (here the brain mask itself, so its
+  // percentiles are the brain's).
+  const json & regions = ensemble["uncertainty"]["regions"];
+  ASSERT_EQ(regions.size(), 2u);
+  EXPECT_EQ(regions[0]["name"].get<std::string>().rfind("ventricles", 0), 0u);
+  EXPECT_GT(regions[0]["voxels"].get<int>(), 1000);
+  EXPECT_EQ(regions[1]["name"], "ch2bet.nii.gz");
+  EXPECT_NEAR(regions[1]["p95_mm"].get<double>(), ensemble["uncertainty"]["map_mm"]["brain_p95"].get<double>(), 0.01);
   for (const char * file : { "displacement-uncertainty.nii.gz", "mean-transform.h5", "uncertainty-overlay.png" })
   {
     EXPECT_TRUE(fs::exists(m_Folder / "ensemble" / file)) << file;

@@ -9,12 +9,14 @@
 #include "itkBiomechanicalImageIO.h"
 #include "itkDisplacementPointSetToBSplineTransformFilter.h"
 #include "itkEdgeHausdorffDistanceImageFilter.h"
+#include "itkSignedMaurerDistanceMapImageFilter.h"
 
 #include <omp.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <random>
 #include <sstream>
 
@@ -292,6 +294,70 @@ MapUncertainty(const std::vector<Vector3> & nodes, const LabelVolume & brain,
   }
 }
 
+/** The map's percentiles over the voxels where `inside` holds. */
+BrainShiftUncertaintyResult::Region
+RegionSpread(const std::string & name, const RegistrationImage * map, const std::function<bool(std::size_t)> & inside)
+{
+  BrainShiftUncertaintyResult::Region region;
+  region.name = name;
+  std::vector<double> values;
+  const float *       data = map->GetBufferPointer();
+  const std::size_t   count = map->GetLargestPossibleRegion().GetNumberOfPixels();
+  for (std::size_t v = 0; v < count; ++v)
+  {
+    if (inside(v))
+    {
+      values.push_back(data[v]);
+    }
+  }
+  region.voxels = values.size();
+  if (!values.empty())
+  {
+    region.p95 = Percentile(values, 0.95);
+    region.median = Percentile(values, 0.5);
+    region.max = values.back();
+  }
+  return region;
+}
+
+/** The ventricles (the CSF class deep inside the brain) and the label maps. */
+void
+SpreadInRegions(const BrainModel & model, const std::vector<RegistrationLabelImage::ConstPointer> & labelMaps,
+                BrainShiftUncertaintyResult & result)
+{
+  const RegistrationImage * map = result.uncertaintyImage.GetPointer();
+  if (model.tissueLabelImage.IsNotNull() &&
+      model.tissueLabelImage->GetLargestPossibleRegion() == map->GetLargestPossibleRegion())
+  {
+    auto brain = itk::MakeImageFromBiomechanicalVolume<RegistrationLabelImage>(model.brainMask);
+    auto depth = itk::SignedMaurerDistanceMapImageFilter<RegistrationLabelImage, RegistrationImage>::New();
+    depth->SetInput(brain);
+    depth->SetUseImageSpacing(true);
+    depth->SetSquaredDistance(false);
+    depth->SetInsideIsPositive(true);
+    depth->Update();
+    const float *         inside = depth->GetOutput()->GetBufferPointer();
+    const unsigned char * classes = model.tissueLabelImage->GetBufferPointer();
+    const unsigned char   csf = static_cast<unsigned char>(model.csfClass.csfClass + 1); // labels are 1..K
+    std::ostringstream    name;
+    name << "ventricles (CSF class at least " << kVentricleDepth << " mm inside the brain)";
+    result.regions.push_back(
+      RegionSpread(name.str(), map, [&](std::size_t v) { return classes[v] == csf && inside[v] >= kVentricleDepth; }));
+  }
+  for (std::size_t k = 0; k < labelMaps.size(); ++k)
+  {
+    const RegistrationLabelImage * labels = labelMaps[k].GetPointer();
+    if (labels->GetLargestPossibleRegion() != map->GetLargestPossibleRegion())
+    {
+      continue; // label maps lie on the preoperative grid (CheckUpdateInputs); kept safe here
+    }
+    const unsigned char * values = labels->GetBufferPointer();
+    result.regions.push_back(
+      RegionSpread("label map " + std::to_string(k + 1), map, [&](std::size_t v) { return values[v] != 0; }));
+    result.regions.back().labelMap = static_cast<int>(k);
+  }
+}
+
 } // namespace
 
 BrainShiftUncertaintyResult
@@ -377,6 +443,7 @@ EstimateBrainShiftUncertainty(const BrainModel &                     prepared,
   fitter->Update();
   result.meanTransform = const_cast<RegistrationTransform *>(fitter->GetTransform());
   MapUncertainty(nodes, nominal.model.brainMask, settings, threads, result);
+  SpreadInRegions(nominal.model, inputs.labelMaps, result);
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return result;
 }
@@ -396,6 +463,15 @@ UncertaintyReportJson(const BrainShiftUncertaintyResult & result, const Uncertai
                         { "steps", member.steps },
                         { "message", member.message } });
   }
+  nlohmann::json regions = nlohmann::json::array();
+  for (const auto & region : result.regions)
+  {
+    regions.push_back({ { "name", region.name },
+                        { "voxels", region.voxels },
+                        { "median_mm", region.median },
+                        { "p95_mm", region.p95 },
+                        { "max_mm", region.max } });
+  }
   return { { "members", settings.members },
            { "used_members", result.usedMembers },
            { "seed", settings.seed },
@@ -410,6 +486,7 @@ UncertaintyReportJson(const BrainShiftUncertaintyResult & result, const Uncertai
                { "exposed_max", result.exposedMax },
                { "interior_median", result.interiorMedian },
                { "interior_max", result.interiorMax } } },
+           { "regions", regions },
            { "seconds", result.seconds },
            { "member_results", members },
            { "warnings", result.warnings } };
