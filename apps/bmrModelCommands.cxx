@@ -680,6 +680,105 @@ struct IntraoperativeOptions
   }
 };
 
+/** The ensemble of `register` and `update` (--uncertainty N and its distributions). */
+struct UncertaintyOptions
+{
+  UncertaintySettings settings; // members 0: no ensemble
+  std::vector<double> gravity;  // low, high
+  std::vector<double> poisson;  // low, high
+
+  void
+  Add(CLI::App * command)
+  {
+    command
+      ->add_option("--uncertainty", settings.members,
+                   "An ensemble of this many solves with the uncertain inputs drawn (measurement noise, gravity's "
+                   "size, Young's moduli, Poisson's ratio: docs/registration.md, Uncertainty); writes "
+                   "displacement-uncertainty.nii.gz (per voxel the 95th percentile of |u_i - u_mean|, mm), "
+                   "mean-transform.h5 and uncertainty-overlay.png")
+      ->check(CLI::Range(2, 1000));
+    command
+      ->add_option("--uncertainty-noise", settings.noiseSigma,
+                   "Measurement noise (mm, standard deviation per component); negative: the loads' RMS "
+                   "correspondence distance; 0: none")
+      ->capture_default_str();
+    command
+      ->add_option("--uncertainty-gravity", gravity,
+                   "Gravity's size drawn uniformly between these fractions of the registration's, e.g. 0.5 1.5")
+      ->expected(2);
+    command
+      ->add_option("--uncertainty-modulus-spread", settings.youngsModulusSpread,
+                   "Standard deviation of the logarithm of one factor on every Young's modulus; 0: none")
+      ->capture_default_str();
+    command
+      ->add_option("--uncertainty-poisson", poisson,
+                   "The parenchyma's Poisson's ratio drawn uniformly in this range (default 0.45 0.499; 0 0: none)")
+      ->expected(2);
+    command
+      ->add_option("--uncertainty-skull-gap", settings.skullGapSpread,
+                   "Standard deviation (mm) of the skull's offset along its normals: the brain-skull gap; 0: none")
+      ->capture_default_str();
+    command->add_option("--uncertainty-seed", settings.seed, "Seed of the draws")->capture_default_str();
+  }
+
+  /** The settings with the ranges, checked (before any work). */
+  UncertaintySettings
+  Checked() const
+  {
+    UncertaintySettings checked = settings;
+    if (!gravity.empty())
+    {
+      checked.gravityLow = gravity.at(0);
+      checked.gravityHigh = gravity.at(1);
+    }
+    if (!poisson.empty())
+    {
+      checked.poissonLow = poisson.at(0);
+      checked.poissonHigh = poisson.at(1);
+    }
+    if (checked.members != 0)
+    {
+      CheckUncertaintySettings(checked);
+    }
+    return checked;
+  }
+};
+
+/** The ensemble after a registration (`prepared`: its model before the
+ *  loads), its warnings added to the result's, its label-map regions named
+ *  after `labelNames`; the stage "uncertainty". */
+BrainShiftUncertaintyResult
+RunEnsemble(const BrainModel & prepared, BrainShiftRegistrationResult & result, const BrainShiftUpdateInputs & inputs,
+            const BrainShiftRegistrationSettings & settings, const UncertaintySettings & uncertainty,
+            const std::vector<std::string> & labelNames)
+{
+  BrainShiftUncertaintyResult ensemble = result.timer.Run("uncertainty", [&] {
+    return EstimateBrainShiftUncertainty(prepared, result, inputs, settings, uncertainty);
+  });
+  result.warnings.insert(result.warnings.end(), ensemble.warnings.begin(), ensemble.warnings.end());
+  for (auto & region : ensemble.regions)
+  {
+    if (region.labelMap >= 0)
+    {
+      region.name = fs::path(labelNames.at(static_cast<std::size_t>(region.labelMap))).filename().string();
+    }
+  }
+  return ensemble;
+}
+
+/** The ensemble's files into `folder` (listed in `files`). */
+void
+WriteEnsemble(const BrainShiftUncertaintyResult & ensemble, const RegistrationImage * preoperative,
+              const fs::path & folder, json & files)
+{
+  WriteImageAtomically(ensemble.uncertaintyImage.GetPointer(), folder / "displacement-uncertainty.nii.gz");
+  files["displacement_uncertainty"] = (folder / "displacement-uncertainty.nii.gz").string();
+  itk::WriteBiomechanicalTransform(ensemble.meanTransform, (folder / "mean-transform.h5").string());
+  files["mean_transform"] = (folder / "mean-transform.h5").string();
+  WriteUncertaintyOverlay(ensemble, preoperative, (folder / "uncertainty-overlay.png").string());
+  files["uncertainty_overlay"] = (folder / "uncertainty-overlay.png").string();
+}
+
 struct RegisterOptions
 {
   PatientModelOptions            patient;
@@ -689,6 +788,7 @@ struct RegisterOptions
   SettingOptions                 settings{ { "solve", "fit", "evaluation" } };
   int                            overlays = 5;
   bool                           quiet = false;
+  UncertaintyOptions             uncertainty;
 };
 
 /** "labels.nii.gz" -> "labels-warped.nii.gz". */
@@ -827,15 +927,34 @@ RunRegister(const RegisterOptions & options)
 
   BrainShiftRegistrationSettings settings = options.patient.RegistrationSettings();
   options.settings.Apply(settings);
+  const UncertaintySettings uncertainty = options.uncertainty.Checked();
 
-  BrainShiftRegistrationResult result;
+  BrainShiftRegistrationResult               result;
+  std::optional<BrainShiftUncertaintyResult> ensemble;
   {
     RegistrationProgress progress(!options.quiet && ::isatty(STDERR_FILENO) != 0);
-    result = RegisterBrainShift(inputs, settings, progress.Stages(), progress.Steps());
+    BrainModel           prepared;
+    result = RegisterBrainShift(inputs, settings, progress.Stages(), progress.Steps(),
+                                uncertainty.members > 0 ? &prepared : nullptr);
+    if (uncertainty.members > 0)
+    {
+      const BrainShiftUpdateInputs update{ inputs.preoperativeImage, inputs.labelMaps, inputs.intraoperative };
+      ensemble = RunEnsemble(prepared, result, update, settings, uncertainty, options.labelMaps);
+    }
+  }
+  json report = { { "preoperative_image", options.patient.image } };
+  if (ensemble)
+  {
+    report["uncertainty"] = UncertaintyReportJson(*ensemble, uncertainty);
   }
   return WriteRegistrationOutputs(result, settings, options.outputDirectory, options.labelMaps,
-                                  inputs.intraoperative.image, options.overlays, options.quiet,
-                                  { { "preoperative_image", options.patient.image } });
+                                  inputs.intraoperative.image, options.overlays, options.quiet, report, json::object(),
+                                  [&](const fs::path & folder, json & files) {
+                                    if (ensemble)
+                                    {
+                                      WriteEnsemble(*ensemble, inputs.preoperativeImage, folder, files);
+                                    }
+                                  });
 }
 
 // ---------------------------------------------------------------------------
@@ -918,32 +1037,8 @@ struct UpdateOptions
   int                   overlays = 5;
   std::string           outputDirectory = "update";
   bool                  quiet = false;
-  UncertaintySettings   uncertainty;          // members 0: no ensemble
-  std::vector<double>   uncertaintyGravity;   // low, high
-  std::vector<double>   uncertaintyPoisson;   // low, high
+  UncertaintyOptions    uncertainty;
 };
-
-/** `--uncertainty-gravity` and `--uncertainty-poisson` into the settings, then their check (before any work). */
-UncertaintySettings
-UncertaintyOf(const UpdateOptions & options)
-{
-  UncertaintySettings settings = options.uncertainty;
-  if (!options.uncertaintyGravity.empty())
-  {
-    settings.gravityLow = options.uncertaintyGravity.at(0);
-    settings.gravityHigh = options.uncertaintyGravity.at(1);
-  }
-  if (!options.uncertaintyPoisson.empty())
-  {
-    settings.poissonLow = options.uncertaintyPoisson.at(0);
-    settings.poissonHigh = options.uncertaintyPoisson.at(1);
-  }
-  if (settings.members != 0)
-  {
-    CheckUncertaintySettings(settings);
-  }
-  return settings;
-}
 
 /** Intraoperative measurements must lie on the bundle's preoperative image: a
  *  point outside it is from another patient, scan or coordinate frame. */
@@ -979,7 +1074,7 @@ int
 RunUpdate(const UpdateOptions & options)
 {
   const auto                started = std::chrono::steady_clock::now();
-  const UncertaintySettings uncertainty = UncertaintyOf(options);
+  const UncertaintySettings uncertainty = options.uncertainty.Checked();
   ModelBundle               bundle = ReadModelBundle(options.bundle);
   const double readSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   BrainShiftRegistrationSettings settings = bundle.settings;
@@ -1014,17 +1109,7 @@ RunUpdate(const UpdateOptions & options)
     result = UpdateBrainShift(std::move(bundle.model), inputs, settings, progress.Stages(), progress.Steps());
     if (prepared)
     {
-      ensemble = result.timer.Run("uncertainty", [&] {
-        return EstimateBrainShiftUncertainty(*prepared, result, inputs, settings, uncertainty);
-      });
-      result.warnings.insert(result.warnings.end(), ensemble->warnings.begin(), ensemble->warnings.end());
-      for (auto & region : ensemble->regions)
-      {
-        if (region.labelMap >= 0)
-        {
-          region.name = bundle.labelMapNames.at(static_cast<std::size_t>(region.labelMap));
-        }
-      }
+      ensemble = RunEnsemble(*prepared, result, inputs, settings, uncertainty, bundle.labelMapNames);
     }
   }
   json report = { { "bundle", options.bundle },
@@ -1059,12 +1144,7 @@ RunUpdate(const UpdateOptions & options)
     files["solution"] = (folder / "solution.bin").string();
     if (ensemble)
     {
-      WriteImageAtomically(ensemble->uncertaintyImage.GetPointer(), folder / "displacement-uncertainty.nii.gz");
-      files["displacement_uncertainty"] = (folder / "displacement-uncertainty.nii.gz").string();
-      itk::WriteBiomechanicalTransform(ensemble->meanTransform, (folder / "mean-transform.h5").string());
-      files["mean_transform"] = (folder / "mean-transform.h5").string();
-      WriteUncertaintyOverlay(*ensemble, inputs.preoperativeImage, (folder / "uncertainty-overlay.png").string());
-      files["uncertainty_overlay"] = (folder / "uncertainty-overlay.png").string();
+      WriteEnsemble(*ensemble, inputs.preoperativeImage, folder, files);
     }
   };
   const int status = WriteRegistrationOutputs(result, settings, options.outputDirectory, bundle.labelMapNames,
@@ -1322,6 +1402,7 @@ AddModelCommands(CLI::App & app)
                               "Label maps on the image grid to warp (nearest neighbour); repeat for several");
   registration->intraoperative.Add(registerCommand);
   registration->settings.Add(registerCommand);
+  registration->uncertainty.Add(registerCommand);
   registerCommand->add_option("--overlays", registration->overlays, "Edge-overlay PNGs per evaluation (0: none)")
     ->capture_default_str();
   registerCommand->add_option("-o,--output-dir", registration->outputDirectory, "Output folder")->capture_default_str();
@@ -1358,27 +1439,7 @@ AddModelCommands(CLI::App & app)
   updateCommand->add_option("--previous", update->previous,
                             "A later update of the same surgery: start the solve from this earlier update's output "
                             "folder (its solution.bin); the result is the cold solve's within the tolerance");
-  updateCommand
-    ->add_option("--uncertainty", update->uncertainty.members,
-                 "An ensemble of this many solves with the uncertain inputs drawn (measurement noise, gravity's "
-                 "size, Young's moduli, Poisson's ratio: docs/registration.md, Uncertainty); writes "
-                 "displacement-uncertainty.nii.gz (per voxel the 95th percentile of |u_i - u_mean|, mm), "
-                 "mean-transform.h5 and uncertainty-overlay.png")
-    ->check(CLI::Range(2, 1000));
-  updateCommand->add_option("--uncertainty-noise", update->uncertainty.noiseSigma,
-                            "Measurement noise (mm, standard deviation per component); negative: the loads' RMS "
-                            "correspondence distance; 0: none")
-    ->capture_default_str();
-  updateCommand->add_option("--uncertainty-gravity", update->uncertaintyGravity,
-                            "Gravity's size drawn uniformly between these fractions of the registration's, e.g. 0.5 1.5")
-    ->expected(2);
-  updateCommand->add_option("--uncertainty-modulus-spread", update->uncertainty.youngsModulusSpread,
-                            "Standard deviation of the logarithm of one factor on every Young's modulus; 0: none")
-    ->capture_default_str();
-  updateCommand->add_option("--uncertainty-poisson", update->uncertaintyPoisson,
-                            "The parenchyma's Poisson's ratio drawn uniformly in this range (default 0.45 0.499; 0 0: none)")
-    ->expected(2);
-  updateCommand->add_option("--uncertainty-seed", update->uncertainty.seed, "Seed of the draws")->capture_default_str();
+  update->uncertainty.Add(updateCommand);
   updateCommand->add_option("--overlays", update->overlays, "Edge-overlay PNGs per evaluation (0: none)")
     ->capture_default_str();
   updateCommand->add_option("-o,--output-dir", update->outputDirectory, "Output folder")->capture_default_str();

@@ -400,12 +400,15 @@ struct BrainShiftRegistrationResult
 /** Runs the pipeline. A solve that does not converge is not an exception:
  *  the result says so (solve.converged false, solve.message), and the caller
  *  decides (the `register` subcommand exits 2). A solve that fails (inverted
- *  element) and bad input throw bmr::Error naming the problem. */
+ *  element) and bad input throw bmr::Error naming the problem. With
+ *  `prepared`, the model before its loads is copied there (what
+ *  EstimateBrainShiftUncertainty starts each member from). */
 BrainShiftRegistrationResult
 RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
                    const BrainShiftRegistrationSettings & settings,
                    const StageCallback &                  stageCallback = {},
-                   const ProgressCallback &               solverProgress = {});
+                   const ProgressCallback &               solverProgress = {},
+                   BrainModel *                           prepared = nullptr);
 
 /** What the intraoperative phase needs beside the prepared model. */
 struct BrainShiftUpdateInputs

@@ -46,6 +46,13 @@ struct UncertaintySettings
    *  Both 0: not perturbed. */
   double poissonLow = 0.45;
   double poissonHigh = 0.499;
+  /** The brain-skull gap: the skull moved along its outward normals by a
+   *  normal deviate of this standard deviation (mm), at least to a tenth of
+   *  the model's gap (BrainModelSettings::skullGap). 0: not perturbed (the
+   *  default: the gap the model was made with is the skull's segmentation
+   *  plus a margin, and how far that margin is from the real one is not
+   *  measured here). */
+  double skullGapSpread = 0.0;
   /** Worker threads over the members (0: OpenMP's default); with at least
    *  as many members as threads each member's solve is single-threaded. */
   int threads = 0;
@@ -62,6 +69,7 @@ struct UncertaintyMember
   double      gravityFactor = 1.0;  // of the registration's gravity
   double      modulusFactor = 1.0;
   double      poissonOffset = 0.0;
+  double      skullOffset = 0.0;    // mm, outward
   bool        converged = false;
   bool        failed = false;       // the solve threw (e.g. an inverted cell)
   int         steps = 0;

@@ -364,6 +364,17 @@ TEST_F(ModelBundleTest, PrepareThenUpdateFromTheCommandLine)
   {
     EXPECT_TRUE(fs::exists(m_Folder / "ensemble" / file)) << file;
   }
+  // `register` with the same draws: the same prepared model, so the same ensemble bit for bit.
+  run = bmr::test::RunBiomech(m_Folder, "register " + patient + " --labels " + quoted(Colin27Folder / "ch2bet.nii.gz") +
+                                          " --sparse-displacements " + quoted(csv) +
+                                          " --uncertainty 3 --uncertainty-seed 7 -q -o " +
+                                          quoted(m_Folder / "register-ensemble"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const json registeredEnsemble =
+    json::parse(bmr::test::ReadText(m_Folder / "register-ensemble" / "registration-report.json"));
+  EXPECT_EQ(registeredEnsemble["uncertainty"]["map_mm"], ensemble["uncertainty"]["map_mm"]);
+  EXPECT_EQ(registeredEnsemble["uncertainty"]["regions"], ensemble["uncertainty"]["regions"]);
+  EXPECT_TRUE(fs::exists(m_Folder / "register-ensemble" / "displacement-uncertainty.nii.gz"));
   run = bmr::test::RunBiomech(m_Folder, "update " + quoted(plan) + " --sparse-displacements " + quoted(csv) +
                                           " --uncertainty 3 --uncertainty-modulus-spread -1 -q -o " +
                                           quoted(m_Folder / "badensemble"));

@@ -123,8 +123,8 @@ TEST_F(Uncertainty, ModuliScaledTogetherUnderPrescribedDisplacementsGiveNone)
 // Gravity's size after CSF loss is unknown: drawn between 0.5 and 1.5 times
 // the registration's, it moves the brain away from the opening, while the
 // exposed surface, held at its measured displacements, cannot move at all;
-// so do the moduli under gravity. Measurement noise instead moves the
-// exposed surface most.
+// so do the moduli under gravity and the skull gap. Measurement noise
+// instead moves the exposed surface most.
 TEST_F(Uncertainty, GravityMattersAwayFromTheOpeningNoiseAtIt)
 {
   const Scene              scene = MakeScene(true);
@@ -148,6 +148,24 @@ TEST_F(Uncertainty, GravityMattersAwayFromTheOpeningNoiseAtIt)
   EXPECT_GT(stiff.interiorMax, 0.1);
   EXPECT_LT(stiff.exposedMax, 1e-9);
 
+  // A wider or narrower gap lets the brain sink further or less, away from
+  // the opening; the skull moved by offsets of both signs.
+  bmr::UncertaintySettings gap = NothingDrawn(4);
+  gap.skullGapSpread = 1.0;
+  const auto skull = scene.Ensemble(gap);
+  ASSERT_EQ(skull.usedMembers, 4);
+  double narrowest = 0.0, widest = 0.0;
+  for (const auto & member : skull.members)
+  {
+    narrowest = std::min(narrowest, member.skullOffset);
+    widest = std::max(widest, member.skullOffset);
+  }
+  EXPECT_LT(narrowest, 0.0);
+  EXPECT_GT(widest, 0.0);
+  RecordProperty("skullGapInteriorMax", std::to_string(skull.interiorMax));
+  EXPECT_GT(skull.interiorMax, 0.1);
+  EXPECT_LT(skull.exposedMax, 1e-9);
+
   bmr::UncertaintySettings noise = NothingDrawn(6);
   noise.noiseSigma = 0.5;
   const auto measured = scene.Ensemble(noise);
@@ -169,6 +187,9 @@ TEST_F(Uncertainty, BadSettingsAndFailedMembersAreNamed)
   settings.gravityHigh = 0.8;
   EXPECT_CONTAINS(ErrorMessage([&] { bmr::CheckUncertaintySettings(settings); }), "gravity range");
   settings.gravityLow = settings.gravityHigh = 1.0;
+  settings.skullGapSpread = -1.0;
+  EXPECT_CONTAINS(ErrorMessage([&] { bmr::CheckUncertaintySettings(settings); }), "skull gap spread");
+  settings.skullGapSpread = 0.0;
   settings.poissonLow = 0.45;
   settings.poissonHigh = 0.5;
   EXPECT_CONTAINS(ErrorMessage([&] { bmr::CheckUncertaintySettings(settings); }), "Poisson's ratio range");

@@ -716,7 +716,6 @@ FiniteElementForceModel::AddTetrahedronForces(Index begin, Index end, const doub
 
 #undef BMR_TETRAHEDRON_DEFORMATION_GRADIENT
 
-
 std::size_t
 FiniteElementForceModel::StreamedBytesPerStep() const
 {

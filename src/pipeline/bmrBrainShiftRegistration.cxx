@@ -1196,7 +1196,8 @@ BrainShiftRegistrationResult
 RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
                    const BrainShiftRegistrationSettings & settings,
                    const StageCallback &                  stageCallback,
-                   const ProgressCallback &               solverProgress)
+                   const ProgressCallback &               solverProgress,
+                   BrainModel *                           prepared)
 {
   const BrainShiftUpdateInputs update{ inputs.preoperativeImage, inputs.labelMaps, inputs.intraoperative };
   CheckUpdateInputs(update, settings);
@@ -1207,6 +1208,10 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
   result.model = PrepareBrainModel(inputs.preoperativeImage, inputs.brainMask, inputs.tumourMask, inputs.skullSurface,
                                    settings.model, result.timer, surfaceLoad);
   PrecomputeBrainModel(result.model, settings, result.timer);
+  if (prepared != nullptr)
+  {
+    *prepared = result.model;
+  }
   UpdateInto(result, update, settings, solverProgress);
   return result;
 }

@@ -58,6 +58,12 @@ CheckUncertaintySettings(const UncertaintySettings & settings)
             << "] is not within (0, 0.5) with low <= high; give e.g. 0.45 0.499, or 0 0 to keep the model's";
     fail(message.str());
   }
+  if (!(settings.skullGapSpread >= 0.0))
+  {
+    std::ostringstream message;
+    message << "the skull gap spread is " << settings.skullGapSpread << " mm; give a standard deviation of 0 mm or more";
+    fail(message.str());
+  }
   if (settings.threads < 0)
   {
     fail(std::to_string(settings.threads) + " threads; give 0 (OpenMP's default) or more");
@@ -129,6 +135,32 @@ NoisyMeasurements(const IntraoperativeData & data, double sigma, std::mt19937_64
 
 using PointSetType = itk::DisplacementPointSetType<3>;
 
+/** The skull moved by `offset` (mm) along its outward (area-weighted vertex) normals. */
+ContactSurface
+WidenedSkull(const ContactSurface & skull, double offset)
+{
+  ContactSurface       widened = skull;
+  std::vector<Vector3> normals(skull.vertices.size(), Vector3::Zero());
+  for (const auto & triangle : skull.OutwardTriangles())
+  {
+    const Vector3 normal = (skull.vertices[triangle[1]] - skull.vertices[triangle[0]])
+                             .cross(skull.vertices[triangle[2]] - skull.vertices[triangle[0]]);
+    for (const Index vertex : triangle)
+    {
+      normals[static_cast<std::size_t>(vertex)] += normal;
+    }
+  }
+  const double away = skull.bodySide == ContactSurface::Side::Inside ? 1.0 : -1.0; // from the brain
+  for (std::size_t v = 0; v < normals.size(); ++v)
+  {
+    if (normals[v].norm() > 0.0)
+    {
+      widened.vertices[v] += away * offset * normals[v].normalized();
+    }
+  }
+  return widened;
+}
+
 /** Each member's draws (into `members`, one seeded stream in member order:
  *  the ensemble repeats exactly whatever the threads) and the prepared model
  *  loaded from its noisy measurements (serial: the loads are cheap, the
@@ -144,7 +176,7 @@ DrawAndLoadMembers(const BrainModel & prepared, const BrainShiftRegistrationResu
   const double sigma = uncertainty.noiseSigma < 0.0 ? nominal.model.loadReport.rmsCorrespondenceDistance
                                                     : uncertainty.noiseSigma;
   std::mt19937_64                        random(uncertainty.seed);
-  std::normal_distribution<double>       logModulus(0.0, uncertainty.youngsModulusSpread);
+  std::normal_distribution<double>       standard(0.0, 1.0); // times each spread: a spread of 0 draws nothing
   std::uniform_real_distribution<double> gravityFactor(uncertainty.gravityLow, uncertainty.gravityHigh);
   std::uniform_real_distribution<double> poissonRatio(uncertainty.poissonLow, uncertainty.poissonHigh);
   const double                           nominalPoisson = NominalPoissonRatio(nominal.model.model);
@@ -154,9 +186,13 @@ DrawAndLoadMembers(const BrainModel & prepared, const BrainShiftRegistrationResu
   {
     UncertaintyMember & member = members[m];
     member.noiseSigma = noisy ? sigma : 0.0;
-    member.modulusFactor = uncertainty.youngsModulusSpread > 0.0 ? std::exp(logModulus(random)) : 1.0;
+    member.modulusFactor =
+      uncertainty.youngsModulusSpread > 0.0 ? std::exp(uncertainty.youngsModulusSpread * standard(random)) : 1.0;
     member.gravityFactor = gravity ? gravityFactor(random) : 1.0;
     member.poissonOffset = poisson ? poissonRatio(random) - nominalPoisson : 0.0;
+    member.skullOffset = uncertainty.skullGapSpread > 0.0
+                           ? std::max(uncertainty.skullGapSpread * standard(random), -0.9 * settings.model.skullGap)
+                           : 0.0;
     models[m] = prepared;
     StageTimer timer;
     LoadBrainModel(models[m], NoisyMeasurements(inputs.intraoperative, member.noiseSigma, random), settings.model, timer);
@@ -195,7 +231,10 @@ SolveMember(const BrainModel & model, UncertaintyMember & member, const Vector3 
   }
   if (model.contactSurface.IsNotNull())
   {
-    deformation->SetContactSurface(model.contactSurface);
+    deformation->SetContactSurface(member.skullOffset == 0.0
+                                     ? model.contactSurface
+                                     : itk::MakeMeshFromContactSurface<itk::BiomechanicalSurfaceMeshType>(
+                                         WidenedSkull(model.surfaces.skull, member.skullOffset)));
   }
   solver.threads = threads;
   deformation->SetSolverSettings(solver);
@@ -458,6 +497,7 @@ UncertaintyReportJson(const BrainShiftUncertaintyResult & result, const Uncertai
                         { "gravity_factor", member.gravityFactor },
                         { "youngs_modulus_factor", member.modulusFactor },
                         { "poisson_ratio_offset", member.poissonOffset },
+                        { "skull_offset_mm", member.skullOffset },
                         { "converged", member.converged },
                         { "failed", member.failed },
                         { "steps", member.steps },
@@ -479,7 +519,8 @@ UncertaintyReportJson(const BrainShiftUncertaintyResult & result, const Uncertai
              { { "noise_sigma_mm", settings.noiseSigma },
                { "gravity_fraction", { settings.gravityLow, settings.gravityHigh } },
                { "youngs_modulus_log_sd", settings.youngsModulusSpread },
-               { "poisson_ratio", { settings.poissonLow, settings.poissonHigh } } } },
+               { "poisson_ratio", { settings.poissonLow, settings.poissonHigh } },
+               { "skull_gap_sd_mm", settings.skullGapSpread } } },
            { "map_mm", { { "brain_p50", result.brainMedian }, { "brain_p95", result.brainP95 }, { "brain_max", result.brainMax } } },
            { "nodes_mm",
              { { "exposed_median", result.exposedMedian },
