@@ -76,12 +76,14 @@ constexpr const char * ImageSectionEnd = "<!-- image-benchmark: end -->";
  *  (scripts/benchmark-simulation.py) and issue 20's targets on Colin27
  *  (scripts/benchmark-registration.py, scripts/benchmark-model-building.py) and the
  *  update latency on a prepared bundle (scripts/benchmark-update.py) with its solves
- *  by part (scripts/benchmark-solve-parts.py) and the uncertainty map's cost
- *  (scripts/benchmark-uncertainty.py); and the notes written by hand after a
+ *  by part (scripts/benchmark-solve-parts.py), the uncertainty map's cost
+ *  (scripts/benchmark-uncertainty.py) and the steps on the real brains
+ *  (scripts/benchmark-real-brain-steps.py); and the notes written by hand after a
  *  run of the update latency, the solve parts and the uncertainty map's cost. */
 constexpr const char * ScriptSections[] = { "simulation-benchmark", "colin27-meshless", "colin27-registration",
                                              "update-latency", "update-latency-note", "solve-parts",
-                                             "solve-parts-note", "uncertainty-cost", "uncertainty-cost-note" };
+                                             "solve-parts-note", "uncertainty-cost", "uncertainty-cost-note",
+                                             "real-brain-steps" };
 
 /** The section of `report` between two markers (included), or "" when it has none. */
 inline std::string

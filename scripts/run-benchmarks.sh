@@ -54,6 +54,8 @@ PYTHONPATH="${build}/python" /usr/bin/python3 scripts/benchmark-simulation.py
 /usr/bin/python3 scripts/benchmark-update.py --build "${build}"
 # The same bundles' solves by part, their memory roofline and 1 thread against 2 (issue 62): its section of docs/benchmarks.md.
 /usr/bin/python3 scripts/benchmark-solve-parts.py --build "${build}"
+# Each grid's dynamic-relaxation steps on the tests' real brains (issue 62 item 3): its section of docs/benchmarks.md.
+/usr/bin/python3 scripts/benchmark-real-brain-steps.py --build "${build}"
 # The uncertainty map's ensemble against one update (issue 63): its section of docs/benchmarks.md.
 /usr/bin/python3 scripts/benchmark-uncertainty.py --build "${build}"
 # README's measured numbers, copied from the docs just written.
