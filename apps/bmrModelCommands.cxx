@@ -718,6 +718,10 @@ struct UncertaintyOptions
       ->add_option("--uncertainty-skull-gap", settings.skullGapSpread,
                    "Standard deviation (mm) of the skull's offset along its normals: the brain-skull gap; 0: none")
       ->capture_default_str();
+    command
+      ->add_option("--uncertainty-tolerance", settings.memberTolerance,
+                   "The members' dynamic-relaxation tolerance (mm; 0: the registration's solver tolerance)")
+      ->capture_default_str();
     command->add_option("--uncertainty-seed", settings.seed, "Seed of the draws")->capture_default_str();
   }
 

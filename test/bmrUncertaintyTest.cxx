@@ -190,6 +190,9 @@ TEST_F(Uncertainty, BadSettingsAndFailedMembersAreNamed)
   settings.skullGapSpread = -1.0;
   EXPECT_CONTAINS(ErrorMessage([&] { bmr::CheckUncertaintySettings(settings); }), "skull gap spread");
   settings.skullGapSpread = 0.0;
+  settings.memberTolerance = -0.01;
+  EXPECT_CONTAINS(ErrorMessage([&] { bmr::CheckUncertaintySettings(settings); }), "members' tolerance");
+  settings.memberTolerance = 0.05;
   settings.poissonLow = 0.45;
   settings.poissonHigh = 0.5;
   EXPECT_CONTAINS(ErrorMessage([&] { bmr::CheckUncertaintySettings(settings); }), "Poisson's ratio range");

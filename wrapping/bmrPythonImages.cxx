@@ -655,6 +655,7 @@ BindRegistration(py::module_ & module)
     .def_readwrite("poisson_low", &UncertaintySettings::poissonLow)
     .def_readwrite("poisson_high", &UncertaintySettings::poissonHigh)
     .def_readwrite("skull_gap_spread", &UncertaintySettings::skullGapSpread)
+    .def_readwrite("member_tolerance", &UncertaintySettings::memberTolerance)
     .def_readwrite("threads", &UncertaintySettings::threads);
 
   py::class_<BrainShiftRegistrationResult>(module, "RegistrationResult", py::dynamic_attr(),

@@ -64,6 +64,13 @@ CheckUncertaintySettings(const UncertaintySettings & settings)
     message << "the skull gap spread is " << settings.skullGapSpread << " mm; give a standard deviation of 0 mm or more";
     fail(message.str());
   }
+  if (!(settings.memberTolerance >= 0.0))
+  {
+    std::ostringstream message;
+    message << "the members' tolerance is " << settings.memberTolerance
+            << " mm; give 0 mm (the registration's) or more";
+    fail(message.str());
+  }
   if (settings.threads < 0)
   {
     fail(std::to_string(settings.threads) + " threads; give 0 (OpenMP's default) or more");
@@ -429,6 +436,11 @@ EstimateBrainShiftUncertainty(const BrainModel &                     prepared,
   const int concurrent = std::max(1, std::min(count, threads));
   const int memberThreads = std::max(1, threads / concurrent);
   const WarmStart                   nominalState = WarmStartFrom(nominal.solve);
+  SolverSettings                    memberSolver = settings.solver;
+  if (uncertainty.memberTolerance > 0.0)
+  {
+    memberSolver.tolerance = uncertainty.memberTolerance;
+  }
   std::vector<std::vector<Vector3>> displacements(static_cast<std::size_t>(count));
 #pragma omp parallel for num_threads(concurrent) schedule(dynamic, 1)
   for (int m = 0; m < count; ++m)
@@ -437,7 +449,7 @@ EstimateBrainShiftUncertainty(const BrainModel &                     prepared,
     try
     {
       displacements[static_cast<std::size_t>(m)] = SolveMember(models[static_cast<std::size_t>(m)], member,
-                                                               nominal.gravity, nominalState, settings.solver, memberThreads);
+                                                               nominal.gravity, nominalState, memberSolver, memberThreads);
     }
     catch (const std::exception & error)
     {
@@ -521,6 +533,7 @@ UncertaintyReportJson(const BrainShiftUncertaintyResult & result, const Uncertai
                { "youngs_modulus_log_sd", settings.youngsModulusSpread },
                { "poisson_ratio", { settings.poissonLow, settings.poissonHigh } },
                { "skull_gap_sd_mm", settings.skullGapSpread } } },
+           { "member_tolerance_mm", settings.memberTolerance },
            { "map_mm", { { "brain_p50", result.brainMedian }, { "brain_p95", result.brainP95 }, { "brain_max", result.brainMax } } },
            { "nodes_mm",
              { { "exposed_median", result.exposedMedian },

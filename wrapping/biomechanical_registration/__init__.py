@@ -313,6 +313,7 @@ def update(
     uncertainty_modulus_spread=None,
     uncertainty_poisson=None,
     uncertainty_skull_gap=None,
+    uncertainty_tolerance=None,
     uncertainty_seed=None,
     progress=None,
     **settings
@@ -352,10 +353,13 @@ def update(
             ensemble.poisson_low, ensemble.poisson_high = (float(value) for value in uncertainty_poisson)
         if uncertainty_skull_gap is not None:
             ensemble.skull_gap_spread = float(uncertainty_skull_gap)
+        if uncertainty_tolerance is not None:
+            ensemble.member_tolerance = float(uncertainty_tolerance)
         if uncertainty_seed is not None:
             ensemble.seed = int(uncertainty_seed)
     elif any(value is not None for value in (uncertainty_noise, uncertainty_gravity, uncertainty_modulus_spread,
-                                                 uncertainty_poisson, uncertainty_skull_gap, uncertainty_seed)):
+                                                 uncertainty_poisson, uncertainty_skull_gap,
+                                                 uncertainty_tolerance, uncertainty_seed)):
         raise TypeError("update() got uncertainty_* settings without uncertainty=N (the ensemble's members)")
     result, report, spread = _bmr._update(
         bundle, intraoperative_surface, sparse_points, sparse_displacements, intraoperative_image,
