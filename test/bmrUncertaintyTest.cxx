@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <functional>
 #include <string>
+#include <utility>
 
 namespace
 {
@@ -75,6 +76,16 @@ NothingDrawn(int members)
   return settings;
 }
 
+/** The smallest and largest value the members drew of one input. */
+std::pair<double, double>
+DrawnRange(const bmr::BrainShiftUncertaintyResult & result, double bmr::UncertaintyMember::*drawn)
+{
+  const auto [smallest, largest] = std::minmax_element(
+    result.members.begin(), result.members.end(),
+    [drawn](const bmr::UncertaintyMember & a, const bmr::UncertaintyMember & b) { return a.*drawn < b.*drawn; });
+  return { (*smallest).*drawn, (*largest).*drawn };
+}
+
 class Uncertainty : public ::testing::Test
 {
 protected:
@@ -103,12 +114,7 @@ TEST_F(Uncertainty, ModuliScaledTogetherUnderPrescribedDisplacementsGiveNone)
   settings.threads = 2;
   const auto result = scene.Ensemble(settings);
   ASSERT_EQ(result.usedMembers, 4);
-  double smallest = 10.0, largest = 0.0;
-  for (const auto & member : result.members)
-  {
-    smallest = std::min(smallest, member.modulusFactor);
-    largest = std::max(largest, member.modulusFactor);
-  }
+  const auto [smallest, largest] = DrawnRange(result, &bmr::UncertaintyMember::modulusFactor);
   EXPECT_GT(largest / smallest, 1.5) << "the draws must differ for the test to mean anything";
   RecordProperty("interiorMax", std::to_string(result.interiorMax));
   RecordProperty("brainMax", std::to_string(result.brainMax));
@@ -154,12 +160,7 @@ TEST_F(Uncertainty, GravityMattersAwayFromTheOpeningNoiseAtIt)
   gap.skullGapSpread = 1.0;
   const auto skull = scene.Ensemble(gap);
   ASSERT_EQ(skull.usedMembers, 4);
-  double narrowest = 0.0, widest = 0.0;
-  for (const auto & member : skull.members)
-  {
-    narrowest = std::min(narrowest, member.skullOffset);
-    widest = std::max(widest, member.skullOffset);
-  }
+  const auto [narrowest, widest] = DrawnRange(skull, &bmr::UncertaintyMember::skullOffset);
   EXPECT_LT(narrowest, 0.0);
   EXPECT_GT(widest, 0.0);
   RecordProperty("skullGapInteriorMax", std::to_string(skull.interiorMax));

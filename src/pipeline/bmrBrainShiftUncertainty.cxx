@@ -80,10 +80,12 @@ CheckUncertaintySettings(const UncertaintySettings & settings)
 namespace
 {
 
-/** The parenchyma's Poisson's ratio the offsets are measured from: the
- *  largest among the nearly incompressible materials. */
+/** Materials with a Poisson's ratio above this are the nearly incompressible
+ *  tissues whose ratio the ensemble draws (the soft CSF keeps its own). */
 constexpr double kIncompressibleFrom = 0.4;
 
+/** The parenchyma's Poisson's ratio the drawn offsets are measured from: the
+ *  largest of the model's materials. */
 double
 NominalPoissonRatio(const Model & model)
 {
@@ -301,45 +303,6 @@ NodalSpread(const std::vector<std::vector<Vector3>> & displacements, const std::
   return mean;
 }
 
-/** The nodal values on the brain of the preoperative grid, between the
- *  nodes by the multilevel B-spline approximation the transforms use; the
- *  map's percentiles inside the brain. */
-void
-MapUncertainty(const std::vector<Vector3> & nodes, const LabelVolume & brain,
-               const BrainShiftRegistrationSettings & settings, int threads, BrainShiftUncertaintyResult & result)
-{
-  std::vector<Vector3> values(nodes.size(), Vector3::Zero());
-  for (std::size_t n = 0; n < nodes.size(); ++n)
-  {
-    values[n].x() = result.nodalUncertainty[n];
-  }
-  BSplineFitSettings fit;
-  fit.tolerance = settings.fitTolerance;
-  fit.minimumSpacing = settings.minimumControlPointSpacing;
-  const BSplineFitResult field = FitMultilevelBSpline(nodes, values, brain.geometry, fit);
-  std::vector<double>    sampled(3 * brain.geometry.VoxelCount());
-  SampleBSplineField(field.lattice, brain.geometry, sampled.data(), threads);
-  ScalarVolume map;
-  map.geometry = brain.geometry;
-  map.values.assign(brain.geometry.VoxelCount(), 0.0f);
-  std::vector<double> inBrain;
-  for (std::size_t v = 0; v < map.values.size(); ++v)
-  {
-    if (brain.values[v] != 0)
-    {
-      map.values[v] = static_cast<float>(std::max(0.0, sampled[3 * v])); // the spline's undershoot is no spread
-      inBrain.push_back(map.values[v]);
-    }
-  }
-  result.uncertaintyImage = itk::MakeImageFromBiomechanicalVolume<RegistrationImage>(map);
-  if (!inBrain.empty())
-  {
-    result.brainMedian = Percentile(inBrain, 0.5);
-    result.brainP95 = Percentile(inBrain, 0.95);
-    result.brainMax = inBrain.back();
-  }
-}
-
 /** The map's percentiles over the voxels where `inside` holds. */
 BrainShiftUncertaintyResult::Region
 RegionSpread(const std::string & name, const RegistrationImage * map, const std::function<bool(std::size_t)> & inside)
@@ -364,6 +327,42 @@ RegionSpread(const std::string & name, const RegistrationImage * map, const std:
     region.max = values.back();
   }
   return region;
+}
+
+/** The nodal values on the brain of the preoperative grid, between the
+ *  nodes by the multilevel B-spline approximation the transforms use; the
+ *  map's percentiles inside the brain. */
+void
+MapUncertainty(const std::vector<Vector3> & nodes, const LabelVolume & brain,
+               const BrainShiftRegistrationSettings & settings, int threads, BrainShiftUncertaintyResult & result)
+{
+  std::vector<Vector3> values(nodes.size(), Vector3::Zero());
+  for (std::size_t n = 0; n < nodes.size(); ++n)
+  {
+    values[n].x() = result.nodalUncertainty[n];
+  }
+  BSplineFitSettings fit;
+  fit.tolerance = settings.fitTolerance;
+  fit.minimumSpacing = settings.minimumControlPointSpacing;
+  const BSplineFitResult field = FitMultilevelBSpline(nodes, values, brain.geometry, fit);
+  std::vector<double>    sampled(3 * brain.geometry.VoxelCount());
+  SampleBSplineField(field.lattice, brain.geometry, sampled.data(), threads);
+  ScalarVolume map;
+  map.geometry = brain.geometry;
+  map.values.assign(brain.geometry.VoxelCount(), 0.0f);
+  const auto inBrain = [&](std::size_t v) { return brain.values[v] != 0; };
+  for (std::size_t v = 0; v < map.values.size(); ++v)
+  {
+    if (inBrain(v))
+    {
+      map.values[v] = static_cast<float>(std::max(0.0, sampled[3 * v])); // the spline's undershoot is no spread
+    }
+  }
+  result.uncertaintyImage = itk::MakeImageFromBiomechanicalVolume<RegistrationImage>(map);
+  const auto spread = RegionSpread("brain", result.uncertaintyImage, inBrain);
+  result.brainMedian = spread.median;
+  result.brainP95 = spread.p95;
+  result.brainMax = spread.max;
 }
 
 /** The ventricles (the CSF class deep inside the brain) and the label maps. */
