@@ -16,6 +16,7 @@
 
 #include "bmrCommandSupport.h"
 #include "bmrDemoTruth.h"
+#include "bmrUncertaintyOptions.h"
 
 #include "bmrMeshIO.h"
 #include "bmrElectrodes.h"
@@ -60,6 +61,7 @@ struct DemoOptions
   SyntheticBrainShiftSettings truth;
   std::vector<double>         craniotomyCentre;
   std::vector<double>         tumourCentre;
+  std::vector<double>         greyWhiteModuli; // the truth's grey and white matter (Pa); empty: one parenchyma
   std::string                 truthGrid = "hexahedra";
   std::vector<std::string>    variants{ "hexahedra:5" };
   std::string                 truthCheck; // KIND:SIZE of a second ground truth; empty: none
@@ -67,6 +69,7 @@ struct DemoOptions
   std::string                 surfaceMatch = "closest";
   double                      registrationGravity = 0.0; // g
   int                         gravityFitCandidates = 0;
+  UncertaintyOptions          uncertainty; // an ensemble after each biomechanical registration, calibrated on the truth
   bool                        noBaseline = false;
   bool                        noRegistrationResection = false; // the registration is not told the planned resection
   bool                        truthOnly = false; // solve and write the truth, register nothing
@@ -232,6 +235,11 @@ RunDemo(DemoOptions options)
   {
     options.truth.tumourCentre = Vector3(options.tumourCentre.at(0), options.tumourCentre.at(1), options.tumourCentre.at(2));
   }
+  if (!options.greyWhiteModuli.empty())
+  {
+    options.truth.greyMatterYoungsModulus = options.greyWhiteModuli.at(0);
+    options.truth.whiteMatterYoungsModulus = options.greyWhiteModuli.at(1);
+  }
   options.truth.grid.kind = ParseImageGridKind(options.truthGrid);
   options.truth.contrast = ParseIntraoperativeContrast(options.contrast);
   options.truth.noiseModel = options.noiseModel == "rician" ? NoiseModel::Rician : NoiseModel::Gaussian;
@@ -274,6 +282,7 @@ RunDemo(DemoOptions options)
       throw Error("--peer-details: " + options.peerDetails + " must hold a JSON object (what the peer was)");
     }
   }
+  const UncertaintySettings uncertainty = options.uncertainty.Checked();
   std::vector<ImageGridSettings> variants;
   if (options.truthOnly)
   {
@@ -543,13 +552,22 @@ RunDemo(DemoOptions options)
     csf.poissonRatio = options.truth.csfPoissonRatio;
     csf.density = options.truth.csfDensity;
     settings.model.materials.classMaterials = DefaultClassMaterials(settings.model.classifier.classes, csf);
-    const BrainShiftRegistrationResult result = RegisterBrainShift(inputs, settings, stages);
+    BrainModel                   prepared; // the ensemble's model before the loads
+    BrainShiftRegistrationResult result =
+      RegisterBrainShift(inputs, settings, stages, {}, uncertainty.members > 0 ? &prepared : nullptr);
+    std::optional<BrainShiftUncertaintyResult> ensemble;
+    if (uncertainty.members > 0)
+    {
+      const BrainShiftUpdateInputs update{ inputs.preoperativeImage, inputs.labelMaps, inputs.intraoperative };
+      ensemble = RunEnsemble(prepared, result, update, settings, uncertainty, {});
+    }
     MethodResult method;
     method.name = "biomechanical " + std::string(ImageGridKindName(grid.kind)) + " " +
                   FormatNumber(grid.elementSize) + " mm" +
                   (options.gravityFitCandidates > 0 ? " + fitted gravity"
                    : options.registrationGravity > 0.0 ? " + " + FormatNumber(options.registrationGravity) + " g"
-                                                       : "");
+                                                       : "") +
+                  (ensemble ? ", uncertainty " + std::to_string(uncertainty.members) : "");
     method.stages = result.timer.Json();
     // The registration's time: everything but the evaluation, which needs the intraoperative image.
     method.seconds = method.stages["total"].get<double>() - result.timer.Seconds("evaluate");
@@ -557,8 +575,28 @@ RunDemo(DemoOptions options)
     method.details = RegistrationReportJson(result, settings);
     method.details.erase("evaluation");
     score(result.transform, method);
-    methods.push_back(method);
     const std::string tag = std::string(ImageGridKindName(grid.kind)) + "-" + FormatNumber(grid.elementSize);
+    if (ensemble)
+    {
+      // How often the true error lies within the map's 95 % bound: the registration's and the ensemble mean's.
+      const auto calibration = [&](const itk::Transform<double, 3, 3> * transform) {
+        const UncertaintyCalibration measured = MeasureUncertaintyCalibration(
+          transform, truth.truthTransform, truth.intraoperativeBrainOnPreoperativeGrid, ensemble->uncertaintyImage);
+        return json{ { "fraction_within_bound", measured.fractionWithinBound },
+                     { "median_error_mm", measured.medianError },
+                     { "median_bound_mm", measured.medianBound },
+                     { "samples", measured.samples } };
+      };
+      method.details["uncertainty"] = UncertaintyReportJson(*ensemble, uncertainty);
+      method.details["uncertainty"]["calibration"] = { { "transform", calibration(result.transform) },
+                                                       { "mean_transform", calibration(ensemble->meanTransform) } };
+      const fs::path folder = output / ("uncertainty-biomechanical-" + tag);
+      CreateFolder(folder);
+      json files;
+      WriteEnsemble(*ensemble, preoperative, folder, files);
+      method.details["uncertainty"]["files"] = files;
+    }
+    methods.push_back(method);
     WriteImageAtomically(result.warpedImage.GetPointer(), output / ("warped-biomechanical-" + tag + ".nii.gz"));
     itk::WriteBiomechanicalTransform(result.transform, (output / ("transform-biomechanical-" + tag + ".h5")).string());
     WriteEdgeOverlays(result.registered, intraoperative, overlays.string(), "biomechanical-" + tag, options.overlays);
@@ -665,6 +703,11 @@ RunDemo(DemoOptions options)
       { "poisson_ratio", options.truth.poissonRatio },
       { "csf_youngs_modulus_pa", options.truth.csfYoungsModulus },
       { "csf_poisson_ratio", options.truth.csfPoissonRatio },
+      { "csf_drained_depth_mm", options.truth.csfDrainedDepth >= 0.0 ? json(options.truth.csfDrainedDepth) : json() },
+      { "bonded_depth_mm", options.truth.bondedDepth >= 0.0 ? json(options.truth.bondedDepth) : json() },
+      { "bonded_nodes", truth.model.model.nodeSets.count("bonded to the skull") > 0
+                          ? truth.model.model.nodeSets.at("bonded to the skull").size() : 0 },
+      { "grey_white_youngs_moduli_pa", options.greyWhiteModuli.empty() ? json() : json(options.greyWhiteModuli) },
       { "tumour_radius_mm", options.truth.tumourRadius },
       { "tumour_stiffness", options.truth.tumourStiffness },
       { "intraoperative_spacing_mm", { options.truth.intraoperativeSpacing.x(), options.truth.intraoperativeSpacing.y(),
@@ -773,6 +816,20 @@ AddDemoCommand(CLI::App & app)
                    "shifts then cycles in its contact: docs/model-building.md)")
     ->capture_default_str()
     ->check(CLI::NonNegativeNumber);
+  // Physics only the truth has (docs/validation.md, "Truths of another kind"): the registration does not model them.
+  demo->add_option("--truth-csf-drained-depth", options->truth.csfDrainedDepth,
+                   "The ground truth's CSF drained only to this depth (mm) below the brain's top along gravity: the "
+                   "tissue below stays buoyed (weightless); the registration assumes it drained completely")
+    ->check(CLI::NonNegativeNumber);
+  demo->add_option("--truth-bonded-depth", options->truth.bondedDepth,
+                   "The ground truth's skull-contact nodes deeper than this (mm below the craniotomy's centre along "
+                   "gravity) are bonded to the skull instead of sliding; the registration lets them slide")
+    ->check(CLI::NonNegativeNumber);
+  demo->add_option("--truth-grey-white-moduli", options->greyWhiteModuli,
+                   "The ground truth's grey and white matter Young's moduli (Pa) on three tissue classes, e.g. 1390 "
+                   "1895 (Budday et al. 2015); the registration has one parenchyma of 3 kPa")
+    ->expected(2)
+    ->check(CLI::PositiveNumber);
   demo->add_option("--noise", options->truth.noise, "Noise of the intraoperative image (fraction of the bright level)")
     ->capture_default_str();
   demo->add_option("--noise-model", options->noiseModel,
@@ -826,6 +883,7 @@ AddDemoCommand(CLI::App & app)
                    "--registration-gravity solved, the best match (mutual information) kept (3 or more); 0: as given")
     ->check(CLI::NonNegativeNumber)
     ->needs("--registration-gravity");
+  options->uncertainty.Add(demo); // each row then also reports how well the map bounds its true error
   demo->add_flag("--no-baseline", options->noBaseline, "Skip the B-spline intensity registration");
   demo->add_flag("--no-registration-resection", options->noRegistrationResection,
                  "On a scene with a resection, do not give the biomechanical registration the planned resection "
@@ -877,12 +935,13 @@ AddDemoCommand(CLI::App & app)
        { "--image", "--mask", "--craniotomy-centre", "--craniotomy-radius", "--shift", "--free-rim", "--gravity",
          "--poisson-ratio", "--csf-modulus", "--csf-poisson-ratio", "--tumour-centre", "--tumour-radius",
          "--tumour-stiffness", "--truth-grid", "--truth-element-size", "--truth-max-steps", "--truth-skull-closing",
+         "--truth-csf-drained-depth", "--truth-bonded-depth", "--truth-grey-white-moduli",
          "--noise", "--noise-model", "--intraoperative-contrast", "--bias-field", "--intraoperative-spacing",
          "--field-of-view", "--resection-margin", "--truth-check" })
   {
     truthFrom->excludes(demo->get_option(scene));
   }
-  for (const char * registration : { "--variant", "--load", "--surface-match", "--registration-gravity",
+  for (const char * registration : { "--variant", "--load", "--surface-match", "--registration-gravity", "--uncertainty",
                                      "--gravity-fit-candidates", "--no-registration-resection", "--elastix",
                                      "--elastix-parameters", "--baseline-shrink-factors", "--baseline-iterations",
                                      "--truth-from", "--peer-field" })

@@ -32,7 +32,9 @@ struct UncertaintySettings
    *  points being rough. */
   double noiseSigma = 0.5;
   /** Gravity's size as a fraction of the registration's (given or fitted):
-   *  uniform in [gravityLow, gravityHigh]; equal: not perturbed. */
+   *  uniform in [gravityLow, gravityHigh]; equal: not perturbed. When the
+   *  gravity fit chose none, the fractions are of the smallest nonzero size
+   *  it tried (which it could not tell from none), with a warning. */
   double gravityLow = 1.0;
   double gravityHigh = 1.0;
   /** Young's moduli: every material's scaled by exp(N(0, youngsModulusSpread^2));

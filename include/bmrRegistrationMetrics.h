@@ -30,6 +30,26 @@ MeasureDisplacementError(const itk::Transform<double, 3, 3> * transform,
                          const RegistrationLabelImage *       region,
                          int                                  stride = 2);
 
+/** How well an uncertainty map bounds the true error: the fraction of the
+ *  sampled voxels of `region` (as MeasureDisplacementError samples them)
+ *  whose error |T(x) - T_truth(x)| lies within the map's value there (`bound`,
+ *  mm, on the region's grid, e.g. bmr::BrainShiftUncertaintyResult's 95th
+ *  percentile map): 0.95 for a calibrated 95 % bound; with the medians of
+ *  the errors and of the bounds over the same voxels. */
+struct UncertaintyCalibration
+{
+  double      fractionWithinBound = 0.0;
+  double      medianError = 0.0, medianBound = 0.0; // mm
+  std::size_t samples = 0;
+};
+
+UncertaintyCalibration
+MeasureUncertaintyCalibration(const itk::Transform<double, 3, 3> * transform,
+                              const itk::Transform<double, 3, 3> * truth,
+                              const RegistrationLabelImage *       region,
+                              const RegistrationImage *            bound,
+                              int                                  stride = 2);
+
 /** The voxels of `region` (e.g. the intraoperative brain on the preoperative
  *  grid) within `distance` mm of `structure` (a tumour or a resection cavity,
  *  voxels > 0, on the same grid): where the error near a tumour or a cavity

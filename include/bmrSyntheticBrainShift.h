@@ -126,6 +126,26 @@ struct SyntheticBrainShiftSettings
    *  almost no weight. With its full weight, 10 Pa CSF cells cannot carry
    *  themselves under gravity and fold (3 mm hexahedra diverge at 0.3 g). */
   double csfDensity = 1.0; // kg/m^3
+  /** Physics the registration does not model (docs/validation.md, "Truths of
+   *  another kind"), so that a study judging it is not an inverse crime.
+   *  CSF drained only partly: the CSF's surface lies this far (mm) below the
+   *  brain's highest node along gravity; the tissue below it stays buoyed and
+   *  carries no weight (Model::fluidSurface, Miga et al. 1999). Negative:
+   *  drained completely, as the registration assumes. */
+  double csfDrainedDepth = -1.0;
+  /** A bonded brain-skull interface over part of the surface: the skull-contact
+   *  nodes deeper than this (mm along "down" from the craniotomy's centre) are
+   *  held to the skull (zero displacement) instead of sliding on it, as
+   *  tethering by the dura's attachments, vessels and nerves at the skull base
+   *  would. Negative: none (frictionless sliding everywhere). */
+  double bondedDepth = -1.0;
+  /** Heterogeneous parenchyma: Young's moduli of grey and white matter (Pa)
+   *  on a three-class classification (CSF, grey, white), e.g. 1390 and 1895 Pa
+   *  from indentation (Budday et al. 2015); both 0: one parenchyma of
+   *  ParenchymaMaterial()'s modulus on two classes, as the registration. */
+  double greyMatterYoungsModulus = 0.0;
+  double whiteMatterYoungsModulus = 0.0;
+
   /** A synthetic spherical tumour (radius 0: none), stiffness x parenchyma. */
   Vector3 tumourCentre = Vector3::Zero();
   double  tumourRadius = 0.0;

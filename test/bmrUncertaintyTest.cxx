@@ -1,13 +1,19 @@
 // The uncertainty map where its answer is known: a perturbation that cannot
 // move the solution gives none, one that must shows up where it should.
-// Colin27 with 10 mm hexahedra and a 5 mm sag of a parietal opening.
+// Colin27 with 10 mm hexahedra and a 5 mm sag of a parietal opening. Then
+// how its calibration is counted, and the ground truths whose physics the
+// registration does not model (partial CSF drainage, a bonded skull base,
+// grey and white matter), on which the validation study calibrates it.
 // The deformation filter first: ITK's bundled Eigen before the core's (its header says why).
 #include "itkBiomechanicalDeformationFilter.h"
 
 #include "bmrBrainShiftUncertainty.h"
 #include "bmrColin27.h"
 #include "bmrSagScenes.h"
+#include "bmrSolver.h"
+#include "bmrSyntheticBrainShift.h"
 #include "bmrTemporaryFolderTest.h"
+#include "itkTranslationTransform.h"
 
 #include <gtest/gtest.h>
 
@@ -214,6 +220,168 @@ TEST_F(Uncertainty, BadSettingsAndFailedMembersAreNamed)
                     bmr::EstimateBrainShiftUncertainty(scene.prepared, scene.nominal, scene.inputs, hurried, noise);
                   }),
                   "0 of 3 members converged");
+}
+
+// A map of 6 mm on one half of a region and 4 mm on the other, a
+// registration 5 mm from the truth everywhere (a translation): exactly the
+// first half's samples lie within the map.
+TEST(UncertaintyCalibration, CountsTheErrorsWithinTheMap)
+{
+  auto region = bmr::RegistrationLabelImage::New();
+  bmr::RegistrationLabelImage::SizeType size{ { 10, 8, 6 } };
+  region->SetRegions(size);
+  region->SetSpacing(std::array<double, 3>{ 2.0, 2.0, 2.0 }.data());
+  region->Allocate();
+  region->FillBuffer(1);
+  auto bound = bmr::RegistrationImage::New();
+  bound->CopyInformation(region);
+  bound->SetRegions(region->GetBufferedRegion());
+  bound->Allocate();
+  std::size_t firstHalf = 0, sampled = 0;
+  for (itk::IndexValueType k = 0; k < 6; ++k)
+    for (itk::IndexValueType j = 0; j < 8; ++j)
+      for (itk::IndexValueType i = 0; i < 10; ++i)
+      {
+        bound->SetPixel({ { i, j, k } }, i < 4 ? 6.0f : 4.0f);
+        const bool taken = i % 2 == 0 && j % 2 == 0 && k % 2 == 0; // stride 2
+        sampled += taken;
+        firstHalf += taken && i < 4;
+      }
+  auto truth = itk::TranslationTransform<double, 3>::New();
+  auto shifted = itk::TranslationTransform<double, 3>::New();
+  shifted->SetOffset(itk::Vector<double, 3>(std::array<double, 3>{ 3.0, 4.0, 0.0 }.data()));
+  const bmr::UncertaintyCalibration measured = bmr::MeasureUncertaintyCalibration(shifted, truth, region, bound);
+  EXPECT_EQ(measured.samples, sampled);
+  EXPECT_DOUBLE_EQ(measured.fractionWithinBound, static_cast<double>(firstHalf) / static_cast<double>(sampled));
+  EXPECT_NEAR(measured.medianError, 5.0, 1e-12);
+  EXPECT_EQ(measured.medianBound, 4.0);
+  // Nothing moved: every error (0) lies within any map.
+  EXPECT_EQ(bmr::MeasureUncertaintyCalibration(truth, truth, region, bound).fractionWithinBound, 1.0);
+
+  auto other = bmr::RegistrationImage::New();
+  other->SetRegions(bmr::RegistrationImage::SizeType{ { 4, 4, 4 } });
+  other->Allocate();
+  EXPECT_CONTAINS(ErrorMessage([&] { bmr::MeasureUncertaintyCalibration(shifted, truth, region, other); }),
+                  "on the region's grid");
+}
+
+/** The README demo's scene on 8 mm hexahedra, made and solved; `adjust` sets the physics under test. */
+struct SolvedTruth
+{
+  bmr::SyntheticBrainShift truth;
+  bmr::SolveResult         solve;
+};
+
+SolvedTruth
+SolveTruth(const std::function<void(bmr::SyntheticBrainShiftSettings &)> & adjust)
+{
+  const Colin27 &                  colin = Colin27::Get();
+  bmr::SyntheticBrainShiftSettings settings;
+  settings.grid.elementSize = 8.0;
+  settings.targetShift = 5.0;
+  adjust(settings);
+  SolvedTruth solved{ bmr::MakeSyntheticBrainShiftModel(colin.image, colin.mask, settings), {} };
+  bmr::SolverSettings solver;
+  solver.tolerance = settings.solverTolerance;
+  solved.solve = bmr::Solver(solved.truth.model.model, solver).Solve();
+  EXPECT_TRUE(solved.solve.converged) << solved.solve.message;
+  return solved;
+}
+
+/** Largest |u_a - u_b| over the nodes (mm); the models must share their nodes. */
+double
+LargestDifference(const SolvedTruth & a, const SolvedTruth & b)
+{
+  EXPECT_EQ(a.solve.displacements.size(), b.solve.displacements.size());
+  double largest = 0.0;
+  for (std::size_t n = 0; n < a.solve.displacements.size(); ++n)
+  {
+    largest = std::max(largest, (a.solve.displacements[n] - b.solve.displacements[n]).norm());
+  }
+  return largest;
+}
+
+class TruthOfAnotherKind : public Uncertainty
+{};
+
+// The CSF's level bounds the drained tissue: at the brain's top every node
+// is still buoyed and the truth is the weightless one; below its lowest node
+// every node carries its weight, as when the CSF drains completely; a level
+// between them differs from both (the tissue below it stays where the
+// weightless truth has it, and the tissue above it sinks).
+TEST_F(TruthOfAnotherKind, PartialDrainageLiesBetweenWeightlessAndDrained)
+{
+  const SolvedTruth drained = SolveTruth([](auto &) {});
+  const SolvedTruth weightless = SolveTruth([](auto & s) { s.gravity = 0.0; });
+  const SolvedTruth atTheTop = SolveTruth([](auto & s) { s.csfDrainedDepth = 0.0; });
+  const SolvedTruth belowTheBrain = SolveTruth([](auto & s) { s.csfDrainedDepth = 500.0; });
+  const SolvedTruth halfway = SolveTruth([](auto & s) { s.csfDrainedDepth = 60.0; });
+  const double      gravityEffect = LargestDifference(drained, weightless);
+  RecordProperty("gravityEffect", std::to_string(gravityEffect));
+  ASSERT_GT(gravityEffect, 0.5) << "gravity must matter for the test to mean anything";
+  EXPECT_LT(LargestDifference(atTheTop, weightless), 1e-6);
+  EXPECT_LT(LargestDifference(belowTheBrain, drained), 1e-6);
+  RecordProperty("halfwayFromDrained", std::to_string(LargestDifference(halfway, drained)));
+  RecordProperty("halfwayFromWeightless", std::to_string(LargestDifference(halfway, weightless)));
+  EXPECT_GT(LargestDifference(halfway, drained), 0.1 * gravityEffect);
+  EXPECT_GT(LargestDifference(halfway, weightless), 0.1 * gravityEffect);
+}
+
+// A bonded skull base, beyond the 10 mm band that both models hold fixed:
+// its nodes leave the contact and do not move, where the sliding truth moves
+// them along the skull.
+TEST_F(TruthOfAnotherKind, BondedNodesHoldToTheSkull)
+{
+  const SolvedTruth  sliding = SolveTruth([](auto &) {});
+  const SolvedTruth  bonded = SolveTruth([](auto & s) { s.bondedDepth = 70.0; });
+  const bmr::Model & model = bonded.truth.model.model;
+  const auto &       held = model.NodeSet("bonded to the skull");
+  const auto &       contact = model.NodeSet("contact");
+  ASSERT_GT(held.size(), 10u);
+  EXPECT_EQ(std::count_if(model.fixedConstraints.begin(), model.fixedConstraints.end(),
+                          [](const bmr::FixedConstraint & fixed) { return fixed.nodeSet == "bonded to the skull"; }),
+            1);
+  double slid = 0.0;
+  for (const bmr::Index node : held)
+  {
+    EXPECT_EQ(std::count(contact.begin(), contact.end(), node), 0) << "node " << node << " is bonded and in contact";
+    EXPECT_EQ(bonded.solve.displacements[node].norm(), 0.0);
+    slid = std::max(slid, sliding.solve.displacements[node].norm());
+  }
+  RecordProperty("slidingAtTheBondedNodes", std::to_string(slid));
+  EXPECT_GT(slid, 0.05);
+  EXPECT_CONTAINS(ErrorMessage([] { SolveTruth([](auto & s) { s.bondedDepth = 1000.0; }); }), "bonded depth");
+}
+
+// Grey and white matter on three tissue classes: the cells' moduli reach
+// white matter's, none exceeds it, and the parenchyma spans the two.
+TEST_F(TruthOfAnotherKind, GreyAndWhiteMatterCarryTheirModuli)
+{
+  const Colin27 &                  colin = Colin27::Get();
+  bmr::SyntheticBrainShiftSettings settings;
+  settings.grid.elementSize = 8.0;
+  settings.greyMatterYoungsModulus = 1390.0;
+  settings.whiteMatterYoungsModulus = 1895.0;
+  const bmr::SyntheticBrainShift truth = bmr::MakeSyntheticBrainShiftModel(colin.image, colin.mask, settings);
+  const bmr::Model &             model = truth.model.model;
+  double                         stiffest = 0.0, softestParenchyma = 1e300;
+  for (const bmr::Cell & cell : model.cells)
+  {
+    const double modulus = model.materials[cell.material].youngsModulus;
+    stiffest = std::max(stiffest, modulus);
+    if (modulus > 0.5 * settings.greyMatterYoungsModulus)
+    {
+      softestParenchyma = std::min(softestParenchyma, modulus);
+    }
+  }
+  RecordProperty("stiffest", std::to_string(stiffest));
+  RecordProperty("softestParenchyma", std::to_string(softestParenchyma));
+  EXPECT_LE(stiffest, settings.whiteMatterYoungsModulus * (1.0 + 1e-12));
+  EXPECT_GT(stiffest, 0.95 * settings.whiteMatterYoungsModulus);
+  EXPECT_LT(softestParenchyma, 1.05 * settings.greyMatterYoungsModulus);
+  settings.whiteMatterYoungsModulus = 0.0;
+  EXPECT_CONTAINS(ErrorMessage([&] { bmr::MakeSyntheticBrainShiftModel(colin.image, colin.mask, settings); }),
+                  "grey and white matter");
 }
 
 } // namespace

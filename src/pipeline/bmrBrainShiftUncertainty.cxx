@@ -16,6 +16,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <functional>
 #include <random>
 #include <sstream>
@@ -420,12 +421,25 @@ EstimateBrainShiftUncertainty(const BrainModel &                     prepared,
     throw Error("uncertainty: measurement noise needs measured points or a displaced surface, and this update "
                 "takes its surface from an image; give the noise as 0 (--uncertainty-noise 0)");
   }
+  BrainShiftUncertaintyResult result;
+  Vector3                     drawnGravity = nominal.gravity; // what the members' factors scale
   if (uncertainty.gravityLow != uncertainty.gravityHigh && nominal.gravity.isZero())
   {
-    throw Error("uncertainty: a gravity range is given but the registration has no gravity; give gravity "
-                "(--gravity) or no range");
+    // A fit that chose no gravity cannot tell sizes below the smallest it tried from none: draw around that one.
+    double smallest = std::numeric_limits<double>::infinity();
+    for (const auto & tried : nominal.gravityFit)
+    {
+      smallest = tried.first > 0.0 ? std::min(smallest, tried.first) : smallest;
+    }
+    if (!std::isfinite(smallest) || settings.model.gravity.isZero())
+    {
+      throw Error("uncertainty: a gravity range is given but the registration has no gravity; give gravity "
+                  "(--gravity) or no range");
+    }
+    drawnGravity = smallest * settings.model.gravity.normalized();
+    result.warnings.push_back("uncertainty: the gravity fit chose no gravity; the members draw their gravity's size "
+                              "as fractions of the smallest size it tried, " + std::to_string(smallest) + " mm/s^2");
   }
-  BrainShiftUncertaintyResult result;
   std::vector<BrainModel>     models = DrawAndLoadMembers(prepared, nominal, inputs, settings, uncertainty, result.members);
 
   // The solves in parallel: single-threaded members when there are at least
@@ -448,7 +462,7 @@ EstimateBrainShiftUncertainty(const BrainModel &                     prepared,
     try
     {
       displacements[static_cast<std::size_t>(m)] = SolveMember(models[static_cast<std::size_t>(m)], member,
-                                                               nominal.gravity, nominalState, memberSolver, memberThreads);
+                                                               drawnGravity, nominalState, memberSolver, memberThreads);
     }
     catch (const std::exception & error)
     {

@@ -145,19 +145,21 @@ RegionNear(const RegistrationLabelImage * structure, const RegistrationLabelImag
   return near;
 }
 
-DisplacementError
-MeasureDisplacementError(const itk::Transform<double, 3, 3> * transform,
-                         const itk::Transform<double, 3, 3> * truth,
-                         const RegistrationLabelImage *       region,
-                         int                                  stride)
+namespace
+{
+
+/** |T(x) - T_truth(x)| (mm) on every `stride`-th voxel of `region` (> 0) along each axis, with each voxel's index. */
+std::vector<std::pair<double, RegistrationLabelImage::IndexType>>
+SampledErrors(const itk::Transform<double, 3, 3> * transform, const itk::Transform<double, 3, 3> * truth,
+              const RegistrationLabelImage * region, int stride, const char * who)
 {
   if (truth == nullptr || region == nullptr || stride < 1)
   {
-    throw Error("MeasureDisplacementError: give the ground-truth transform, the region and a stride >= 1");
+    throw Error(std::string(who) + ": give the ground-truth transform, the region and a stride >= 1");
   }
-  const auto          size = region->GetBufferedRegion().GetSize();
-  const auto          start = region->GetBufferedRegion().GetIndex();
-  std::vector<double> errors;
+  const auto size = region->GetBufferedRegion().GetSize();
+  const auto start = region->GetBufferedRegion().GetIndex();
+  std::vector<std::pair<double, RegistrationLabelImage::IndexType>> errors;
   RegistrationLabelImage::IndexType index;
   for (index[2] = start[2]; index[2] < start[2] + static_cast<itk::IndexValueType>(size[2]); index[2] += stride)
   {
@@ -173,16 +175,39 @@ MeasureDisplacementError(const itk::Transform<double, 3, 3> * transform,
         region->TransformIndexToPhysicalPoint(index, x);
         const auto expected = truth->TransformPoint(x);
         const auto estimate = transform != nullptr ? transform->TransformPoint(x) : x;
-        errors.push_back(expected.EuclideanDistanceTo(estimate));
+        errors.emplace_back(expected.EuclideanDistanceTo(estimate), index);
       }
     }
   }
-  DisplacementError result;
-  result.samples = errors.size();
   if (errors.empty())
   {
-    throw Error("MeasureDisplacementError: the region has no voxel; give the brain mask of the intraoperative image");
+    throw Error(std::string(who) + ": the region has no voxel; give the brain mask of the intraoperative image");
   }
+  return errors;
+}
+
+double
+Median(std::vector<double> values)
+{
+  std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
+  return values[values.size() / 2];
+}
+
+} // namespace
+
+DisplacementError
+MeasureDisplacementError(const itk::Transform<double, 3, 3> * transform,
+                         const itk::Transform<double, 3, 3> * truth,
+                         const RegistrationLabelImage *       region,
+                         int                                  stride)
+{
+  std::vector<double> errors;
+  for (const auto & sample : SampledErrors(transform, truth, region, stride, "MeasureDisplacementError"))
+  {
+    errors.push_back(sample.first);
+  }
+  DisplacementError result;
+  result.samples = errors.size();
   double sum = 0.0;
   for (const double error : errors)
   {
@@ -191,6 +216,36 @@ MeasureDisplacementError(const itk::Transform<double, 3, 3> * transform,
   result.mean = sum / static_cast<double>(errors.size());
   result.p95 = NearestRankPercentile95(errors);
   result.max = *std::max_element(errors.begin(), errors.end());
+  return result;
+}
+
+UncertaintyCalibration
+MeasureUncertaintyCalibration(const itk::Transform<double, 3, 3> * transform,
+                              const itk::Transform<double, 3, 3> * truth,
+                              const RegistrationLabelImage *       region,
+                              const RegistrationImage *            bound,
+                              int                                  stride)
+{
+  const char * who = "MeasureUncertaintyCalibration";
+  if (bound == nullptr || region == nullptr ||
+      !itk::MakeBiomechanicalGeometry(bound).SameGridAs(itk::MakeBiomechanicalGeometry(region)))
+  {
+    throw Error(std::string(who) + ": give the uncertainty map on the region's grid (the preoperative grid)");
+  }
+  std::vector<double> errors, bounds;
+  std::size_t         within = 0;
+  for (const auto & [error, index] : SampledErrors(transform, truth, region, stride, who))
+  {
+    const double limit = bound->GetPixel(index);
+    errors.push_back(error);
+    bounds.push_back(limit);
+    within += error <= limit;
+  }
+  UncertaintyCalibration result;
+  result.samples = errors.size();
+  result.fractionWithinBound = static_cast<double>(within) / static_cast<double>(errors.size());
+  result.medianError = Median(errors);
+  result.medianBound = Median(bounds);
   return result;
 }
 

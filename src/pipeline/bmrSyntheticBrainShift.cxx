@@ -356,6 +356,12 @@ MakeSyntheticBrainShiftModel(const RegistrationImage *           preoperativeIma
     throw Error("MakeSyntheticBrainShift: a resection removes the tumour; give a tumour (centre and radius) "
                 "or no resection margin");
   }
+  const bool heterogeneous = settings.greyMatterYoungsModulus != 0.0 || settings.whiteMatterYoungsModulus != 0.0;
+  if (heterogeneous && !(settings.greyMatterYoungsModulus > 0.0 && settings.whiteMatterYoungsModulus > 0.0))
+  {
+    throw Error("MakeSyntheticBrainShift: give grey and white matter's Young's moduli both > 0 Pa (e.g. 1390 and "
+                "1895), or both 0 for one parenchyma");
+  }
   SyntheticBrainShift truth;
   truth.timer = StageTimer(stageCallback);
   StageTimer & timer = truth.timer;
@@ -377,7 +383,18 @@ MakeSyntheticBrainShiftModel(const RegistrationImage *           preoperativeIma
   csf.density = settings.csfDensity;
   Material parenchyma = ParenchymaMaterial();
   parenchyma.poissonRatio = settings.poissonRatio;
+  if (heterogeneous)
+  {
+    modelSettings.classifier.classes = 3; // CSF, grey and white matter, in ascending T1 intensity
+  }
   modelSettings.materials.classMaterials = DefaultClassMaterials(modelSettings.classifier.classes, csf, parenchyma);
+  if (heterogeneous)
+  {
+    modelSettings.materials.classMaterials[1].name = "grey matter";
+    modelSettings.materials.classMaterials[1].youngsModulus = settings.greyMatterYoungsModulus;
+    modelSettings.materials.classMaterials[2].name = "white matter";
+    modelSettings.materials.classMaterials[2].youngsModulus = settings.whiteMatterYoungsModulus;
+  }
   modelSettings.materials.tumour.youngsModulus = settings.tumourStiffness * ParenchymaMaterial().youngsModulus;
   modelSettings.materials.tumour.poissonRatio = settings.poissonRatio;
   truth.model = BuildBrainModel(preoperativeImage, brainMask, truth.tumourMask, ContactSurface{}, nullptr,
@@ -443,6 +460,34 @@ MakeSyntheticBrainShiftModel(const RegistrationImage *           preoperativeIma
   }
   truth.gravity = settings.gravity * units::StandardGravity * down;
   model.bodyAcceleration = truth.gravity;
+  if (settings.csfDrainedDepth >= 0.0)
+  {
+    // As the registration's BrainModelSettings::csfDrainedDepth: the level hangs from the brain's highest node.
+    const auto top = std::max_element(model.nodes.begin(), model.nodes.end(),
+                                      [&](const Vector3 & a, const Vector3 & b) { return a.dot(down) > b.dot(down); });
+    model.fluidSurface = *top + settings.csfDrainedDepth * down;
+  }
+  if (settings.bondedDepth >= 0.0)
+  {
+    std::vector<Index> & contact = model.nodeSets["contact"];
+    std::vector<Index> & bonded = model.nodeSets["bonded to the skull"];
+    for (const Index node : contact)
+    {
+      if ((model.nodes[node] - settings.craniotomyCentre).dot(down) > settings.bondedDepth)
+      {
+        bonded.push_back(node);
+      }
+    }
+    if (bonded.empty())
+    {
+      throw Error("MakeSyntheticBrainShift: no skull-contact node lies deeper than the bonded depth of " +
+                  std::to_string(settings.bondedDepth) + " mm below the craniotomy's centre; give a smaller depth");
+    }
+    const std::set<Index> held(bonded.begin(), bonded.end());
+    contact.erase(std::remove_if(contact.begin(), contact.end(), [&](Index node) { return held.count(node) > 0; }),
+                  contact.end());
+    model.fixedConstraints.push_back(FixedConstraint{ "bonded to the skull" });
+  }
   return truth;
 }
 
