@@ -579,6 +579,40 @@ IntraoperativeFrom(const py::object & surface, const py::object & points, const 
   return data;
 }
 
+/** The ensemble after a registration or an update when `uncertainty` is given (the stage "uncertainty"), its
+ *  warnings added to the result's. */
+void
+RunEnsemble(const BrainModel & prepared, BrainShiftRegistrationResult & result, const BrainShiftUpdateInputs & inputs,
+            const BrainShiftRegistrationSettings & settings, const std::optional<UncertaintySettings> & uncertainty,
+            std::optional<BrainShiftUncertaintyResult> & ensemble)
+{
+  if (!uncertainty)
+  {
+    return;
+  }
+  ensemble = result.timer.Run("uncertainty", [&] {
+    return EstimateBrainShiftUncertainty(prepared, result, inputs, settings, *uncertainty);
+  });
+  result.warnings.insert(result.warnings.end(), ensemble->warnings.begin(), ensemble->warnings.end());
+}
+
+/** (result, report, None or (uncertainty map, mean transform, nodal uncertainty)) for register() and update(). */
+py::tuple
+ResultWithEnsemble(BrainShiftRegistrationResult result, const BrainShiftRegistrationSettings & settings,
+                   const std::optional<UncertaintySettings> &          uncertainty,
+                   const std::optional<BrainShiftUncertaintyResult> & ensemble)
+{
+  nlohmann::json report = RegistrationReportJson(result, settings);
+  py::object     spread = py::none();
+  if (ensemble)
+  {
+    report["uncertainty"] = UncertaintyReportJson(*ensemble, *uncertainty);
+    spread = py::make_tuple(PythonImage(ensemble->uncertaintyImage.GetPointer()),
+                            PythonTransform{ ensemble->meanTransform.GetPointer() }, ensemble->nodalUncertainty);
+  }
+  return py::make_tuple(std::move(result), JsonToDict(report), spread);
+}
+
 void
 BindRegistration(py::module_ & module)
 {
@@ -708,7 +742,7 @@ BindRegistration(py::module_ & module)
        const std::optional<ContactSurface> & skullSurface, const std::vector<py::object> & labelMaps,
        const py::object & surface, const py::object & points, const py::object & displacements,
        const py::object & intraoperativeImage, const py::object & intraoperativeMask, const py::dict & values,
-       const py::object & progress) {
+       const std::optional<UncertaintySettings> & uncertainty, const py::object & progress) {
       const BrainShiftRegistrationSettings settings = RegistrationSettingsFrom(values);
       BrainShiftRegistrationInputs         inputs;
       inputs.preoperativeImage = ItkImage(image, "preoperative_image");
@@ -721,21 +755,28 @@ BindRegistration(py::module_ & module)
       }
       inputs.intraoperative = IntraoperativeFrom(surface, points, displacements, intraoperativeImage,
                                                  intraoperativeMask, MaxDistanceFrom(values));
-      ProgressReporter reporter(progress);
+      if (uncertainty)
+      {
+        CheckUncertaintySettings(*uncertainty);
+      }
+      ProgressReporter                           reporter(progress);
+      std::optional<BrainShiftUncertaintyResult> ensemble;
       auto result = RunWithoutGil(reporter, [&] {
         return TranslateItkErrors([&] {
-          return RegisterBrainShift(
-            inputs, settings,
-            reporter.StageCallback(),
-            reporter.SolverCallback());
+          BrainModel prepared; // the ensemble's model before the loads
+          auto       registered = RegisterBrainShift(inputs, settings, reporter.StageCallback(), reporter.SolverCallback(),
+                                                     uncertainty ? &prepared : nullptr);
+          RunEnsemble(prepared, registered, { inputs.preoperativeImage, inputs.labelMaps, inputs.intraoperative },
+                      settings, uncertainty, ensemble);
+          return registered;
         });
       });
-      py::object report = JsonToDict(RegistrationReportJson(result, settings));
-      return py::make_tuple(std::move(result), report);
+      return ResultWithEnsemble(std::move(result), settings, uncertainty, ensemble);
     },
     py::arg("preoperative_image"), py::arg("brain_mask"), py::arg("tumour_mask"), py::arg("skull_surface"),
     py::arg("label_maps"), py::arg("intraoperative_surface"), py::arg("sparse_points"), py::arg("sparse_displacements"),
-    py::arg("intraoperative_image"), py::arg("intraoperative_mask"), py::arg("settings"), py::arg("progress"));
+    py::arg("intraoperative_image"), py::arg("intraoperative_mask"), py::arg("settings"), py::arg("uncertainty"),
+    py::arg("progress"));
 
   py::class_<ModelBundle>(module, "ModelBundle",
                           "A brain model prepared before surgery (biomech prepare): the model, its surfaces, the "
@@ -816,25 +857,11 @@ BindRegistration(py::module_ & module)
       auto result = RunWithoutGil(reporter, [&] {
         return TranslateItkErrors([&] {
           auto update = UpdateBrainShift(bundle.model, inputs, settings, reporter.StageCallback(), reporter.SolverCallback());
-          if (uncertainty)
-          {
-            ensemble = update.timer.Run("uncertainty", [&] {
-              return EstimateBrainShiftUncertainty(bundle.model, update, inputs, settings, *uncertainty);
-            });
-            update.warnings.insert(update.warnings.end(), ensemble->warnings.begin(), ensemble->warnings.end());
-          }
+          RunEnsemble(bundle.model, update, inputs, settings, uncertainty, ensemble);
           return update;
         });
       });
-      nlohmann::json report = RegistrationReportJson(result, settings);
-      py::object     spread = py::none();
-      if (ensemble)
-      {
-        report["uncertainty"] = UncertaintyReportJson(*ensemble, *uncertainty);
-        spread = py::make_tuple(PythonImage(ensemble->uncertaintyImage.GetPointer()),
-                                PythonTransform{ ensemble->meanTransform.GetPointer() }, ensemble->nodalUncertainty);
-      }
-      return py::make_tuple(std::move(result), JsonToDict(report), spread);
+      return ResultWithEnsemble(std::move(result), settings, uncertainty, ensemble);
     },
     py::arg("bundle"), py::arg("intraoperative_surface"), py::arg("sparse_points"), py::arg("sparse_displacements"),
     py::arg("intraoperative_image"), py::arg("intraoperative_mask"), py::arg("previous"), py::arg("settings"),

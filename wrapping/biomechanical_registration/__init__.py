@@ -230,6 +230,39 @@ def build_brain_model(
     )
 
 
+_UNCERTAINTY_KEYWORDS = {  # keyword: (UncertaintySettings field(s), conversion)
+    "uncertainty_noise": (("noise_sigma",), float),
+    "uncertainty_gravity": (("gravity_low", "gravity_high"), float),
+    "uncertainty_modulus_spread": (("youngs_modulus_spread",), float),
+    "uncertainty_poisson": (("poisson_low", "poisson_high"), float),
+    "uncertainty_skull_gap": (("skull_gap_spread",), float),
+    "uncertainty_tolerance": (("member_tolerance",), float),
+    "uncertainty_seed": (("seed",), int),
+}
+
+
+def _uncertainty_settings(function, uncertainty, settings):
+    """The ensemble's settings of register() and update() (None without `uncertainty`), taking its keywords out of
+    `settings`."""
+    given = {name: settings.pop(name) for name in list(settings) if name in _UNCERTAINTY_KEYWORDS}
+    given = {name: value for name, value in given.items() if value is not None}
+    if uncertainty is None:
+        if given:
+            raise TypeError("%s() got %s without uncertainty=N (the ensemble's members)" % (
+                function, ", ".join(sorted(given))))
+        return None
+    ensemble = _bmr.UncertaintySettings()
+    ensemble.members = int(uncertainty)
+    for name, value in given.items():
+        fields, convert = _UNCERTAINTY_KEYWORDS[name]
+        values = (value,) if len(fields) == 1 else tuple(value)
+        if len(values) != len(fields):
+            raise TypeError("%s() takes %s as (low, high)" % (function, name))
+        for field, item in zip(fields, values):
+            setattr(ensemble, field, convert(item))
+    return ensemble
+
+
 def register(
     preoperative_image,
     *,
@@ -242,6 +275,7 @@ def register(
     sparse_displacements=None,
     intraoperative_image=None,
     intraoperative_mask=None,
+    uncertainty=None,
     progress=None,
     **settings
 ):
@@ -259,13 +293,24 @@ def register(
     ``biomech register`` writes as registration-report.json. A solve that did
     not converge is reported there (``report["solve"]["converged"]``) and in
     ``warnings``; bad input and a failed solve raise :class:`Error`.
+
+    ``uncertainty=N`` and the ``uncertainty_*`` keywords: the ensemble, as
+    :func:`update` runs it, on the model this call prepares.
     """
+    ensemble = _uncertainty_settings("register", uncertainty, settings)
     values = _checked_settings("register", settings)
-    result, report = _bmr._register(
+    result, report, spread = _bmr._register(
         preoperative_image, brain_mask, tumour_mask, skull_surface, list(label_maps), intraoperative_surface,
-        sparse_points, sparse_displacements, intraoperative_image, intraoperative_mask, values, progress,
+        sparse_points, sparse_displacements, intraoperative_image, intraoperative_mask, values, ensemble, progress,
     )
+    return _with_report(result, report, spread)
+
+
+def _with_report(result, report, spread):
+    """The result of register() or update() with its report and, after an ensemble, its uncertainty."""
     result.report = report
+    if spread is not None:
+        result.uncertainty_map, result.mean_transform, result.nodal_uncertainty = spread
     return result
 
 
@@ -308,13 +353,6 @@ def update(
     intraoperative_mask=None,
     previous=None,
     uncertainty=None,
-    uncertainty_noise=None,
-    uncertainty_gravity=None,
-    uncertainty_modulus_spread=None,
-    uncertainty_poisson=None,
-    uncertainty_skull_gap=None,
-    uncertainty_tolerance=None,
-    uncertainty_seed=None,
     progress=None,
     **settings
 ):
@@ -331,44 +369,21 @@ def update(
     ``uncertainty=N``, as ``biomech update --uncertainty N``: an ensemble of N solves with
     the uncertain inputs drawn (``uncertainty_noise`` mm, ``uncertainty_gravity`` (low,
     high) fractions, ``uncertainty_modulus_spread``, ``uncertainty_poisson`` (low, high),
-    ``uncertainty_seed``; defaults and meaning in docs/registration.md, Uncertainty).
+    ``uncertainty_skull_gap`` mm, ``uncertainty_tolerance`` mm, ``uncertainty_seed``;
+    defaults and meaning in docs/registration.md, Uncertainty).
     The result then has ``uncertainty_map`` (an :class:`Image` on the preoperative grid:
     per voxel the 95th percentile of |u_i - u_mean| in mm), ``mean_transform``,
     ``nodal_uncertainty`` (mm per node) and the report's ``uncertainty``.
     """
     if not isinstance(bundle, _bmr.ModelBundle):
         bundle = _bmr.read_model_bundle(bundle)
+    ensemble = _uncertainty_settings("update", uncertainty, settings)
     values = _checked_settings("update", settings)
-    ensemble = None
-    if uncertainty is not None:
-        ensemble = _bmr.UncertaintySettings()
-        ensemble.members = int(uncertainty)
-        if uncertainty_noise is not None:
-            ensemble.noise_sigma = float(uncertainty_noise)
-        if uncertainty_gravity is not None:
-            ensemble.gravity_low, ensemble.gravity_high = (float(value) for value in uncertainty_gravity)
-        if uncertainty_modulus_spread is not None:
-            ensemble.youngs_modulus_spread = float(uncertainty_modulus_spread)
-        if uncertainty_poisson is not None:
-            ensemble.poisson_low, ensemble.poisson_high = (float(value) for value in uncertainty_poisson)
-        if uncertainty_skull_gap is not None:
-            ensemble.skull_gap_spread = float(uncertainty_skull_gap)
-        if uncertainty_tolerance is not None:
-            ensemble.member_tolerance = float(uncertainty_tolerance)
-        if uncertainty_seed is not None:
-            ensemble.seed = int(uncertainty_seed)
-    elif any(value is not None for value in (uncertainty_noise, uncertainty_gravity, uncertainty_modulus_spread,
-                                                 uncertainty_poisson, uncertainty_skull_gap,
-                                                 uncertainty_tolerance, uncertainty_seed)):
-        raise TypeError("update() got uncertainty_* settings without uncertainty=N (the ensemble's members)")
     result, report, spread = _bmr._update(
         bundle, intraoperative_surface, sparse_points, sparse_displacements, intraoperative_image,
         intraoperative_mask, previous, values, ensemble, progress,
     )
-    result.report = report
-    if spread is not None:
-        result.uncertainty_map, result.mean_transform, result.nodal_uncertainty = spread
-    return result
+    return _with_report(result, report, spread)
 
 
 # ITK Python's objects (`import itk`) wherever the package's are taken, and back when given

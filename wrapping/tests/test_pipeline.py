@@ -531,6 +531,14 @@ def test_prepare_then_update_gives_the_one_call_registration(tmp_path, colin27):
     assert len(ensemble.nodal_uncertainty) == len(ensemble.brain_model.model.nodes)
     np.testing.assert_allclose(ensemble.mean_transform.transform_points(samples),
                                from_object.transform.transform_points(samples), atol=2.0)
+    # register() runs the same ensemble on the model it prepares: the same draws give the same map, bit for bit.
+    registered = bmr.register(image, brain_mask=mask, sparse_points=points, sparse_displacements=displacements,
+                              uncertainty=3, uncertainty_seed=5, **CRANIOTOMY)
+    np.testing.assert_array_equal(registered.uncertainty_map.array, spread)
+    assert registered.report["uncertainty"]["member_results"] == ensemble.report["uncertainty"]["member_results"]
+    with pytest.raises(TypeError, match="without uncertainty=N"):
+        bmr.register(image, brain_mask=mask, sparse_points=points, sparse_displacements=displacements,
+                     uncertainty_poisson=(0.45, 0.49), **CRANIOTOMY)
     with pytest.raises(TypeError, match="without uncertainty=N"):
         bmr.update(bundle, sparse_points=points, sparse_displacements=displacements, uncertainty_seed=3)
     with pytest.raises(bmr.Error, match="at least 2"):
