@@ -114,7 +114,7 @@ CALIBRATION_TARGET = (0.85, 0.99)
 
 def calibration_table(runs, other_kind_scenes):
     """The uncertainty map's calibration per scene (the ensemble rows' details), with a summary computed from it."""
-    rows, matched, other = [], [], []
+    rows, matched, other, outside, inside = [], [], [], [], []
     for entry in runs:
         method = next((m for m in (entry["report"] or {}).get("methods", []) if "uncertainty" in m.get("details", {})), None)
         if method is None:
@@ -124,8 +124,13 @@ def calibration_table(runs, other_kind_scenes):
         fraction = calibration["transform"]["fraction_within_bound"]
         (other if entry["name"] in other_kind_scenes else matched).append((fraction, entry["name"]))
         fitted = method["details"].get("gravity_fit", {}).get("gravity_g")
-        rows.append("| %s | %s | %d of %d | %s | %.3f | %.2f | %.1f %% | %.1f %% |" % (
+        drawn = ensemble["distributions"]["gravity_fraction"]
+        truth_gravity = entry["report"]["ground_truth"]["gravity_g"]
+        if entry["name"] not in other_kind_scenes and fitted:
+            (outside if not drawn[0] * fitted <= truth_gravity <= drawn[1] * fitted else inside).append(fraction)
+        rows.append("| %s | %s | %.1f (%.1f) | %d of %d | %s | %.3f | %.2f | %.1f %% | %.1f %% |" % (
             entry["name"], "another kind" if entry["name"] in other_kind_scenes else "the model's family",
+            method["seconds"], method["stages"].get("uncertainty", float("nan")),
             ensemble["used_members"], ensemble["members"], "%.3f" % fitted if fitted is not None else "-",
             calibration["transform"]["median_bound_mm"], calibration["transform"]["median_error_mm"], 100 * fraction,
             100 * calibration["mean_transform"]["fraction_within_bound"]))
@@ -142,8 +147,9 @@ def calibration_table(runs, other_kind_scenes):
              "displacement error) whose true error |T(x) - T_truth(x)| lies within the map there, for the "
              "registration's transform and for the ensemble's mean; target %d-%d %%. The 15-25 mm scenes are left "
              "out (their tetrahedral truths are the study's longest jobs)." % (UNCERTAINTY_ROW, 100 * low, 100 * high),
-             "", "| scene | truth | members used | fitted gravity g | median map mm | median true error mm | within "
-             "the map | within the map (mean transform) |", "|---|---|---|---|---|---|---|---|", *rows, ""]
+             "", "| scene | truth | time s (of it the ensemble) | members used | fitted gravity g | median map mm | "
+             "median true error mm | within the map | within the map (mean transform) |",
+             "|---|---|---|---|---|---|---|---|---|", *rows, ""]
     for label, values in (("the scenes whose truth is of the registration's model family", matched),
                           ("the truths of another kind", other)):
         if values:
@@ -151,6 +157,12 @@ def calibration_table(runs, other_kind_scenes):
             lines.append("* **Calibration on %s: %d of %d scenes within %d-%d %%** (%.1f-%.1f %%; lowest on %s)." % (
                 label, len(met), len(values), 100 * low, 100 * high, 100 * min(values)[0], 100 * max(values)[0],
                 min(values)[1]))
+    if outside:
+        lines.append("* Where the model's family misses it: on %d of %d of those scenes the truth's gravity lies "
+                     "outside the drawn sizes (the fit's size times the drawn fractions), so the one error source "
+                     "that dominates is drawn too narrowly; there the map covers %.1f-%.1f %%%s." % (
+                         len(outside), len(outside) + len(inside), 100 * min(outside), 100 * max(outside),
+                         ", on the others %.1f-%.1f %%" % (100 * min(inside), 100 * max(inside)) if inside else ""))
     return lines
 
 
@@ -419,11 +431,14 @@ def image_change_target(runs, methods, p95):
 
 
 def time_budget_target(runs, methods):
-    """Issue 19's clinical budget: every discretization's registration within CLINICAL_BUDGET_S seconds."""
+    """Issue 19's clinical budget: every discretization's registration within CLINICAL_BUDGET_S seconds (the
+    uncertainty ensemble, which runs after a registration and is optional, is not one: calibration_table gives its
+    time)."""
     slowest = {}
     for entry in runs:
         for name, method in methods(entry).items():
-            if name.startswith("biomechanical") and method["seconds"] > slowest.get(name, (0.0, ""))[0]:
+            if name.startswith("biomechanical") and name != UNCERTAINTY_ROW and \
+                    method["seconds"] > slowest.get(name, (0.0, ""))[0]:
                 slowest[name] = (method["seconds"], entry["name"])
     if not slowest:
         return []

@@ -412,6 +412,12 @@ def collect(output, reduced=False):
         commit = job.get("commit") or "unrecorded"
         commits[commit] = commits.get(commit, 0) + 1
     built = ", ".join("%s (%d jobs)" % item for item in sorted(commits.items()))
+    # Records seeded from an earlier study (--seed-from) carry that study's truth job's host, date and commit.
+    seeded = sorted({job["seeded_from"] for job in jobs if job.get("seeded_from")})
+    if seeded:
+        built += "; %d of the jobs' records carried over from %s (each with its scene's truth job's date and " \
+                 "commit there)" % (sum(1 for job in jobs if job.get("seeded_from")), ", ".join(
+                     os.path.relpath(path, ROOT) for path in seeded))
     machine = "%s, %d cores, %s, %s to %s, load average %.1f to %.1f at the %d jobs' starts and ends; biomech " \
               "built from commit %s" % (
                   platform.processor() or platform.machine(), jobs[0].get("cores") or os.cpu_count(),
