@@ -19,7 +19,7 @@
 #include "bmrUncertaintyOptions.h"
 
 #include "bmrMeshIO.h"
-#include "bmrElectrodes.h"
+#include "bmrSyntheticElectrodeCt.h"
 #include "bmrSyntheticBrainShift.h"
 #include "bmrUnits.h"
 

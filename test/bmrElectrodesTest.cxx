@@ -4,7 +4,7 @@
 // is known: a synthetic CT made from Colin27 after a synthetic brain shift,
 // with the grid's contacts on the shifted surface.
 #include "bmrColin27.h"
-#include "bmrElectrodes.h"
+#include "bmrSyntheticElectrodeCt.h"
 #include "bmrTemporaryFolderTest.h"
 
 #include "itkBiomechanicalImageIO.h"

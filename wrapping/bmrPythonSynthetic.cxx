@@ -3,7 +3,7 @@
 // localisation (bmrSyntheticBrainShift.h, bmrElectrodes.h).
 
 // ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.
-#include "bmrElectrodes.h"
+#include "bmrSyntheticElectrodeCt.h"
 
 #include "bmrPythonItk.h"
 
