@@ -16,7 +16,7 @@
 
 #include "bmrCommandSupport.h"
 #include "bmrDemoTruth.h"
-#include "bmrUncertaintyOptions.h"
+#include "bmrDemo.h"
 
 #include "bmrMeshIO.h"
 #include "bmrSyntheticElectrodeCt.h"
@@ -46,186 +46,13 @@ namespace app
 namespace
 {
 
-// The largest brain shift the module is built for (mm): the cut-off of matches along gravity.
-constexpr double kLargestExpectedShift = 25.0;
-// The error near a tumour or a resection cavity is measured within this distance (mm) of it.
-constexpr double kNearTumourDistance = 10.0;
-// The ventricles: the CSF class deeper than this (mm) below the brain's surface (VentricleMask).
-constexpr double kVentricleDepth = 10.0;
+using namespace demo;
 
-struct DemoOptions
-{
-  std::string                 image = "/usr/share/mricron/templates/ch2.nii.gz";
-  std::string                 mask = "/usr/share/mricron/templates/ch2bet.nii.gz";
-  std::string                 outputDirectory = "out/demo";
-  SyntheticBrainShiftSettings truth;
-  std::vector<double>         craniotomyCentre;
-  std::vector<double>         tumourCentre;
-  std::vector<double>         greyWhiteModuli; // the truth's grey and white matter (Pa); empty: one parenchyma
-  std::string                 truthGrid = "hexahedra";
-  std::vector<std::string>    variants{ "hexahedra:5" };
-  std::string                 truthCheck; // KIND:SIZE of a second ground truth; empty: none
-  std::string                 load = "points";
-  std::string                 surfaceMatch = "closest";
-  double                      registrationGravity = 0.0; // g
-  int                         gravityFitCandidates = 0;
-  UncertaintyOptions          uncertainty; // an ensemble after each biomechanical registration, calibrated on the truth
-  bool                        noBaseline = false;
-  bool                        noRegistrationResection = false; // the registration is not told the planned resection
-  bool                        truthOnly = false; // solve and write the truth, register nothing
-  std::string                 truthFrom;         // a --truth-only folder to read the truth from
-  bool                        elastix = false;
-  std::vector<std::string>    elastixParameters;
-  std::string                 peerField;  // a peer registration run elsewhere: its displacement field,
-  std::string                 peerWarped; // its warped image,
-  std::string                 peerName;   // the method's name in the report,
-  double                      peerSeconds = 0.0; // its run time
-  std::string                 peerDetails; // and a JSON object of what it was (tool, version, parameters)
-  std::string                 contrast = "preoperative";
-  std::string                 noiseModel = "gaussian";
-  std::vector<double>         intraoperativeSpacing;
-  std::vector<unsigned int>   baselineShrinkFactors{ 4, 2, 1 };
-  unsigned int                baselineIterations = 0;
-  int                         overlays = 3;
-  bool                        quiet = false;
-};
-
-/** One registration method's numbers. */
-struct MethodResult
-{
-  std::string       name;
-  double            seconds = 0.0;
-  json              stages = json::object();
-  DisplacementError error;
-  std::optional<DisplacementError> nearTumourError; // within kNearTumourDistance of the tumour or the cavity
-  std::optional<double>            tumourSurfaceDistance; // 95th percentile, mm (StructureSurfaceDistance)
-  std::optional<double>            ventricleSurfaceDistance; // 95th percentile, mm; none: not measured
-  EdgeEvaluation    edges;
-  json              details = json::object();
-};
-
-/** A displacement error's statistics (mm) as the report writes them. */
-json
-DisplacementErrorJson(const DisplacementError & error)
-{
-  return { { "mean", error.mean }, { "p95", error.p95 }, { "max", error.max }, { "samples", error.samples } };
-}
-
-json
-MethodJson(const MethodResult & method)
-{
-  json result = { { "name", method.name },
-                  { "seconds", method.seconds },
-                  { "stages", method.stages },
-                  { "displacement_error_mm", DisplacementErrorJson(method.error) },
-                  { "details", method.details } };
-  if (method.nearTumourError)
-  {
-    result["displacement_error_near_tumour_mm"] = DisplacementErrorJson(*method.nearTumourError);
-  }
-  if (method.tumourSurfaceDistance)
-  {
-    result["tumour_surface_distance_p95_mm"] = *method.tumourSurfaceDistance;
-  }
-  if (method.ventricleSurfaceDistance)
-  {
-    result["ventricle_surface_distance_p95_mm"] = *method.ventricleSurfaceDistance;
-  }
-  if (method.edges.valid)
-  {
-    result["hausdorff_mm"] = { { "p50", method.edges.Percentile(50) },
-                               { "p90", method.edges.Percentile(90) },
-                               { "p95", method.edges.Percentile(95) },
-                               { "p100", method.edges.Percentile(100) } };
-    result["fraction_within_1_7_mm"] = method.edges.fractionWithinThreshold;
-    result["hausdorff_curve_mm"] = method.edges.symmetric;
-  }
-  else
-  {
-    result["hausdorff_mm"] = nullptr;
-    result["evaluation_message"] = method.edges.message;
-  }
-  return result;
-}
-
+/** The options' vectors into the truth's settings, and the elastix peer's programs checked: before the long
+ *  ground-truth solve. */
 void
-PrintTable(const std::vector<MethodResult> & methods)
+ApplySceneOptions(DemoOptions & options)
 {
-  // The name column as wide as the longest name ("biomechanical mixed 5 mm + fitted gravity").
-  int width = 26;
-  for (const MethodResult & method : methods)
-  {
-    width = std::max(width, static_cast<int>(method.name.size()));
-  }
-  std::printf("\n%-*s %9s | %27s | %27s | %9s | %10s\n", width, "", "time", "displacement error (mm)",
-              "edge Hausdorff (mm)", "edges", "ventricles");
-  std::printf("%-*s %9s | %8s %8s %9s | %8s %8s %9s | %9s | %10s\n", width, "method", "s", "mean", "p95", "max", "p50",
-              "p90", "p95", "<1.7 mm", "p95 (mm)");
-  for (const MethodResult & method : methods)
-  {
-    char ventricles[32] = "-";
-    if (method.ventricleSurfaceDistance)
-    {
-      std::snprintf(ventricles, sizeof ventricles, "%.2f", *method.ventricleSurfaceDistance);
-    }
-    std::printf("%-*s %9.2f | %8.2f %8.2f %9.2f | %8.2f %8.2f %9.2f | %8.1f%% | %10s\n", width, method.name.c_str(),
-                method.seconds, method.error.mean, method.error.p95, method.error.max, method.edges.Percentile(50),
-                method.edges.Percentile(90), method.edges.Percentile(95), 100.0 * method.edges.fractionWithinThreshold,
-                ventricles);
-  }
-  std::printf("\ntime per stage (s)\n");
-  for (const MethodResult & method : methods)
-  {
-    if (method.stages.empty())
-    {
-      continue;
-    }
-    std::printf("  %-*s", width, method.name.c_str());
-    for (const auto & [stage, seconds] : method.stages.items())
-    {
-      std::printf(" %s %.2f", stage.c_str(), seconds.get<double>());
-    }
-    std::printf("\n");
-  }
-}
-
-std::string
-FormatNumber(double value)
-{
-  std::ostringstream text;
-  text << value;
-  return text.str();
-}
-
-/** "hexahedra:5" -> grid settings; `option` names the option in errors. */
-ImageGridSettings
-ParseVariant(const std::string & variant, const std::string & option = "--variant")
-{
-  const auto colon = variant.find(':');
-  if (colon == std::string::npos)
-  {
-    throw Error(option + " '" + variant + "': write it as KIND:SIZE, e.g. hexahedra:5 or meshless:7");
-  }
-  ImageGridSettings settings;
-  settings.kind = ParseImageGridKind(variant.substr(0, colon));
-  try
-  {
-    settings.elementSize = std::stod(variant.substr(colon + 1));
-  }
-  catch (const std::exception &)
-  {
-    throw Error(option + " '" + variant + "': the size after ':' must be a number (mm)");
-  }
-  return settings;
-}
-
-int
-RunDemo(DemoOptions options)
-{
-  const fs::path output(options.outputDirectory);
-  const bool     terminal = !options.quiet && ::isatty(STDERR_FILENO) != 0;
-  const StageCallback stages = terminal ? StageCallback(StepTimer::PrintStage) : StageCallback();
-
   if (!options.craniotomyCentre.empty())
   {
     options.truth.craniotomyCentre = Vector3(options.craniotomyCentre.at(0), options.craniotomyCentre.at(1),
@@ -248,7 +75,7 @@ RunDemo(DemoOptions options)
     options.truth.intraoperativeSpacing =
       Vector3(options.intraoperativeSpacing.at(0), options.intraoperativeSpacing.at(1), options.intraoperativeSpacing.at(2));
   }
-  // Before the long ground-truth solve: the peer's files.
+  // The peer's files.
   options.elastix = options.elastix || !options.elastixParameters.empty();
   if (options.elastix)
   {
@@ -265,24 +92,37 @@ RunDemo(DemoOptions options)
       options.elastixParameters = DefaultElastixParameters();
     }
   }
+}
+
+/** --peer-details: a JSON object describing a peer run elsewhere (empty path: an empty object). */
+json
+ReadPeerDetails(const std::string & path)
+{
   json peerDetails = json::object();
-  if (!options.peerDetails.empty())
+  if (path.empty())
   {
-    try
-    {
-      std::ifstream in(options.peerDetails);
-      peerDetails = json::parse(in);
-    }
-    catch (const json::exception & exception)
-    {
-      throw Error("--peer-details: " + options.peerDetails + " is not readable JSON (" + exception.what() + ")");
-    }
-    if (!peerDetails.is_object())
-    {
-      throw Error("--peer-details: " + options.peerDetails + " must hold a JSON object (what the peer was)");
-    }
+    return peerDetails;
   }
-  const UncertaintySettings uncertainty = options.uncertainty.Checked();
+  try
+  {
+    std::ifstream in(path);
+    peerDetails = json::parse(in);
+  }
+  catch (const json::exception & exception)
+  {
+    throw Error("--peer-details: " + path + " is not readable JSON (" + exception.what() + ")");
+  }
+  if (!peerDetails.is_object())
+  {
+    throw Error("--peer-details: " + path + " must hold a JSON object (what the peer was)");
+  }
+  return peerDetails;
+}
+
+/** The biomechanical registrations' grids (--variant; none with --truth-only, which also skips the baseline). */
+std::vector<ImageGridSettings>
+ParseVariants(DemoOptions & options)
+{
   std::vector<ImageGridSettings> variants;
   if (options.truthOnly)
   {
@@ -297,6 +137,210 @@ RunDemo(DemoOptions options)
     }
     variants.push_back(ParseVariant(variant));
   }
+  return variants;
+}
+
+/** The epilepsy workflow (--load electrodes): a grid on the shifted brain, seen in a CT; its contacts, found and
+ *  projected along gravity (the head's position in the operating room tells its direction), load the registration.
+ *  Without it: nothing, and `report` stays null. */
+std::optional<ElectrodeLocalisation>
+LocaliseElectrodes(const DemoOptions & options, const RegistrationImage * preoperative,
+                   const RegistrationLabelImage * brainMask, const SyntheticBrainShift & truth, const fs::path & output,
+                   const StageCallback & stages, json & report)
+{
+  if (options.load != "electrodes")
+  {
+    return std::nullopt;
+  }
+  StageTimer                 timer(stages);
+  const SyntheticElectrodeCt ct = timer.Run("electrode-ct", [&] {
+    return MakeSyntheticElectrodeCt(preoperative, brainMask, truth, options.truth.craniotomyCentre);
+  });
+  WriteImageAtomically(ct.image.GetPointer(), output / "electrodes-ct.nii.gz");
+  ElectrodeLocalisationSettings settings;
+  settings.detection.expectedContacts = static_cast<int>(ct.contacts.size());
+  settings.projectionDirection = truth.down;
+  std::optional<ElectrodeLocalisation> electrodes = timer.Run("electrodes", [&] {
+    return LocateElectrodes(ct.image, preoperative, ElectrodeReferenceSurface(brainMask), settings);
+  });
+  WriteSparseDisplacements((output / "electrode-displacements.csv").string(), electrodes->loads);
+  const ElectrodeLocalisationErrors errors = MeasureElectrodeLocalisation(*electrodes, ct);
+  report = { { "contacts", ct.contacts.size() },
+             { "found", electrodes->contacts.size() },
+             { "each_found_once", errors.eachContactFoundOnce },
+             { "detection_max_mm", errors.detectionMax },
+             { "location_mean_mm", errors.locationMean },
+             { "location_max_mm", errors.locationMax },
+             { "displacement_error_mean_mm", errors.displacementMean },
+             { "displacement_error_max_mm", errors.displacementMax },
+             { "alignment_seconds", electrodes->alignment.seconds },
+             { "seconds", timer.Json() } };
+  if (!options.quiet)
+  {
+    std::cerr << "electrodes: " << electrodes->contacts.size() << " of " << ct.contacts.size()
+              << " contacts found, located within " << errors.locationMax
+              << " mm, measured displacements within " << errors.displacementMax << " mm\n";
+  }
+  return electrodes;
+}
+
+/** A second ground truth of the same scene on another discretization (--truth-check): how far two truths differ is
+ *  the smallest error a registration can be judged by. Its report entry; `secondTruth` its transform. */
+json
+SolveSecondTruth(const DemoOptions & options, const ImageGridSettings & grid, const RegistrationImage * preoperative,
+                 const RegistrationLabelImage * brainMask, const SyntheticBrainShift & truth, const fs::path & output,
+                 RegistrationTransform::Pointer & secondTruth)
+{
+  SyntheticBrainShiftSettings checkSettings = options.truth;
+  checkSettings.grid.kind = grid.kind;
+  checkSettings.grid.elementSize = grid.elementSize;
+  if (!options.quiet)
+  {
+    std::cerr << "second ground truth: " << ImageGridKindName(checkSettings.grid.kind) << " "
+              << checkSettings.grid.elementSize << " mm\n";
+  }
+  const SyntheticBrainShift check = [&] {
+    try
+    {
+      return MakeSyntheticBrainShift(preoperative, brainMask, checkSettings);
+    }
+    catch (const Error & error)
+    {
+      throw Error("--truth-check " + options.truthCheck + ": the second ground truth failed: " + error.what());
+    }
+  }();
+  const DisplacementError difference =
+    MeasureDisplacementError(check.truthTransform, truth.truthTransform, truth.intraoperativeBrainOnPreoperativeGrid);
+  itk::WriteBiomechanicalTransform(check.truthTransform, (output / "ground-truth-check-transform.h5").string());
+  secondTruth = check.truthTransform;
+  const json report = { { "grid", ImageGridKindName(checkSettings.grid.kind) },
+                        { "element_size_mm", checkSettings.grid.elementSize },
+                        { "nodes", check.model.model.nodes.size() },
+                        { "cells", check.model.model.cells.size() },
+                        { "shift_mm", check.shift },
+                        { "solve_steps", check.solve.steps },
+                        { "solve_estimated_error_mm", check.solve.estimatedError },
+                        { "fit_max_residual_mm", check.truthFitMaxResidual },
+                        { "difference_from_truth_mm", DisplacementErrorJson(difference) },
+                        { "seconds", check.timer.Json() } };
+  if (!options.quiet)
+  {
+    std::cerr << "the two ground truths differ by " << difference.mean << " / " << difference.p95 << " / "
+              << difference.max << " mm (mean / p95 / max over the brain)\n";
+  }
+  return report;
+}
+
+/** The intensity peers' rows: elastix run here (--elastix) and a peer run elsewhere (--peer-field), each with its
+ *  error, its own warped image's edges and its overlays. */
+void
+AddPeerRows(const DemoOptions & options, const RegistrationImage * preoperative, const SyntheticBrainShift & truth,
+            const std::optional<IntensityPeer> & externalPeer, const json & peerDetails, const Scoring & scoring,
+            const fs::path & output, std::vector<MethodResult> & methods)
+{
+  const RegistrationImage *      intraoperative = truth.intraoperativeImage;
+  const RegistrationLabelImage * intraoperativeMask = truth.intraoperativeBrainMask;
+  // A peer's method row: its error, its own warped image's edges, its overlays.
+  const auto addPeer = [&](const IntensityPeer & peer, MethodResult method, const std::string & overlayName) {
+    method.seconds = peer.seconds;
+    method.edges = EvaluateEdges(intraoperative, peer.warpedOnFixedGrid, intraoperativeMask);
+    scoring.Score(peer.transform, method);
+    methods.push_back(method);
+    WriteEdgeOverlays(method.edges, intraoperative, (output / "overlays").string(), overlayName, options.overlays);
+  };
+  if (options.elastix)
+  {
+    if (!options.quiet)
+    {
+      std::cerr << "elastix (peer): " << options.elastixParameters.size() << " parameter files\n";
+    }
+    const IntensityPeer peer =
+      RegisterWithElastix(output / "intraoperative.nii.gz", options.image, output / "intraoperative-brain-mask.nii.gz",
+                          options.elastixParameters, preoperative, output / "elastix", options.truth.threads);
+    if (peer.warpedOnFixedGrid->GetLargestPossibleRegion() != intraoperative->GetLargestPossibleRegion())
+    {
+      throw Error("transformix's warped image is not on the intraoperative grid; check the parameter files' output settings");
+    }
+    // The same grid, read back from single-precision NIfTI: take the exact geometry.
+    peer.warpedOnFixedGrid->CopyInformation(intraoperative);
+    MethodResult method;
+    method.name = "elastix B-spline";
+    method.stages = { { "register", peer.seconds }, { "transformix", peer.outputSeconds } };
+    method.details = { { "parameter_files", options.elastixParameters }, { "folder", (output / "elastix").string() } };
+    addPeer(peer, method, "elastix");
+  }
+  if (externalPeer)
+  {
+    MethodResult method;
+    method.name = options.peerName;
+    method.stages = { { "register", externalPeer->seconds } };
+    method.details = peerDetails;
+    method.details["field"] = options.peerField;
+    method.details["warped"] = options.peerWarped;
+    addPeer(*externalPeer, method, "peer");
+  }
+}
+
+/** demo-report.json: the scene, the ground truth (solved here or read with --truth-from), what the scores measure,
+ *  and every method's row. */
+json
+DemoReportJson(const DemoOptions & options, const SyntheticBrainShift & truth, const std::optional<TruthFiles> & cached,
+               const json & truthCheckReport, const Scoring & scoring, const json & electrodeReport,
+               const std::vector<MethodResult> & methods)
+{
+  json report;
+  report["preoperative_image"] = options.image;
+  report["brain_mask"] = options.mask;
+  report["load"] = options.load;
+  report["surface_match"] = options.surfaceMatch;
+  if (!options.truthFrom.empty())
+  {
+    report["ground_truth"] = cached->report["ground_truth"];
+    report["ground_truth"]["read_from"] = options.truthFrom;
+    report["ground_truth"]["reusable"] = false; // this folder has the truth's common files only
+  }
+  else
+  {
+    report["ground_truth"] = GroundTruthJson(options, truth);
+  }
+  if (!truthCheckReport.is_null())
+  {
+    report["ground_truth_check"] = truthCheckReport;
+  }
+  if (scoring.NearTumour() != nullptr)
+  {
+    // What the methods' displacement_error_near_tumour_mm measures.
+    report["near_tumour"] = { { "structure", truth.resectionMask.IsNotNull() ? "resection cavity" : "tumour" },
+                              { "distance_mm", kNearTumourDistance },
+                              { "region", "the intraoperative brain within the distance of the structure" },
+                              { "surface_distance", "95th percentile of the symmetric distances between the "
+                                                    "structure's boundary moved by the method and by the truth" } };
+  }
+  // What the methods' ventricle_surface_distance_p95_mm measures.
+  report["ventricles"] = scoring.VentricleReport();
+  if (!electrodeReport.is_null())
+  {
+    report["electrodes"] = electrodeReport;
+  }
+  report["methods"] = json::array();
+  for (const MethodResult & method : methods)
+  {
+    report["methods"].push_back(MethodJson(method));
+  }
+  return report;
+}
+
+int
+RunDemo(DemoOptions options)
+{
+  const fs::path output(options.outputDirectory);
+  const bool     terminal = !options.quiet && ::isatty(STDERR_FILENO) != 0;
+  const StageCallback stages = terminal ? StageCallback(StepTimer::PrintStage) : StageCallback();
+
+  ApplySceneOptions(options);
+  const json                peerDetails = ReadPeerDetails(options.peerDetails);
+  const UncertaintySettings uncertainty = options.uncertainty.Checked();
+  const std::vector<ImageGridSettings> variants = ParseVariants(options);
   std::optional<ImageGridSettings> truthCheckGrid;
   if (!options.truthCheck.empty())
   {
@@ -353,41 +397,9 @@ RunDemo(DemoOptions options)
   std::error_code ignored;
   fs::remove(output / "demo-report.json", ignored);
   WriteTruthFiles(truth, output, options.truthOnly);
-  // The epilepsy workflow: a grid on the shifted brain, seen in a CT; its
-  // contacts, found and projected along gravity (the head's position in the
-  // operating room tells its direction), load the registration.
-  std::optional<ElectrodeLocalisation> electrodes;
-  json                                 electrodeReport;
-  if (options.load == "electrodes")
-  {
-    StageTimer                 timer(stages);
-    const SyntheticElectrodeCt ct = timer.Run("electrode-ct", [&] {
-      return MakeSyntheticElectrodeCt(preoperative, brainMask, truth, options.truth.craniotomyCentre);
-    });
-    WriteImageAtomically(ct.image.GetPointer(), output / "electrodes-ct.nii.gz");
-    ElectrodeLocalisationSettings settings;
-    settings.detection.expectedContacts = static_cast<int>(ct.contacts.size());
-    settings.projectionDirection = truth.down;
-    electrodes = timer.Run("electrodes", [&] { return LocateElectrodes(ct.image, preoperative, ElectrodeReferenceSurface(brainMask), settings); });
-    WriteSparseDisplacements((output / "electrode-displacements.csv").string(), electrodes->loads);
-    const ElectrodeLocalisationErrors errors = MeasureElectrodeLocalisation(*electrodes, ct);
-    electrodeReport = { { "contacts", ct.contacts.size() },
-                        { "found", electrodes->contacts.size() },
-                        { "each_found_once", errors.eachContactFoundOnce },
-                        { "detection_max_mm", errors.detectionMax },
-                        { "location_mean_mm", errors.locationMean },
-                        { "location_max_mm", errors.locationMax },
-                        { "displacement_error_mean_mm", errors.displacementMean },
-                        { "displacement_error_max_mm", errors.displacementMax },
-                        { "alignment_seconds", electrodes->alignment.seconds },
-                        { "seconds", timer.Json() } };
-    if (!options.quiet)
-    {
-      std::cerr << "electrodes: " << electrodes->contacts.size() << " of " << ct.contacts.size()
-                << " contacts found, located within " << errors.locationMax
-                << " mm, measured displacements within " << errors.displacementMax << " mm\n";
-    }
-  }
+  json                                       electrodeReport;
+  const std::optional<ElectrodeLocalisation> electrodes =
+    LocaliseElectrodes(options, preoperative, brainMask, truth, output, stages, electrodeReport);
   const fs::path overlays = output / "overlays";
 
   // A second ground truth of the same scene on another discretization: how far
@@ -396,105 +408,16 @@ RunDemo(DemoOptions options)
   RegistrationTransform::Pointer secondTruth = cached ? cached->secondTruth : nullptr;
   if (truthCheckGrid)
   {
-    SyntheticBrainShiftSettings checkSettings = options.truth;
-    checkSettings.grid.kind = truthCheckGrid->kind;
-    checkSettings.grid.elementSize = truthCheckGrid->elementSize;
-    if (!options.quiet)
-    {
-      std::cerr << "second ground truth: " << ImageGridKindName(checkSettings.grid.kind) << " "
-                << checkSettings.grid.elementSize << " mm\n";
-    }
-    const SyntheticBrainShift check = [&] {
-      try
-      {
-        return MakeSyntheticBrainShift(preoperative, brainMask, checkSettings);
-      }
-      catch (const Error & error)
-      {
-        throw Error("--truth-check " + options.truthCheck + ": the second ground truth failed: " + error.what());
-      }
-    }();
-    const DisplacementError   difference = MeasureDisplacementError(check.truthTransform, truth.truthTransform,
-                                                                  truth.intraoperativeBrainOnPreoperativeGrid);
-    itk::WriteBiomechanicalTransform(check.truthTransform, (output / "ground-truth-check-transform.h5").string());
-    secondTruth = check.truthTransform;
-    truthCheckReport = { { "grid", ImageGridKindName(checkSettings.grid.kind) },
-                         { "element_size_mm", checkSettings.grid.elementSize },
-                         { "nodes", check.model.model.nodes.size() },
-                         { "cells", check.model.model.cells.size() },
-                         { "shift_mm", check.shift },
-                         { "solve_steps", check.solve.steps },
-                         { "solve_estimated_error_mm", check.solve.estimatedError },
-                         { "fit_max_residual_mm", check.truthFitMaxResidual },
-                         { "difference_from_truth_mm", DisplacementErrorJson(difference) },
-                         { "seconds", check.timer.Json() } };
-    if (!options.quiet)
-    {
-      std::cerr << "the two ground truths differ by " << difference.mean << " / " << difference.p95 << " / "
-                << difference.max << " mm (mean / p95 / max over the brain)\n";
-    }
+    truthCheckReport = SolveSecondTruth(options, *truthCheckGrid, preoperative, brainMask, truth, output, secondTruth);
   }
 
   std::vector<MethodResult> methods;
-  // Near the tumour, or the cavity's walls after a resection: the brain within kNearTumourDistance of it.
-  const RegistrationLabelImage * structure =
-    truth.resectionMask.IsNotNull() ? truth.resectionMask.GetPointer() : truth.tumourMask.GetPointer();
-  const RegistrationLabelImage::Pointer nearTumour =
-    structure != nullptr ? RegionNear(structure, truth.intraoperativeBrainOnPreoperativeGrid, kNearTumourDistance)
-                         : nullptr;
-  const std::optional<StructureSurfaceDistance> tumourSurface =
-    structure != nullptr ? std::make_optional<StructureSurfaceDistance>(truth.truthTransform, structure) : std::nullopt;
-  // The ventricles' surface, found in the preoperative T1; an image where they are not found (another contrast,
-  // part of a brain) is measured without it, and the report says why.
-  json                                    ventricleReport;
-  std::optional<StructureSurfaceDistance> ventricleSurface;
-  try
-  {
-    const RegistrationLabelImage::Pointer ventricles = VentricleMask(preoperative, brainMask, kVentricleDepth);
-    WriteImageAtomically(ventricles.GetPointer(), output / "ventricle-mask.nii.gz");
-    const auto   spacing = ventricles->GetSpacing();
-    const auto * voxels = ventricles->GetBufferPointer();
-    const double volume = spacing[0] * spacing[1] * spacing[2] *
-                          static_cast<double>(std::count_if(voxels, voxels + ventricles->GetBufferedRegion().GetNumberOfPixels(),
-                                                            [](unsigned char v) { return v > 0; }));
-    ventricleSurface.emplace(truth.truthTransform, ventricles);
-    ventricleReport = { { "depth_mm", kVentricleDepth },
-                        { "volume_mm3", volume },
-                        { "mask", "ventricle-mask.nii.gz" },
-                        { "definition", "the CSF class deeper than depth_mm below the brain's surface, opened by 2 mm, "
-                                        "its largest connected component" } };
-  }
-  catch (const Error & error)
-  {
-    ventricleReport = { { "error", error.what() } };
-    if (!options.quiet)
-    {
-      std::cerr << "the ventricles' surface is not measured: " << error.what() << "\n";
-    }
-  }
-  // A method's error against the ground truth (also near the tumour), and against the second truth when there is one.
-  const auto score = [&](const itk::Transform<double, 3, 3> * transform, MethodResult & method) {
-    method.error = MeasureDisplacementError(transform, truth.truthTransform, truth.intraoperativeBrainOnPreoperativeGrid);
-    if (nearTumour)
-    {
-      method.nearTumourError = MeasureDisplacementError(transform, truth.truthTransform, nearTumour);
-      method.tumourSurfaceDistance = tumourSurface->Percentile95(transform);
-    }
-    if (ventricleSurface)
-    {
-      method.ventricleSurfaceDistance = ventricleSurface->Percentile95(transform);
-    }
-    if (secondTruth)
-    {
-      method.details["displacement_error_against_second_truth_mm"] = DisplacementErrorJson(
-        MeasureDisplacementError(transform, secondTruth, truth.intraoperativeBrainOnPreoperativeGrid));
-    }
-  };
+  const Scoring scoring(options, preoperative, brainMask, truth, secondTruth, output);
   {
     // The preoperative image as it is, against the intraoperative one: what every method improves on.
     MethodResult none;
     none.name = "no registration";
-    score(nullptr, none);
+    scoring.Score(nullptr, none);
     const auto identity = itk::IdentityTransform<double, 3>::New();
     none.edges = EvaluateEdges(intraoperative, WarpImage(preoperative, identity, intraoperative), intraoperativeMask);
     methods.push_back(none);
@@ -503,249 +426,18 @@ RunDemo(DemoOptions options)
 
   for (const ImageGridSettings & grid : variants)
   {
-    if (!options.quiet)
-    {
-      std::cerr << "biomechanical registration: " << ImageGridKindName(grid.kind) << " " << grid.elementSize << " mm\n";
-    }
-    BrainShiftRegistrationInputs inputs;
-    inputs.preoperativeImage = preoperative;
-    inputs.brainMask = brainMask;
-    inputs.tumourMask = truth.tumourMask;
-    if (options.load == "surface")
-    {
-      inputs.intraoperative.surface = truth.exposedSurface;
-      if (options.surfaceMatch == "gravity")
-      {
-        // Along gravity a match's length is the shift itself, not a distance across a gap: the cut-off
-        // that keeps closest-point outliers out (10 mm) would drop the deepest points of a 10 mm sag.
-        inputs.intraoperative.surfaceMatchDirection = truth.down;
-        inputs.intraoperative.maxDistance = kLargestExpectedShift;
-      }
-    }
-    else if (options.load == "electrodes")
-    {
-      inputs.intraoperative.sparse = electrodes->loads;
-    }
-    else
-    {
-      inputs.intraoperative.sparse = truth.trackedPoints;
-    }
-    inputs.intraoperative.image = intraoperative;
-    inputs.intraoperative.imageBrainMask = intraoperativeMask;
-    BrainShiftRegistrationSettings settings;
-    settings.model.grid = grid;
-    settings.model.threads = options.truth.threads;
-    settings.model.craniotomyCentre = options.truth.craniotomyCentre;
-    settings.model.craniotomyRadius = options.truth.craniotomyRadius;
-    // The head's position gives gravity's direction in the operating room; its effective size is a model choice.
-    settings.model.gravity = options.registrationGravity * units::StandardGravity * truth.down;
-    settings.model.materials.tumour.youngsModulus = options.truth.tumourStiffness * ParenchymaMaterial().youngsModulus;
-    // The surgeon's plan (the tumour and its margin) says what was removed; fluid fills it, as in the truth.
-    if (!options.noRegistrationResection)
-    {
-      settings.model.resectionMask = truth.resectionMask;
-    }
-    settings.gravityFitCandidates = options.gravityFitCandidates;
-    // The registration's CSF has the ground truth's Poisson's ratio (its stiffness stays the default) and, as
-    // the drained CSF it is, the ground truth's (almost no) weight.
-    Material csf = CsfMaterial();
-    csf.poissonRatio = options.truth.csfPoissonRatio;
-    csf.density = options.truth.csfDensity;
-    settings.model.materials.classMaterials = DefaultClassMaterials(settings.model.classifier.classes, csf);
-    BrainModel                   prepared; // the ensemble's model before the loads
-    BrainShiftRegistrationResult result =
-      RegisterBrainShift(inputs, settings, stages, {}, uncertainty.members > 0 ? &prepared : nullptr);
-    std::optional<BrainShiftUncertaintyResult> ensemble;
-    if (uncertainty.members > 0)
-    {
-      const BrainShiftUpdateInputs update{ inputs.preoperativeImage, inputs.labelMaps, inputs.intraoperative };
-      ensemble = RunEnsemble(prepared, result, update, settings, uncertainty, {});
-    }
-    MethodResult method;
-    method.name = "biomechanical " + std::string(ImageGridKindName(grid.kind)) + " " +
-                  FormatNumber(grid.elementSize) + " mm" +
-                  (options.gravityFitCandidates > 0 ? " + fitted gravity"
-                   : options.registrationGravity > 0.0 ? " + " + FormatNumber(options.registrationGravity) + " g"
-                                                       : "") +
-                  (ensemble ? ", uncertainty " + std::to_string(uncertainty.members) : "");
-    method.stages = result.timer.Json();
-    // The registration's time: everything but the evaluation, which needs the intraoperative image.
-    method.seconds = method.stages["total"].get<double>() - result.timer.Seconds("evaluate");
-    method.edges = result.registered;
-    method.details = RegistrationReportJson(result, settings);
-    method.details.erase("evaluation");
-    score(result.transform, method);
-    const std::string tag = std::string(ImageGridKindName(grid.kind)) + "-" + FormatNumber(grid.elementSize);
-    if (ensemble)
-    {
-      // How often the true error lies within the map's 95 % bound: the registration's and the ensemble mean's.
-      const auto calibration = [&](const itk::Transform<double, 3, 3> * transform) {
-        const UncertaintyCalibration measured = MeasureUncertaintyCalibration(
-          transform, truth.truthTransform, truth.intraoperativeBrainOnPreoperativeGrid, ensemble->uncertaintyImage);
-        return json{ { "fraction_within_bound", measured.fractionWithinBound },
-                     { "median_error_mm", measured.medianError },
-                     { "median_bound_mm", measured.medianBound },
-                     { "samples", measured.samples } };
-      };
-      method.details["uncertainty"] = UncertaintyReportJson(*ensemble, uncertainty);
-      method.details["uncertainty"]["calibration"] = { { "transform", calibration(result.transform) },
-                                                       { "mean_transform", calibration(ensemble->meanTransform) } };
-      const fs::path folder = output / ("uncertainty-biomechanical-" + tag);
-      CreateFolder(folder);
-      json files;
-      WriteEnsemble(*ensemble, preoperative, folder, files);
-      method.details["uncertainty"]["files"] = files;
-    }
-    methods.push_back(method);
-    WriteImageAtomically(result.warpedImage.GetPointer(), output / ("warped-biomechanical-" + tag + ".nii.gz"));
-    itk::WriteBiomechanicalTransform(result.transform, (output / ("transform-biomechanical-" + tag + ".h5")).string());
-    WriteEdgeOverlays(result.registered, intraoperative, overlays.string(), "biomechanical-" + tag, options.overlays);
+    methods.push_back(RegisterVariant(grid, options, uncertainty, preoperative, brainMask, truth,
+                                      electrodes ? &electrodes->loads : nullptr, scoring, output, stages));
   }
 
   if (!options.noBaseline)
   {
-    if (!options.quiet)
-    {
-      std::cerr << "B-spline intensity registration (baseline)\n";
-    }
-    BaselineSettings settings;
-    settings.shrinkFactors = options.baselineShrinkFactors;
-    settings.smoothingSigmas.clear();
-    for (const unsigned int factor : options.baselineShrinkFactors)
-    {
-      settings.smoothingSigmas.push_back(factor > 1 ? factor / 2.0 : 0.0);
-    }
-    settings.iterations = options.baselineIterations;
-    const BaselineRegistration baseline = RegisterWithBSplineBaseline(intraoperative, preoperative, intraoperativeMask, settings);
-    MethodResult method;
-    method.name = "B-spline intensity";
-    method.seconds = baseline.seconds;
-    method.stages = { { "register", baseline.seconds } };
-    score(baseline.transform, method);
-    method.edges = EvaluateEdges(intraoperative, baseline.warpedOnFixedGrid, intraoperativeMask);
-    methods.push_back(method);
-    WriteImageAtomically(baseline.warpedOnFixedGrid.GetPointer(), output / "warped-bspline-on-intraoperative-grid.nii.gz");
-    itk::WriteBiomechanicalTransform(baseline.transform, (output / "transform-bspline.h5").string());
-    WriteEdgeOverlays(method.edges, intraoperative, overlays.string(), "bspline", options.overlays);
+    methods.push_back(RegisterBaseline(options, preoperative, truth, scoring, output));
   }
 
-  // A peer's method row: its error, its own warped image's edges, its overlays.
-  const auto addPeer = [&](const IntensityPeer & peer, MethodResult method, const std::string & overlayName) {
-    method.seconds = peer.seconds;
-    method.edges = EvaluateEdges(intraoperative, peer.warpedOnFixedGrid, intraoperativeMask);
-    score(peer.transform, method);
-    methods.push_back(method);
-    WriteEdgeOverlays(method.edges, intraoperative, overlays.string(), overlayName, options.overlays);
-  };
-  if (options.elastix)
-  {
-    if (!options.quiet)
-    {
-      std::cerr << "elastix (peer): " << options.elastixParameters.size() << " parameter files\n";
-    }
-    const IntensityPeer peer =
-      RegisterWithElastix(output / "intraoperative.nii.gz", options.image, output / "intraoperative-brain-mask.nii.gz",
-                          options.elastixParameters, preoperative, output / "elastix", options.truth.threads);
-    if (peer.warpedOnFixedGrid->GetLargestPossibleRegion() != intraoperative->GetLargestPossibleRegion())
-    {
-      throw Error("transformix's warped image is not on the intraoperative grid; check the parameter files' output settings");
-    }
-    // The same grid, read back from single-precision NIfTI: take the exact geometry.
-    peer.warpedOnFixedGrid->CopyInformation(intraoperative);
-    MethodResult method;
-    method.name = "elastix B-spline";
-    method.stages = { { "register", peer.seconds }, { "transformix", peer.outputSeconds } };
-    method.details = { { "parameter_files", options.elastixParameters }, { "folder", (output / "elastix").string() } };
-    addPeer(peer, method, "elastix");
-  }
-  if (externalPeer)
-  {
-    MethodResult method;
-    method.name = options.peerName;
-    method.stages = { { "register", externalPeer->seconds } };
-    method.details = peerDetails;
-    method.details["field"] = options.peerField;
-    method.details["warped"] = options.peerWarped;
-    addPeer(*externalPeer, method, "peer");
-  }
+  AddPeerRows(options, preoperative, truth, externalPeer, peerDetails, scoring, output, methods);
 
-  json report;
-  report["preoperative_image"] = options.image;
-  report["brain_mask"] = options.mask;
-  report["load"] = options.load;
-  report["surface_match"] = options.surfaceMatch;
-  if (!options.truthFrom.empty())
-  {
-    report["ground_truth"] = cached->report["ground_truth"];
-    report["ground_truth"]["read_from"] = options.truthFrom;
-    report["ground_truth"]["reusable"] = false; // this folder has the truth's common files only
-  }
-  else
-  {
-    report["ground_truth"] = {
-      { "grid", ImageGridKindName(options.truth.grid.kind) },
-      { "element_size_mm", options.truth.grid.elementSize },
-      { "nodes", truth.model.model.nodes.size() },
-      { "cells", truth.model.model.cells.size() },
-      { "craniotomy_centre_mm", { options.truth.craniotomyCentre.x(), options.truth.craniotomyCentre.y(),
-                                  options.truth.craniotomyCentre.z() } },
-      { "craniotomy_radius_mm", options.truth.craniotomyRadius },
-      { "target_shift_mm", options.truth.targetShift },
-      { "free_rim", options.truth.freeRim },
-      { "skull_closing_mm", options.truth.skullClosing },
-      { "shift_mm", truth.shift },
-      { "gravity_mm_s2", { truth.gravity.x(), truth.gravity.y(), truth.gravity.z() } },
-      { "gravity_g", truth.gravity.norm() / units::StandardGravity },
-      { "solve_steps", truth.solve.steps },
-      { "solve_restarts", truth.solve.restarts },
-      { "solve_estimated_error_mm", truth.solve.estimatedError },
-      { "fit_max_residual_mm", truth.truthFitMaxResidual },
-      { "poisson_ratio", options.truth.poissonRatio },
-      { "csf_youngs_modulus_pa", options.truth.csfYoungsModulus },
-      { "csf_poisson_ratio", options.truth.csfPoissonRatio },
-      { "csf_drained_depth_mm", options.truth.csfDrainedDepth >= 0.0 ? json(options.truth.csfDrainedDepth) : json() },
-      { "bonded_depth_mm", options.truth.bondedDepth >= 0.0 ? json(options.truth.bondedDepth) : json() },
-      { "bonded_nodes", truth.model.model.nodeSets.count("bonded to the skull") > 0
-                          ? truth.model.model.nodeSets.at("bonded to the skull").size() : 0 },
-      { "grey_white_youngs_moduli_pa", options.greyWhiteModuli.empty() ? json() : json(options.greyWhiteModuli) },
-      { "tumour_radius_mm", options.truth.tumourRadius },
-      { "tumour_stiffness", options.truth.tumourStiffness },
-      { "intraoperative_spacing_mm", { options.truth.intraoperativeSpacing.x(), options.truth.intraoperativeSpacing.y(),
-                                       options.truth.intraoperativeSpacing.z() } },
-      { "noise", options.truth.noise },
-      { "noise_model", options.noiseModel },
-      { "intraoperative_contrast", IntraoperativeContrastName(options.truth.contrast) },
-      { "bias_field", options.truth.biasField },
-      { "field_of_view_mm", options.truth.fieldOfView },
-      { "resection_cavity_radius_mm", truth.resectionCavityRadius },
-      { "down", { truth.down.x(), truth.down.y(), truth.down.z() } },
-      { "reusable", options.truthOnly },
-      { "seconds", truth.timer.Json() } };
-  }
-  if (!truthCheckReport.is_null())
-  {
-    report["ground_truth_check"] = truthCheckReport;
-  }
-  if (nearTumour)
-  {
-    // What the methods' displacement_error_near_tumour_mm measures.
-    report["near_tumour"] = { { "structure", truth.resectionMask.IsNotNull() ? "resection cavity" : "tumour" },
-                              { "distance_mm", kNearTumourDistance },
-                              { "region", "the intraoperative brain within the distance of the structure" },
-                              { "surface_distance", "95th percentile of the symmetric distances between the "
-                                                    "structure's boundary moved by the method and by the truth" } };
-  }
-  // What the methods' ventricle_surface_distance_p95_mm measures.
-  report["ventricles"] = ventricleReport;
-  if (!electrodeReport.is_null())
-  {
-    report["electrodes"] = electrodeReport;
-  }
-  report["methods"] = json::array();
-  for (const MethodResult & method : methods)
-  {
-    report["methods"].push_back(MethodJson(method));
-  }
+  const json report = DemoReportJson(options, truth, cached, truthCheckReport, scoring, electrodeReport, methods);
   WriteTextFileAtomically((output / "demo-report.json").string(), report.dump(2) + "\n");
 
   if (!options.quiet)

@@ -766,7 +766,7 @@ BindRegistration(py::module_ & module)
           BrainModel prepared; // the ensemble's model before the loads
           auto       registered = RegisterBrainShift(inputs, settings, reporter.StageCallback(), reporter.SolverCallback(),
                                                      uncertainty ? &prepared : nullptr);
-          RunEnsemble(prepared, registered, { inputs.preoperativeImage, inputs.labelMaps, inputs.intraoperative },
+          RunEnsemble(prepared, registered, { inputs.preoperativeImage, inputs.labelMaps, inputs.intraoperative, {} },
                       settings, uncertainty, ensemble);
           return registered;
         });

@@ -2,6 +2,7 @@
 #include "bmrSyntheticElectrodeCt.h"
 
 // ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.
+#include "itkCompositeTransform.h"
 #include "itkImageRegionConstIteratorWithIndex.h"
 #include "itkImageRegionIteratorWithIndex.h"
 #include "itkSignedMaurerDistanceMapImageFilter.h"

@@ -2,10 +2,8 @@
 #include "bmrElectrodeImages.h"
 
 // ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.
-#include "itkCompositeTransform.h"
 #include "itkConnectedComponentImageFilter.h"
 #include "itkImageRegionConstIteratorWithIndex.h"
-#include "itkImageRegionIteratorWithIndex.h"
 #include "itkImageRegistrationMethodv4.h"
 #include "itkRegistrationComponents.h"
 #include "itkRegistrationParameterScalesFromPhysicalShift.h"
