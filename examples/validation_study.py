@@ -19,6 +19,11 @@ error-against-run-time plot (docs/validation-error-vs-time.png).
     snakemake -s examples/validation/Snakefile -j2 --config reduced=1    # 1 scene, coarse, checked (a CTest case)
     /usr/bin/python3 examples/validation_study.py --truths   # 2 scenes, each truth solved twice (about 6 min)
     /usr/bin/python3 examples/validation_study.py --from-json docs/validation.json   # rewrite the docs, run nothing
+
+A new scene or method without rerunning the rest: run the truth jobs of the scenes that get a new method
+(snakemake ... out/validation/SCENE/truth/run.json), then `--seed-from docs/validation.json` (the other records
+from the earlier run, where the truth is the same), then the workflow (`--rerun-triggers mtime`): it runs only the
+missing jobs, and the report's machine line counts the carried-over records.
 """
 import argparse
 import json
