@@ -57,6 +57,11 @@ struct UncertaintyOptions
                    "Standard deviation (mm) of the skull's offset along its normals: the brain-skull gap; 0: none")
       ->capture_default_str();
     command
+      ->add_option("--uncertainty-exposed-radius", settings.exposedRadiusSpread,
+                   "Standard deviation (mm) of the craniotomy's radius, the exposed region made again per member "
+                   "(a spherical craniotomy); 0: none")
+      ->capture_default_str();
+    command
       ->add_option("--uncertainty-tolerance", settings.memberTolerance,
                    "The members' dynamic-relaxation tolerance (mm; 0: the registration's solver tolerance)")
       ->capture_default_str();

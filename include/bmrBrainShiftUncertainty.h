@@ -55,6 +55,13 @@ struct UncertaintySettings
    *  plus a margin, and how far that margin is from the real one is not
    *  measured here). */
   double skullGapSpread = 0.0;
+  /** The exposed region: the craniotomy's radius drawn as a normal deviate
+   *  of this standard deviation (mm) around the registration's, at least half
+   *  of it, and the model's regions (exposed, contact, fixed) made again for
+   *  it (itk::BiomechanicalRegionsFilter), so that where the measured surface
+   *  ends and the skull begins is uncertain. A spherical craniotomy only. 0:
+   *  not perturbed (the default). */
+  double exposedRadiusSpread = 0.0;
   /** The members' dynamic-relaxation tolerance (mm; 0: the registration's
    *  solver tolerance). A member starts from the update's steady state and
    *  stops within this of its own equilibrium, on the update's side, so the
@@ -80,6 +87,7 @@ struct UncertaintyMember
   double      modulusFactor = 1.0;
   double      poissonOffset = 0.0;
   double      skullOffset = 0.0;    // mm, outward
+  double      exposedRadius = 0.0;  // mm, the craniotomy's drawn radius; 0: the registration's
   bool        converged = false;
   bool        failed = false;       // the solve threw (e.g. an inverted cell)
   int         steps = 0;

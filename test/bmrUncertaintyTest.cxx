@@ -173,6 +173,20 @@ TEST_F(Uncertainty, GravityMattersAwayFromTheOpeningNoiseAtIt)
   EXPECT_GT(skull.interiorMax, 0.1);
   EXPECT_LT(skull.exposedMax, 1e-9);
 
+  // The exposed region's radius: a member with a smaller opening holds fewer nodes at their measurements and lets
+  // the rest touch the skull, a larger one loads nodes the nominal update left to the model; the map shows it at
+  // the rim, and an ensemble that draws nothing shows nothing.
+  bmr::UncertaintySettings rim = NothingDrawn(4);
+  rim.exposedRadiusSpread = 5.0;
+  const auto opening = scene.Ensemble(rim);
+  ASSERT_EQ(opening.usedMembers, 4);
+  const auto [smallest, largest] = DrawnRange(opening, &bmr::UncertaintyMember::exposedRadius);
+  EXPECT_LT(smallest, 30.0);
+  EXPECT_GT(largest, 30.0);
+  RecordProperty("exposedRadiusBrainMax", std::to_string(opening.brainMax));
+  EXPECT_GT(opening.brainMax, 0.1);
+  EXPECT_EQ(scene.Ensemble(NothingDrawn(2)).brainMax, 0.0);
+
   bmr::UncertaintySettings noise = NothingDrawn(6);
   noise.noiseSigma = 0.5;
   const auto measured = scene.Ensemble(noise);
@@ -197,6 +211,9 @@ TEST_F(Uncertainty, BadSettingsAndFailedMembersAreNamed)
   settings.skullGapSpread = -1.0;
   EXPECT_CONTAINS(ErrorMessage([&] { bmr::CheckUncertaintySettings(settings); }), "skull gap spread");
   settings.skullGapSpread = 0.0;
+  settings.exposedRadiusSpread = -2.0;
+  EXPECT_CONTAINS(ErrorMessage([&] { bmr::CheckUncertaintySettings(settings); }), "exposed radius spread");
+  settings.exposedRadiusSpread = 0.0;
   settings.memberTolerance = -0.01;
   EXPECT_CONTAINS(ErrorMessage([&] { bmr::CheckUncertaintySettings(settings); }), "members' tolerance");
   settings.memberTolerance = 0.05;
@@ -211,6 +228,15 @@ TEST_F(Uncertainty, BadSettingsAndFailedMembersAreNamed)
                     scene.Ensemble(gravity);
                   }),
                   "no gravity");
+  // The opening drawn around a craniotomy the registration was not given as a sphere.
+  bmr::BrainShiftRegistrationSettings masked = scene.settings;
+  masked.model.craniotomyRadius = 0.0;
+  bmr::UncertaintySettings rim = NothingDrawn(2);
+  rim.exposedRadiusSpread = 3.0;
+  EXPECT_CONTAINS(ErrorMessage([&] {
+                    bmr::EstimateBrainShiftUncertainty(scene.prepared, scene.nominal, scene.inputs, masked, rim);
+                  }),
+                  "spherical craniotomy");
   // Every member stopped after 3 steps: none converged, and the ensemble says so.
   bmr::BrainShiftRegistrationSettings hurried = scene.settings;
   hurried.solver.maxSteps = 3;

@@ -689,6 +689,7 @@ BindRegistration(py::module_ & module)
     .def_readwrite("poisson_low", &UncertaintySettings::poissonLow)
     .def_readwrite("poisson_high", &UncertaintySettings::poissonHigh)
     .def_readwrite("skull_gap_spread", &UncertaintySettings::skullGapSpread)
+    .def_readwrite("exposed_radius_spread", &UncertaintySettings::exposedRadiusSpread)
     .def_readwrite("member_tolerance", &UncertaintySettings::memberTolerance)
     .def_readwrite("threads", &UncertaintySettings::threads);
 

@@ -21,7 +21,7 @@
 #include "itkRegistrationComponents.h"
 #include "itkTransformWarpImageFilter.h"
 
-#include "bmrPipelineText.h"
+#include "bmrPipelineDetail.h"
 #include "bmrScene.h"
 #include "bmrUnits.h"
 
@@ -245,24 +245,6 @@ MutualInformation(const RegistrationImage *      fixed,
   }
 }
 
-/** The image axis (a direction-cosine column) nearest LPS +z, pointing up. */
-Vector3
-SuperiorImageAxis(const RegistrationImage * image)
-{
-  const auto & direction = image->GetDirection();
-  Vector3      best = Vector3::UnitZ();
-  double       bestCosine = 0.0;
-  for (unsigned int axis = 0; axis < 3; ++axis)
-  {
-    const Vector3 column(direction[0][axis], direction[1][axis], direction[2][axis]);
-    if (std::abs(column.z()) > std::abs(bestCosine))
-    {
-      bestCosine = column.z();
-      best = column.normalized();
-    }
-  }
-  return bestCosine < 0.0 ? Vector3(-best) : best;
-}
 
 } // namespace
 
@@ -341,23 +323,6 @@ CortexSurfaceOfMask(const RegistrationLabelImage * brainMask, std::vector<std::s
 // ---------------------------------------------------------------------------
 // The model.
 // ---------------------------------------------------------------------------
-
-namespace
-{
-/** The skull base along the patient's superior axis: the image axis nearest
- *  LPS +z unless the settings name another direction. On an oblique
- *  acquisition (scanners tilt the slices 20-30 degrees) world +z would tilt
- *  the fixed band across the brain stem. */
-SkullBaseSettings
-PatientSkullBase(SkullBaseSettings skullBase, const RegistrationImage * image)
-{
-  if (skullBase.superior == Vector3::UnitZ())
-  {
-    skullBase.superior = SuperiorImageAxis(image);
-  }
-  return skullBase;
-}
-} // namespace
 
 BrainModel
 PrepareBrainModel(const RegistrationImage *      image,

@@ -4,9 +4,11 @@
 #include "bmrBrainShiftUncertainty.h"
 
 #include "bmrBSplineField.h"
+#include "bmrPipelineDetail.h"
 
 #include "itkBiomechanicalImageConversion.h"
 #include "itkBiomechanicalImageIO.h"
+#include "itkBiomechanicalRegionsFilter.h"
 #include "itkDisplacementPointSetToBSplineTransformFilter.h"
 #include "itkEdgeHausdorffDistanceImageFilter.h"
 #include "itkSignedMaurerDistanceMapImageFilter.h"
@@ -63,6 +65,13 @@ CheckUncertaintySettings(const UncertaintySettings & settings)
   {
     std::ostringstream message;
     message << "the skull gap spread is " << settings.skullGapSpread << " mm; give a standard deviation of 0 mm or more";
+    fail(message.str());
+  }
+  if (!(settings.exposedRadiusSpread >= 0.0))
+  {
+    std::ostringstream message;
+    message << "the exposed radius spread is " << settings.exposedRadiusSpread
+            << " mm; give a standard deviation of 0 mm or more";
     fail(message.str());
   }
   if (!(settings.memberTolerance >= 0.0))
@@ -171,6 +180,33 @@ WidenedSkull(const ContactSurface & skull, double offset)
   return widened;
 }
 
+/** The model's regions made again for a craniotomy of `radius` (the registration's centre, skull base and
+ *  contact): the exposed nodes, the contact slaves and the fixed band, as PrepareBrainModel makes them. The
+ *  precomputation is left behind (a meshless model's essential-boundary correction depends on the exposed nodes). */
+void
+SetExposedRegion(BrainModel & model, const BrainModelSettings & settings, const RegistrationImage * image, double radius)
+{
+  auto regions = itk::BiomechanicalRegionsFilter<RegistrationLabelImage>::New();
+  regions->SetModelInput(model.pipelineModel);
+  regions->SetSkullBase(PatientSkullBase(settings.skullBase, image));
+  regions->SetCraniotomyCentre(settings.craniotomyCentre);
+  regions->SetCraniotomyRadius(radius);
+  regions->SetContact(settings.contact);
+  try
+  {
+    regions->Update();
+  }
+  catch (const itk::ExceptionObject & exception)
+  {
+    throw Error("uncertainty: the regions for a craniotomy of radius " + std::to_string(radius) +
+                " mm: " + itk::PlainDescription(exception.GetDescription()));
+  }
+  model.pipelineModel = regions->GetOutput();
+  model.model = model.pipelineModel->GetModel();
+  const auto exposed = model.model.nodeSets.find("exposed");
+  model.exposedNodes = exposed != model.model.nodeSets.end() ? exposed->second : std::vector<Index>{};
+}
+
 /** Each member's draws (into `members`, one seeded stream in member order:
  *  the ensemble repeats exactly whatever the threads) and the prepared model
  *  loaded from its noisy measurements (serial: the loads are cheap, the
@@ -204,6 +240,12 @@ DrawAndLoadMembers(const BrainModel & prepared, const BrainShiftRegistrationResu
                            ? std::max(uncertainty.skullGapSpread * standard(random), -0.9 * settings.model.skullGap)
                            : 0.0;
     models[m] = prepared;
+    if (uncertainty.exposedRadiusSpread > 0.0)
+    {
+      const double radius = settings.model.craniotomyRadius;
+      member.exposedRadius = std::max(0.5 * radius, radius + uncertainty.exposedRadiusSpread * standard(random));
+      SetExposedRegion(models[m], settings.model, inputs.preoperativeImage, member.exposedRadius);
+    }
     StageTimer timer;
     LoadBrainModel(models[m], NoisyMeasurements(inputs.intraoperative, member.noiseSigma, random), settings.model, timer);
   }
@@ -421,6 +463,12 @@ EstimateBrainShiftUncertainty(const BrainModel &                     prepared,
     throw Error("uncertainty: measurement noise needs measured points or a displaced surface, and this update "
                 "takes its surface from an image; give the noise as 0 (--uncertainty-noise 0)");
   }
+  if (uncertainty.exposedRadiusSpread > 0.0 &&
+      (!(settings.model.craniotomyRadius > 0.0) || settings.model.craniotomyMask.IsNotNull()))
+  {
+    throw Error("uncertainty: the exposed radius can be drawn only around a spherical craniotomy (a radius, no "
+                "mask); give the exposed radius spread as 0 (--uncertainty-exposed-radius 0)");
+  }
   BrainShiftUncertaintyResult result;
   Vector3                     drawnGravity = nominal.gravity; // what the members' factors scale
   if (uncertainty.gravityLow != uncertainty.gravityHigh && nominal.gravity.isZero())
@@ -523,6 +571,7 @@ UncertaintyReportJson(const BrainShiftUncertaintyResult & result, const Uncertai
                         { "youngs_modulus_factor", member.modulusFactor },
                         { "poisson_ratio_offset", member.poissonOffset },
                         { "skull_offset_mm", member.skullOffset },
+                        { "exposed_radius_mm", member.exposedRadius },
                         { "converged", member.converged },
                         { "failed", member.failed },
                         { "steps", member.steps },
@@ -545,7 +594,8 @@ UncertaintyReportJson(const BrainShiftUncertaintyResult & result, const Uncertai
                { "gravity_fraction", { settings.gravityLow, settings.gravityHigh } },
                { "youngs_modulus_log_sd", settings.youngsModulusSpread },
                { "poisson_ratio", { settings.poissonLow, settings.poissonHigh } },
-               { "skull_gap_sd_mm", settings.skullGapSpread } } },
+               { "skull_gap_sd_mm", settings.skullGapSpread },
+               { "exposed_radius_sd_mm", settings.exposedRadiusSpread } } },
            { "member_tolerance_mm", settings.memberTolerance },
            { "map_mm", { { "brain_p50", result.brainMedian }, { "brain_p95", result.brainP95 }, { "brain_max", result.brainMax } } },
            { "nodes_mm",

@@ -7,7 +7,7 @@
 #include "itkBiomechanicalImageIO.h"
 #include "itkEdgeHausdorffDistanceImageFilter.h"
 
-#include "bmrPipelineText.h"
+#include "bmrPipelineDetail.h"
 #include "bmrScene.h"
 
 #include <algorithm>

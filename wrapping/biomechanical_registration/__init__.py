@@ -236,6 +236,7 @@ _UNCERTAINTY_KEYWORDS = {  # keyword: (UncertaintySettings field(s), conversion)
     "uncertainty_modulus_spread": (("youngs_modulus_spread",), float),
     "uncertainty_poisson": (("poisson_low", "poisson_high"), float),
     "uncertainty_skull_gap": (("skull_gap_spread",), float),
+    "uncertainty_exposed_radius": (("exposed_radius_spread",), float),
     "uncertainty_tolerance": (("member_tolerance",), float),
     "uncertainty_seed": (("seed",), int),
 }
@@ -369,7 +370,8 @@ def update(
     ``uncertainty=N``, as ``biomech update --uncertainty N``: an ensemble of N solves with
     the uncertain inputs drawn (``uncertainty_noise`` mm, ``uncertainty_gravity`` (low,
     high) fractions, ``uncertainty_modulus_spread``, ``uncertainty_poisson`` (low, high),
-    ``uncertainty_skull_gap`` mm, ``uncertainty_tolerance`` mm, ``uncertainty_seed``;
+    ``uncertainty_skull_gap`` mm, ``uncertainty_exposed_radius`` mm, ``uncertainty_tolerance`` mm,
+    ``uncertainty_seed``;
     defaults and meaning in docs/registration.md, Uncertainty).
     The result then has ``uncertainty_map`` (an :class:`Image` on the preoperative grid:
     per voxel the 95th percentile of |u_i - u_mean| in mm), ``mean_transform``,

@@ -1,0 +1,63 @@
+// What the pipeline's sources share and nothing else needs: the patient's
+// superior axis and skull base (the registration and the uncertainty
+// ensemble's regions), and text for messages (private to the pipeline, not
+// installed).
+#ifndef bmrPipelineDetail_h
+#define bmrPipelineDetail_h
+
+#include "bmrBrainShiftRegistration.h"
+#include "bmrUnits.h"
+
+#include <cmath>
+#include <iomanip>
+#include <sstream>
+#include <string>
+
+namespace bmr
+{
+
+/** An acceleration (mm/s^2) in g, for messages. */
+inline std::string
+InG(double acceleration)
+{
+  std::ostringstream text;
+  text << std::setprecision(3) << acceleration / units::StandardGravity << " g";
+  return text.str();
+}
+
+/** The image axis (a direction-cosine column) nearest LPS +z, pointing up. */
+inline Vector3
+SuperiorImageAxis(const RegistrationImage * image)
+{
+  const auto & direction = image->GetDirection();
+  Vector3      best = Vector3::UnitZ();
+  double       bestCosine = 0.0;
+  for (unsigned int axis = 0; axis < 3; ++axis)
+  {
+    const Vector3 column(direction[0][axis], direction[1][axis], direction[2][axis]);
+    if (std::abs(column.z()) > std::abs(bestCosine))
+    {
+      bestCosine = column.z();
+      best = column.normalized();
+    }
+  }
+  return bestCosine < 0.0 ? Vector3(-best) : best;
+}
+
+/** The skull base along the patient's superior axis: the image axis nearest
+ *  LPS +z unless the settings name another direction. On an oblique
+ *  acquisition (scanners tilt the slices 20-30 degrees) world +z would tilt
+ *  the fixed band across the brain stem. */
+inline SkullBaseSettings
+PatientSkullBase(SkullBaseSettings skullBase, const RegistrationImage * image)
+{
+  if (skullBase.superior == Vector3::UnitZ())
+  {
+    skullBase.superior = SuperiorImageAxis(image);
+  }
+  return skullBase;
+}
+
+} // namespace bmr
+
+#endif
