@@ -1393,10 +1393,7 @@ RunEnsemble(const BrainModel & prepared, BrainShiftRegistrationResult & result, 
             const BrainShiftRegistrationSettings & settings, const UncertaintySettings & uncertainty,
             const std::vector<std::string> & labelNames)
 {
-  BrainShiftUncertaintyResult ensemble = result.timer.Run("uncertainty", [&] {
-    return EstimateBrainShiftUncertainty(prepared, result, inputs, settings, uncertainty);
-  });
-  result.warnings.insert(result.warnings.end(), ensemble.warnings.begin(), ensemble.warnings.end());
+  BrainShiftUncertaintyResult ensemble = EstimateUncertaintyAfter(result, prepared, inputs, settings, uncertainty);
   for (auto & region : ensemble.regions)
   {
     if (region.labelMap >= 0)

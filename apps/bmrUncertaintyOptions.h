@@ -92,8 +92,8 @@ struct UncertaintyOptions
 };
 
 /** The ensemble after a registration (`prepared`: its model before the
- *  loads), its warnings added to the result's, its label-map regions named
- *  after `labelNames`; the stage "uncertainty". */
+ *  loads; bmr::EstimateUncertaintyAfter), its label-map regions named after
+ *  `labelNames`. */
 BrainShiftUncertaintyResult
 RunEnsemble(const BrainModel & prepared, BrainShiftRegistrationResult & result, const BrainShiftUpdateInputs & inputs,
             const BrainShiftRegistrationSettings & settings, const UncertaintySettings & uncertainty,

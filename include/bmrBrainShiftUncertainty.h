@@ -147,6 +147,16 @@ EstimateBrainShiftUncertainty(const BrainModel &                     prepared,
                               const BrainShiftRegistrationSettings & settings,
                               const UncertaintySettings &            uncertainty);
 
+/** The ensemble after a registration or an update (`result`, with the
+ *  `prepared` model it started from): EstimateBrainShiftUncertainty timed as
+ *  the result's stage "uncertainty", its warnings added to the result's. */
+BrainShiftUncertaintyResult
+EstimateUncertaintyAfter(BrainShiftRegistrationResult &         result,
+                         const BrainModel &                     prepared,
+                         const BrainShiftUpdateInputs &         inputs,
+                         const BrainShiftRegistrationSettings & settings,
+                         const UncertaintySettings &            uncertainty);
+
 /** The report's "uncertainty" entry: settings, members, statistics. */
 nlohmann::json
 UncertaintyReportJson(const BrainShiftUncertaintyResult & result, const UncertaintySettings & settings);

@@ -579,23 +579,6 @@ IntraoperativeFrom(const py::object & surface, const py::object & points, const 
   return data;
 }
 
-/** The ensemble after a registration or an update when `uncertainty` is given (the stage "uncertainty"), its
- *  warnings added to the result's. */
-void
-RunEnsemble(const BrainModel & prepared, BrainShiftRegistrationResult & result, const BrainShiftUpdateInputs & inputs,
-            const BrainShiftRegistrationSettings & settings, const std::optional<UncertaintySettings> & uncertainty,
-            std::optional<BrainShiftUncertaintyResult> & ensemble)
-{
-  if (!uncertainty)
-  {
-    return;
-  }
-  ensemble = result.timer.Run("uncertainty", [&] {
-    return EstimateBrainShiftUncertainty(prepared, result, inputs, settings, *uncertainty);
-  });
-  result.warnings.insert(result.warnings.end(), ensemble->warnings.begin(), ensemble->warnings.end());
-}
-
 /** (result, report, None or (uncertainty map, mean transform, nodal uncertainty)) for register() and update(). */
 py::tuple
 ResultWithEnsemble(BrainShiftRegistrationResult result, const BrainShiftRegistrationSettings & settings,
@@ -767,8 +750,12 @@ BindRegistration(py::module_ & module)
           BrainModel prepared; // the ensemble's model before the loads
           auto       registered = RegisterBrainShift(inputs, settings, reporter.StageCallback(), reporter.SolverCallback(),
                                                      uncertainty ? &prepared : nullptr);
-          RunEnsemble(prepared, registered, { inputs.preoperativeImage, inputs.labelMaps, inputs.intraoperative, {} },
-                      settings, uncertainty, ensemble);
+          if (uncertainty)
+          {
+            ensemble = EstimateUncertaintyAfter(
+              registered, prepared, { inputs.preoperativeImage, inputs.labelMaps, inputs.intraoperative, {} }, settings,
+              *uncertainty);
+          }
           return registered;
         });
       });
@@ -858,7 +845,10 @@ BindRegistration(py::module_ & module)
       auto result = RunWithoutGil(reporter, [&] {
         return TranslateItkErrors([&] {
           auto update = UpdateBrainShift(bundle.model, inputs, settings, reporter.StageCallback(), reporter.SolverCallback());
-          RunEnsemble(bundle.model, update, inputs, settings, uncertainty, ensemble);
+          if (uncertainty)
+          {
+            ensemble = EstimateUncertaintyAfter(update, bundle.model, inputs, settings, *uncertainty);
+          }
           return update;
         });
       });

@@ -486,29 +486,14 @@ PrepareBrainModel(const RegistrationImage *      image,
   }
   result.surfaces.skull.name = "skull";
 
-  auto regions = itk::BiomechanicalRegionsFilter<RegistrationLabelImage>::New();
-  regions->SetModelInput(materials->GetOutput());
-  regions->SetSkullBase(PatientSkullBase(settings.skullBase, image));
-  regions->SetCraniotomyCentre(settings.craniotomyCentre);
-  regions->SetCraniotomyRadius(settings.craniotomyRadius);
-  if (settings.craniotomyMask.IsNotNull())
-  {
-    regions->SetCraniotomyMask(settings.craniotomyMask);
-  }
-  regions->SetContact(settings.contact);
+  const auto regions = BrainRegionsFilter(materials->GetOutput(), settings, image, settings.craniotomyRadius);
   UpdateStage(regions.GetPointer(), "model regions");
-  result.pipelineModel = regions->GetOutput();
+  TakeRegions(result, regions->GetOutput());
   if (regions->GetFixedNodesExposed() > 0)
   {
     warnings.push_back("the craniotomy reaches into the fixed band at the skull base: its " +
                        std::to_string(regions->GetFixedNodesExposed()) +
                        " surface nodes there are exposed (loaded), not fixed");
-  }
-
-  result.model = result.pipelineModel->GetModel();
-  if (const auto exposed = result.model.nodeSets.find("exposed"); exposed != result.model.nodeSets.end())
-  {
-    result.exposedNodes = exposed->second;
   }
   if (cortex.valid())
   {

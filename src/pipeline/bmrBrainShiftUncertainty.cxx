@@ -8,7 +8,6 @@
 
 #include "itkBiomechanicalImageConversion.h"
 #include "itkBiomechanicalImageIO.h"
-#include "itkBiomechanicalRegionsFilter.h"
 #include "itkDisplacementPointSetToBSplineTransformFilter.h"
 #include "itkEdgeHausdorffDistanceImageFilter.h"
 #include "itkSignedMaurerDistanceMapImageFilter.h"
@@ -186,12 +185,7 @@ WidenedSkull(const ContactSurface & skull, double offset)
 void
 SetExposedRegion(BrainModel & model, const BrainModelSettings & settings, const RegistrationImage * image, double radius)
 {
-  auto regions = itk::BiomechanicalRegionsFilter<RegistrationLabelImage>::New();
-  regions->SetModelInput(model.pipelineModel);
-  regions->SetSkullBase(PatientSkullBase(settings.skullBase, image));
-  regions->SetCraniotomyCentre(settings.craniotomyCentre);
-  regions->SetCraniotomyRadius(radius);
-  regions->SetContact(settings.contact);
+  const auto regions = BrainRegionsFilter(model.pipelineModel, settings, image, radius);
   try
   {
     regions->Update();
@@ -201,10 +195,7 @@ SetExposedRegion(BrainModel & model, const BrainModelSettings & settings, const 
     throw Error("uncertainty: the regions for a craniotomy of radius " + std::to_string(radius) +
                 " mm: " + itk::PlainDescription(exception.GetDescription()));
   }
-  model.pipelineModel = regions->GetOutput();
-  model.model = model.pipelineModel->GetModel();
-  const auto exposed = model.model.nodeSets.find("exposed");
-  model.exposedNodes = exposed != model.model.nodeSets.end() ? exposed->second : std::vector<Index>{};
+  TakeRegions(model, regions->GetOutput());
 }
 
 /** Each member's draws (into `members`, one seeded stream in member order:
@@ -558,6 +549,20 @@ EstimateBrainShiftUncertainty(const BrainModel &                     prepared,
   SpreadInRegions(nominal.model, inputs.labelMaps, result);
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return result;
+}
+
+BrainShiftUncertaintyResult
+EstimateUncertaintyAfter(BrainShiftRegistrationResult &         result,
+                         const BrainModel &                     prepared,
+                         const BrainShiftUpdateInputs &         inputs,
+                         const BrainShiftRegistrationSettings & settings,
+                         const UncertaintySettings &            uncertainty)
+{
+  BrainShiftUncertaintyResult ensemble = result.timer.Run("uncertainty", [&] {
+    return EstimateBrainShiftUncertainty(prepared, result, inputs, settings, uncertainty);
+  });
+  result.warnings.insert(result.warnings.end(), ensemble.warnings.begin(), ensemble.warnings.end());
+  return ensemble;
 }
 
 nlohmann::json

@@ -1,9 +1,12 @@
 // What the pipeline's sources share and nothing else needs: the patient's
-// superior axis and skull base (the registration and the uncertainty
-// ensemble's regions), and text for messages (private to the pipeline, not
-// installed).
+// superior axis and skull base, the model's regions as the registration makes
+// them (PrepareBrainModel, and the uncertainty ensemble's drawn openings), and
+// text for messages (private to the pipeline, not installed).
 #ifndef bmrPipelineDetail_h
 #define bmrPipelineDetail_h
+
+// ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.
+#include "itkBiomechanicalRegionsFilter.h"
 
 #include "bmrBrainShiftRegistration.h"
 #include "bmrUnits.h"
@@ -56,6 +59,37 @@ PatientSkullBase(SkullBaseSettings skullBase, const RegistrationImage * image)
     skullBase.superior = SuperiorImageAxis(image);
   }
   return skullBase;
+}
+
+using RegionsFilter = itk::BiomechanicalRegionsFilter<RegistrationLabelImage>;
+
+/** The regions filter on `model` as the registration sets it up from `settings` (skull base along the patient's
+ *  superior axis of `image`, the craniotomy, contact), with the craniotomy's radius `craniotomyRadius`; not updated. */
+inline RegionsFilter::Pointer
+BrainRegionsFilter(const itk::BiomechanicalModelObject * model, const BrainModelSettings & settings,
+                   const RegistrationImage * image, double craniotomyRadius)
+{
+  auto regions = RegionsFilter::New();
+  regions->SetModelInput(model);
+  regions->SetSkullBase(PatientSkullBase(settings.skullBase, image));
+  regions->SetCraniotomyCentre(settings.craniotomyCentre);
+  regions->SetCraniotomyRadius(craniotomyRadius);
+  if (settings.craniotomyMask.IsNotNull())
+  {
+    regions->SetCraniotomyMask(settings.craniotomyMask);
+  }
+  regions->SetContact(settings.contact);
+  return regions;
+}
+
+/** The regions filter's output as the brain model's (its pipeline model, model and exposed nodes). */
+inline void
+TakeRegions(BrainModel & result, itk::BiomechanicalModelObject * regions)
+{
+  result.pipelineModel = regions;
+  result.model = result.pipelineModel->GetModel();
+  const auto exposed = result.model.nodeSets.find("exposed");
+  result.exposedNodes = exposed != result.model.nodeSets.end() ? exposed->second : std::vector<Index>{};
 }
 
 } // namespace bmr
