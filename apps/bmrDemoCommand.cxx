@@ -522,6 +522,10 @@ AddDemoCommand(CLI::App & app)
                    "1895 (Budday et al. 2015); the registration has one parenchyma of 3 kPa")
     ->expected(2)
     ->check(CLI::PositiveNumber);
+  demo->add_option("--truth-mooney-rivlin-share", options->truth.mooneyRivlinShare,
+                   "The ground truth's parenchyma and tumour Mooney-Rivlin with this C01 / (C10 + C01) and the same "
+                   "small-strain moduli (docs/materials.md); the registration is neo-Hookean")
+    ->check(CLI::Range(0.0, 1.0));
   demo->add_option("--noise", options->truth.noise, "Noise of the intraoperative image (fraction of the bright level)")
     ->capture_default_str();
   demo->add_option("--noise-model", options->noiseModel,

@@ -367,6 +367,7 @@ GroundTruthJson(const DemoOptions & options, const SyntheticBrainShift & truth)
     { "bonded_nodes", truth.model.model.nodeSets.count("bonded to the skull") > 0
                         ? truth.model.model.nodeSets.at("bonded to the skull").size() : 0 },
     { "grey_white_youngs_moduli_pa", options.greyWhiteModuli.empty() ? json() : json(options.greyWhiteModuli) },
+    { "mooney_rivlin_share", options.truth.mooneyRivlinShare > 0.0 ? json(options.truth.mooneyRivlinShare) : json() },
     { "tumour_radius_mm", options.truth.tumourRadius },
     { "tumour_stiffness", options.truth.tumourStiffness },
     { "intraoperative_spacing_mm", { options.truth.intraoperativeSpacing.x(), options.truth.intraoperativeSpacing.y(),

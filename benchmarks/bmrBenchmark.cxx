@@ -15,7 +15,8 @@
 // Each brain-sized case runs in a child process (the same executable with
 // --child), so that its peak memory (getrusage ru_maxrss) is its own. The
 // child modes also serve to reproduce or profile one case:
-//   bmrBenchmark --child brain hex|tet|mtled THREADS SPACING STEPS REPEATS
+//   bmrBenchmark --child brain hex|tet|mtled THREADS SPACING STEPS REPEATS [LAW]
+//                                        (LAW: a material law's name; mooney-rivlin with C01 = C10)
 //   bmrBenchmark --child indentation hex|tet DIVISIONS THREADS TOLERANCE POISSON [HOURGLASS]
 //   bmrBenchmark --child implicit anp|mtled|c3d4|c3d10|c3d10-quarter BODY_SPACING SUBDIVISIONS THREADS [INITIAL_INCREMENT [TOLERANCE]]
 //                                        (the brain-like case beside CalculiX)
@@ -185,7 +186,7 @@ int
 Child(int argc, char ** argv)
 {
   const std::string kind = argc > 2 ? argv[2] : "";
-  if (kind == "brain" && argc == 8)
+  if (kind == "brain" && (argc == 8 || argc == 9))
   {
     const std::string    kind = argv[3];
     if (kind != "mtled")
@@ -196,7 +197,7 @@ Child(int argc, char ** argv)
     const double         spacing = std::stod(argv[5]);
     const int            steps = std::stoi(argv[6]);
     const int            repeats = std::stoi(argv[7]);
-    const Json           result = RunBrainCase(spacing, kind, threads, steps, repeats);
+    const Json           result = RunBrainCase(spacing, kind, threads, steps, repeats, argc == 9 ? argv[8] : "neo-hookean");
     std::cout << "BMR_RESULT " << result.dump() << std::endl;
     return 0;
   }
@@ -277,7 +278,7 @@ Child(int argc, char ** argv)
     std::cout << "BMR_RESULT " << out.dump() << std::endl;
     return 0;
   }
-  std::cerr << "bmrBenchmark --child brain hex|tet|mtled THREADS SPACING STEPS REPEATS\n"
+  std::cerr << "bmrBenchmark --child brain hex|tet|mtled THREADS SPACING STEPS REPEATS [LAW]\n"
                "bmrBenchmark --child indentation hex|tet DIVISIONS THREADS TOLERANCE POISSON [HOURGLASS]\n"
                "bmrBenchmark --child implicit anp|mtled|c3d4|c3d10|c3d10-quarter BODY_SPACING SUBDIVISIONS THREADS [INITIAL_INCREMENT [TOLERANCE]]\n"
                "bmrBenchmark --child triad THREADS\n";
@@ -375,7 +376,7 @@ main(int argc, char ** argv)
                      "             [--reference-divisions 16] [--indentation-divisions 4,8,16,32]\n"
                      "             [--indentation-tolerance 1e-4] [--indentation-poisson 0.45]\n"
                      "             [--calculix-threads 1] [--wait-quiet 300] [--reference-cache DIR] [--rounds 3]\n"
-                     "bmrBenchmark --child brain hex|tet|mtled THREADS SPACING STEPS REPEATS\n"
+                     "bmrBenchmark --child brain hex|tet|mtled THREADS SPACING STEPS REPEATS [LAW]\n"
                      "bmrBenchmark --child indentation hex|tet DIVISIONS THREADS TOLERANCE POISSON [HOURGLASS]\n"
                      "bmrBenchmark --child implicit anp|mtled|c3d4|c3d10|c3d10-quarter BODY_SPACING SUBDIVISIONS THREADS [INITIAL_INCREMENT [TOLERANCE]]\n"
                      "bmrBenchmark --child triad THREADS\n";

@@ -42,9 +42,10 @@ KindName(const std::string & key)
 }
 
 bmr::Model
-MakeBrainModel(double spacing, bmr::GridCells cells, double depth = kCraniotomyDepth)
+MakeBrainModel(double spacing, bmr::GridCells cells, double depth = kCraniotomyDepth,
+               const bmr::Material & material = kBrain)
 {
-  bmr::Model model = bmr::MakeEllipsoidMesh(kBrainSemiAxes, spacing, cells, kBrain);
+  bmr::Model model = bmr::MakeEllipsoidMesh(kBrainSemiAxes, spacing, cells, material);
   const Vector3      top(0.0, 0.0, kBrainSemiAxes.z());
   std::vector<Index> base, craniotomy;
   for (const Index node : model.NodeSet("surface"))
@@ -208,17 +209,22 @@ RunBrainCases(const Options & options, const std::string & self, double spacing,
 /** Child process: one brain-sized case (cells, threads): dynamic relaxation to
  *  0.01 mm, then the throughput of explicit time steps. Prints one JSON line. */
 Json
-RunBrainCase(double spacing, const std::string & kind, int threads, int throughputSteps, int repeats)
+RunBrainCase(double spacing, const std::string & kind, int threads, int throughputSteps, int repeats,
+             const std::string & law)
 {
+  bmr::Material material = kBrain;
+  material.law = bmr::MaterialLawNamed(law);
+  material.secondInvariantShare = bmr::DescribeMaterialLaw(material.law).secondInvariant ? 0.5 : 0.0;
   const bool           meshless = kind == "mtled";
   const bmr::GridCells cells = meshless ? bmr::GridCells::Hexahedra : CellsFromKey(kind);
   Json                 out;
   out["cells"] = kind;
   out["threads"] = threads;
   out["spacing_mm"] = spacing;
+  out["law"] = law;
 
   auto       start = Clock::now();
-  bmr::Model model = MakeBrainModel(spacing, cells);
+  bmr::Model model = MakeBrainModel(spacing, cells, kCraniotomyDepth, material);
   out["mesh_seconds"] = Seconds(start);
   out["integration_seconds"] = 0.0;
   if (meshless)
@@ -270,7 +276,7 @@ RunBrainCase(double spacing, const std::string & kind, int threads, int throughp
   // Throughput: explicit dynamics for a fixed number of steps at 0.8 x the
   // critical step (a 1 mm smooth push over the run), median of the repeats.
   {
-    bmr::Model pushed = MakeBrainModel(spacing, cells, 1.0);
+    bmr::Model pushed = MakeBrainModel(spacing, cells, 1.0, material);
     if (meshless)
     {
       pushed.discretization = model.discretization;

@@ -122,7 +122,8 @@ WriteCreatingFolder(const std::string & path, const std::string & text);
 /** Child process: one brain-sized case (cells, threads): dynamic relaxation to
  *  0.01 mm, then the throughput of explicit time steps. Prints one JSON line. */
 Json
-RunBrainCase(double spacing, const std::string & kind, int threads, int throughputSteps, int repeats);
+RunBrainCase(double spacing, const std::string & kind, int threads, int throughputSteps, int repeats,
+             const std::string & law = "neo-hookean");
 
 /** Runs the brain-sized cases (each in a child process of `self`) and writes
  *  their section of the report to `md` and their rows of the targets table to `summary`. */

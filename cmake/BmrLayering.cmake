@@ -12,7 +12,7 @@
 get_filename_component(BMR_LAYERING_ROOT ${CMAKE_CURRENT_LIST_DIR}/.. ABSOLUTE)
 
 # Public headers (include/) by the layer that implements them.
-set(BMR_MECHANICS_HEADERS bmrModel.h bmrSolver.h bmrBinaryStream.h bmrMeshless.h bmrOgden.h bmrUnits.h bmrAtomicWrite.h
+set(BMR_MECHANICS_HEADERS bmrModel.h bmrMaterialLaw.h bmrSolver.h bmrBinaryStream.h bmrMeshless.h bmrOgden.h bmrUnits.h bmrAtomicWrite.h
                           bmrSettingsTable.h bmrSolverSettingsTable.h)
 set(BMR_FORMATS_HEADERS bmrMeshIO.h bmrScene.h bmrMeshGenerators.h)
 set(BMR_MODELBUILDING_HEADERS bmrFuzzyCMeans.h bmrMaterialMapping.h bmrImageGrids.h bmrBrainSurfaces.h
@@ -22,7 +22,7 @@ set(BMR_MODELBUILDING_HEADERS bmrFuzzyCMeans.h bmrMaterialMapping.h bmrImageGrid
 # FORBIDDEN_PREFIXES match the start of an included name (e.g. "vtk", "itk").
 function(bmr_check_layer folder)
   cmake_parse_arguments(CHECK "" "" "HEADERS;PREFIXES" ${ARGN})
-  file(GLOB sources ${folder}/*.cxx ${folder}/*.h)
+  file(GLOB_RECURSE sources ${folder}/*.cxx ${folder}/*.h)
   foreach(source IN LISTS sources)
     file(STRINGS ${source} includes REGEX "^[ \t]*#[ \t]*include")
     foreach(line IN LISTS includes)

@@ -10,6 +10,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "bmrMaterialLaw.h"
 #include "bmrOgden.h"
 
 #include <array>
@@ -55,16 +56,27 @@ struct Cell
   Index                 material = 0; // index into Model::materials
 };
 
-/** Compressible neo-Hookean: W = mu/2 (I1bar - 3) + kappa/2 (J - 1)^2. */
+/** A hyperelastic solid (bmrMaterialLaw.h): the law, its small-strain
+ *  moduli from E and nu, W_iso + kappa/2 (J - 1)^2. */
 struct Material
 {
   std::string name;
   double      youngsModulus = 3000.0; // Pa
   double      poissonRatio = 0.49;
   double      density = 1000.0; // kg/m^3
+  MaterialLaw law = MaterialLaw::NeoHookean;
+  /** Mooney-Rivlin only: C01 / (C10 + C01), the share of the small-strain
+   *  shear modulus carried by the second invariant, in [0, 1]. */
+  double secondInvariantShare = 0.0;
 
+  /** The small-strain shear modulus mu = 2 (C10 + C01) (Pa). */
   double ShearModulus() const { return youngsModulus / (2.0 * (1.0 + poissonRatio)); }
   double BulkModulus() const { return youngsModulus / (3.0 * (1.0 - 2.0 * poissonRatio)); }
+  /** 2 C01 (Pa): the second invariant's part of mu; 0 for the neo-Hookean law. */
+  double SecondInvariantModulus() const
+  {
+    return law == MaterialLaw::MooneyRivlin ? secondInvariantShare * ShearModulus() : 0.0;
+  }
 };
 
 /** Smooth (zero velocity and acceleration at both ends) or linear ramp from 0 to 1. */

@@ -43,7 +43,8 @@ namespace bmr
 {
 
 /** The bundle format's version: a bundle of another version is not read. */
-constexpr int kModelBundleVersion = 2; // 2: precomputation.bin
+constexpr int kModelBundleVersion = 3; // 2: precomputation.bin; 3: the materials' laws (2 is still read)
+constexpr int kOldestModelBundleVersion = 2;
 
 struct ModelBundle
 {

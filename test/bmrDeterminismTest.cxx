@@ -311,6 +311,26 @@ TEST(StoredPrecomputation, AnotherModelOrOtherSettingsAreNamed)
   EXPECT_EQ(precomputation.Mismatch(hexahedra, looser), "");
 }
 
+TEST(StoredPrecomputation, FormatVersionOneIsStillRead)
+{
+  // Version 1 (before the materials' laws) is version 2 without the force
+  // model's second-invariant table: for a neo-Hookean finite-element model
+  // that table's count (8 zero bytes) comes just before the node-shape
+  // tables that end the file (36 bytes: offsets {0}, three empty tables).
+  const Model       model = ContactScene(GridCells::Hexahedra);
+  SolverSettings    settings = TightRelaxation(1e-6, 100000);
+  settings.threads = 1;
+  const std::string bytes = Stored(SolverPrecomputation(Unloaded(model), settings));
+  ASSERT_EQ(bytes[8], 2) << "the format version's low byte";
+  ASSERT_EQ(bytes.substr(bytes.size() - 44, 8), std::string(8, '\0'));
+  std::string versionOne = bytes.substr(0, bytes.size() - 44) + bytes.substr(bytes.size() - 36);
+  versionOne[8] = 1;
+  const SolverPrecomputation read = ReadBack(versionOne);
+  EXPECT_EQ(read.Mismatch(model, settings), "");
+  EXPECT_EQ(Stored(read), bytes) << "written again as version 2";
+  EXPECT_TRUE(BitwiseEqual(Solver(model, settings, &read).Solve().displacements, Solver(model, settings).Solve().displacements));
+}
+
 TEST(StoredPrecomputation, DamagedIsNamed)
 {
   const std::string bytes = Stored(SolverPrecomputation(Unloaded(MeshlessBlock()), SolverSettings{}));

@@ -87,6 +87,47 @@ struct NeoHookean
   }
 };
 
+/** W = C10 (I1bar - 3) + C01 (I2bar - 3) + kappa/2 (J - 1)^2 in spatial form:
+ *  sigma = 2/J dev[(C10 + C01 I1bar) bbar - C01 bbar^2] + kappa (J - 1) I,
+ *  bbar = J^-2/3 F F^T (Holzapfel, Nonlinear Solid Mechanics, sec. 6.5). */
+struct MooneyRivlin
+{
+  double C10 = 0.0, C01 = 0.0, kappa = 0.0; // Pa
+
+  explicit MooneyRivlin(const Material & material)
+    : C10(0.5 * (1.0 - material.secondInvariantShare) * material.ShearModulus())
+    , C01(0.5 * material.secondInvariantShare * material.ShearModulus())
+    , kappa(material.BulkModulus())
+  {}
+
+  Matrix3 Cauchy(const Matrix3 & F) const
+  {
+    const double  J = F.determinant();
+    const Matrix3 bbar = std::pow(J, -2.0 / 3.0) * F * F.transpose();
+    const Matrix3 A = (C10 + C01 * bbar.trace()) * bbar - C01 * bbar * bbar;
+    return 2.0 / J * (A - A.trace() / 3.0 * Matrix3::Identity()) + kappa * (J - 1.0) * Matrix3::Identity();
+  }
+
+  Matrix3 FirstPiola(const Matrix3 & F) const { return F.determinant() * Cauchy(F) * F.inverse().transpose(); }
+
+  /** Lateral stretch of uniaxial stress along x with axial stretch lambda (bisection on sigma_yy = 0). */
+  Matrix3 Uniaxial(double lambda) const
+  {
+    const auto lateral = [&](double s) { return Cauchy(Eigen::Vector3d(lambda, s, s).asDiagonal())(1, 1); };
+    double low = 0.5, high = 2.0;
+    if (!(lateral(low) * lateral(high) < 0.0))
+    {
+      throw std::runtime_error("MooneyRivlin::Uniaxial: no root in [0.5, 2]");
+    }
+    for (int k = 0; k < 200 && high - low > 1e-15; ++k)
+    {
+      const double middle = 0.5 * (low + high);
+      (lateral(middle) * lateral(low) > 0.0 ? low : high) = middle;
+    }
+    return Eigen::Vector3d(lambda, 0.5 * (low + high), 0.5 * (low + high)).asDiagonal();
+  }
+};
+
 /** Lateral stretch s of uniaxial stress with axial stretch lambda:
  *  F = diag(lambda, s, s), sigma_22 = sigma_33 = 0. Newton on
  *  g(s) = mu J^(-5/3) (s^2 - lambda^2) / 3 + kappa (J - 1), J = lambda s^2,
@@ -200,6 +241,22 @@ AddSymmetryConstraints(Model & model)
   model.fixedConstraints.push_back({ "xmin", { true, false, false } });
   model.fixedConstraints.push_back({ "ymin", { false, true, false } });
   model.fixedConstraints.push_back({ "zmin", { false, false, true } });
+}
+
+/** Uniaxial stress along x: a cube of `length` on 2 x 2 x 2 cells with the
+ *  symmetry planes xmin/ymin/zmin, the xmax face moved to stretch lambda in
+ *  x only (y, z free). */
+inline Model
+UniaxialStressBlock(GridCells cells, double lambda, double length, const Material & material)
+{
+  Model model = MakeBlockMesh(Vector3::Constant(length), { 2, 2, 2 }, cells, material);
+  AddSymmetryConstraints(model);
+  PrescribedDisplacement pull;
+  pull.nodes = model.NodeSet("xmax");
+  pull.displacements.assign(pull.nodes.size(), Vector3((lambda - 1.0) * length, 0.0, 0.0));
+  pull.components = { true, false, false };
+  model.prescribedDisplacements.push_back(pull);
+  return model;
 }
 
 /** Nodes on any face of a block from MakeBlockMesh, sorted. */

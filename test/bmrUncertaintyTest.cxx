@@ -410,4 +410,30 @@ TEST_F(TruthOfAnotherKind, GreyAndWhiteMatterCarryTheirModuli)
                   "grey and white matter");
 }
 
+// Another law: a Mooney-Rivlin parenchyma (same small-strain moduli) moves
+// the brain differently from the registration's neo-Hookean one under the
+// same opening and gravity, and its cells carry the law; CSF keeps its own.
+TEST_F(TruthOfAnotherKind, MooneyRivlinParenchymaFollowsItsOwnLaw)
+{
+  const SolvedTruth neoHookean = SolveTruth([](auto &) {});
+  const SolvedTruth mooneyRivlin = SolveTruth([](auto & s) { s.mooneyRivlinShare = 0.5; });
+  const bmr::Model & model = mooneyRivlin.truth.model.model;
+  std::size_t        lawCells = 0;
+  for (const bmr::Cell & cell : model.cells)
+  {
+    const bmr::Material & material = model.materials[cell.material];
+    lawCells += material.law == bmr::MaterialLaw::MooneyRivlin ? 1 : 0;
+    if (material.name == bmr::CsfMaterial().name) // pure CSF
+    {
+      EXPECT_EQ(material.law, bmr::MaterialLaw::NeoHookean);
+    }
+  }
+  RecordProperty("mooneyRivlinCells", std::to_string(lawCells));
+  EXPECT_GT(lawCells, model.cells.size() / 2);
+  const double lawEffect = LargestDifference(mooneyRivlin, neoHookean);
+  RecordProperty("lawEffect", std::to_string(lawEffect));
+  EXPECT_GT(lawEffect, 0.02);
+  EXPECT_CONTAINS(ErrorMessage([] { SolveTruth([](auto & s) { s.mooneyRivlinShare = 1.5; }); }), "Mooney-Rivlin share");
+}
+
 } // namespace

@@ -3,8 +3,10 @@
 //
 // A bmr::Model (mm, Pa, N) is written as a CalculiX input deck in the
 // consistent mm-N-s-tonne system (moduli in MPa = N/mm^2):
-//   compressible neo-Hookean W = mu/2 (I1bar - 3) + kappa/2 (J - 1)^2
-//   -> *HYPERELASTIC, NEO HOOKE with C10 = mu/2 and D1 = 2/kappa.
+//   each material's law as its CalculiX card (bmrMaterialLaw.h): neo-Hookean
+//   W = mu/2 (I1bar - 3) + kappa/2 (J - 1)^2 -> *HYPERELASTIC, NEO HOOKE with
+//   C10 = mu/2, D1 = 2/kappa; Mooney-Rivlin -> *HYPERELASTIC, MOONEY-RIVLIN
+//   with C10, C01, D1.
 // Tetrahedra become quadratic C3D10 elements (mid-edge nodes added at the
 // straight edge midpoints and shared between neighbours) or linear C3D4;
 // hexahedra become C3D20R (quadratic) or C3D8 (linear). A node set's

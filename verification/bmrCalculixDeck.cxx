@@ -425,13 +425,25 @@ WriteCalculixDeck(std::ostream & stream, const Model & model, const CalculixMesh
     {
       throw Error("CalculiX deck: material '" + material.name + "' has E = " + FormatDouble(material.youngsModulus) +
                   " Pa, nu = " + FormatDouble(material.poissonRatio) +
-                  "; the neo-Hookean constants need E > 0 and -1 < nu < 0.5.");
+                  "; the law's constants need E > 0 and -1 < nu < 0.5.");
     }
+    if (const std::string problem = MaterialLawProblem(material); !problem.empty())
+    {
+      throw Error("CalculiX deck: material '" + material.name + "' " + problem + ".");
+    }
+    const MaterialLawDescription & law = DescribeMaterialLaw(material.law);
     stream << "*MATERIAL, NAME=MAT" << m << "\n"
-           << "** " << material.name << ": E = " << FormatDouble(material.youngsModulus)
-           << " Pa, nu = " << FormatDouble(material.poissonRatio) << "; C10 = mu/2, D1 = 2/kappa (MPa)\n"
-           << "*HYPERELASTIC, NEO HOOKE\n"
-           << FormatDouble(0.5 * mu) << ", " << FormatDouble(2.0 / kappa) << "\n";
+           << "** " << material.name << ": " << law.name << ", E = " << FormatDouble(material.youngsModulus)
+           << " Pa, nu = " << FormatDouble(material.poissonRatio)
+           << (law.secondInvariant ? "; C10, C01 = (1 - s, s) mu/2" : "; C10 = mu/2")
+           << ", D1 = 2/kappa (MPa)\n"
+           << law.calculixKeyword << "\n";
+    const std::vector<double> constants = CalculixMaterialConstants(material);
+    for (std::size_t c = 0; c < constants.size(); ++c)
+    {
+      stream << (c == 0 ? "" : ", ") << FormatDouble(constants[c]);
+    }
+    stream << "\n";
     if (gravity)
     {
       stream << "*DENSITY\n" << FormatDouble(material.density * units::DensityToInternal) << "\n";

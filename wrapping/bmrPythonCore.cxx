@@ -200,24 +200,57 @@ BindErrors(py::module_ & module)
 void
 BindModel(py::module_ & module)
 {
-  py::class_<Material>(module, "Material", "Compressible neo-Hookean material (Pa, -, kg/m^3).")
-    .def(py::init([](const std::string & name, double youngsModulus, double poissonRatio, double density) {
-           return Material{ name, youngsModulus, poissonRatio, density };
+  py::class_<Material>(module, "Material",
+                       "Hyperelastic material (Pa, -, kg/m^3): law 'neo-hookean' or 'mooney-rivlin' (bmr.material_laws()); "
+                       "E and nu give the small-strain moduli of every law, second_invariant_share = C01 / (C10 + C01).")
+    .def(py::init([](const std::string & name, double youngsModulus, double poissonRatio, double density,
+                     const std::string & law, double secondInvariantShare) {
+           Material material{ name, youngsModulus, poissonRatio, density };
+           material.law = MaterialLawNamed(law);
+           material.secondInvariantShare = secondInvariantShare;
+           if (const std::string problem = MaterialLawProblem(material); !problem.empty())
+           {
+             throw Error("Material '" + name + "' " + problem + ".");
+           }
+           return material;
          }),
          py::arg("name") = "material", py::arg("youngs_modulus") = Material{}.youngsModulus,
-         py::arg("poisson_ratio") = Material{}.poissonRatio, py::arg("density") = Material{}.density)
+         py::arg("poisson_ratio") = Material{}.poissonRatio, py::arg("density") = Material{}.density,
+         py::arg("law") = DescribeMaterialLaw(Material{}.law).name,
+         py::arg("second_invariant_share") = Material{}.secondInvariantShare)
     .def_readwrite("name", &Material::name)
     .def_readwrite("youngs_modulus", &Material::youngsModulus)
     .def_readwrite("poisson_ratio", &Material::poissonRatio)
     .def_readwrite("density", &Material::density)
+    .def_property(
+      "law", [](const Material & material) { return std::string(DescribeMaterialLaw(material.law).name); },
+      [](Material & material, const std::string & name) { material.law = MaterialLawNamed(name); })
+    .def_readwrite("second_invariant_share", &Material::secondInvariantShare)
     .def_property_readonly("shear_modulus", &Material::ShearModulus)
     .def_property_readonly("bulk_modulus", &Material::BulkModulus)
     .def("__repr__", [](const Material & material) {
       std::ostringstream text;
       text << "Material(name='" << material.name << "', youngs_modulus=" << material.youngsModulus
-           << ", poisson_ratio=" << material.poissonRatio << ", density=" << material.density << ")";
+           << ", poisson_ratio=" << material.poissonRatio << ", density=" << material.density;
+      if (material.law != MaterialLaw::NeoHookean)
+      {
+        text << ", law='" << DescribeMaterialLaw(material.law).name
+             << "', second_invariant_share=" << material.secondInvariantShare;
+      }
+      text << ")";
       return text.str();
     });
+  module.def(
+    "material_laws",
+    [] {
+      std::vector<std::string> names;
+      for (const MaterialLawDescription & law : MaterialLaws())
+      {
+        names.push_back(law.name);
+      }
+      return names;
+    },
+    "The names of the constitutive laws a Material can take.");
 
   py::class_<ContactSurface>(module, "Surface",
                              "Triangulated surface (mm): a rigid contact surface, a brain or skull surface, an "

@@ -362,6 +362,11 @@ MakeSyntheticBrainShiftModel(const RegistrationImage *           preoperativeIma
     throw Error("MakeSyntheticBrainShift: give grey and white matter's Young's moduli both > 0 Pa (e.g. 1390 and "
                 "1895), or both 0 for one parenchyma");
   }
+  if (!(settings.mooneyRivlinShare >= 0.0 && settings.mooneyRivlinShare <= 1.0))
+  {
+    throw Error("MakeSyntheticBrainShift: the Mooney-Rivlin share is " + std::to_string(settings.mooneyRivlinShare) +
+                "; give C01 / (C10 + C01) in (0, 1], or 0 for the registration's neo-Hookean law");
+  }
   SyntheticBrainShift truth;
   truth.timer = StageTimer(stageCallback);
   StageTimer & timer = truth.timer;
@@ -397,6 +402,17 @@ MakeSyntheticBrainShiftModel(const RegistrationImage *           preoperativeIma
   }
   modelSettings.materials.tumour.youngsModulus = settings.tumourStiffness * ParenchymaMaterial().youngsModulus;
   modelSettings.materials.tumour.poissonRatio = settings.poissonRatio;
+  if (settings.mooneyRivlinShare > 0.0)
+  {
+    // Every class but the CSF (the first, darkest), and the tumour.
+    for (std::size_t k = 1; k < modelSettings.materials.classMaterials.size(); ++k)
+    {
+      modelSettings.materials.classMaterials[k].law = MaterialLaw::MooneyRivlin;
+      modelSettings.materials.classMaterials[k].secondInvariantShare = settings.mooneyRivlinShare;
+    }
+    modelSettings.materials.tumour.law = MaterialLaw::MooneyRivlin;
+    modelSettings.materials.tumour.secondInvariantShare = settings.mooneyRivlinShare;
+  }
   truth.model = BuildBrainModel(preoperativeImage, brainMask, truth.tumourMask, ContactSurface{}, nullptr,
                                 modelSettings, timer);
   Model & model = truth.model.model;

@@ -305,13 +305,18 @@ ConvertUnstructuredGrid(vtkUnstructuredGrid * grid, const std::string & path, co
 }
 
 /** Cell or point data "youngs_modulus", "poisson_ratio", "density" of the
- *  material index that materialOf(i) gives for each of `count` items. */
+ *  material index that materialOf(i) gives for each of `count` items, and
+ *  where any material is not neo-Hookean also "material_law" (the law's code,
+ *  bmrMaterialLaw.h) and "second_invariant_share": files of neo-Hookean
+ *  models stay as they were, and a reader takes missing laws as neo-Hookean. */
 template <typename MaterialOf>
 void
 AddMaterialProperties(vtkDataSetAttributes * attributes, const Model & model, MaterialOf && materialOf, std::size_t count)
 {
-  const char * names[3] = { "youngs_modulus", "poisson_ratio", "density" };
-  for (int property = 0; property < 3; ++property)
+  const bool laws = std::any_of(model.materials.begin(), model.materials.end(),
+                                [](const Material & material) { return material.law != MaterialLaw::NeoHookean; });
+  const char * names[5] = { "youngs_modulus", "poisson_ratio", "density", "material_law", "second_invariant_share" };
+  for (int property = 0; property < (laws ? 5 : 3); ++property)
   {
     vtkNew<vtkDoubleArray> values;
     values->SetName(names[property]);
@@ -325,8 +330,9 @@ AddMaterialProperties(vtkDataSetAttributes * attributes, const Model & model, Ma
                     std::to_string(material) + ", which does not exist");
       }
       const Material & m = model.materials[material];
-      values->SetValue(static_cast<vtkIdType>(item),
-                       property == 0 ? m.youngsModulus : property == 1 ? m.poissonRatio : m.density);
+      const double     value[5] = { m.youngsModulus, m.poissonRatio, m.density, static_cast<double>(m.law),
+                                    m.secondInvariantShare };
+      values->SetValue(static_cast<vtkIdType>(item), value[property]);
     }
     attributes->AddArray(values);
   }
@@ -800,6 +806,16 @@ ReadIntegrationPoints(const std::string & path)
   vtkDataArray *       youngs = requireArray("youngs_modulus");
   vtkDataArray *       poisson = requireArray("poisson_ratio");
   vtkDataArray *       density = requireArray("density");
+  // Written only for models with a law other than neo-Hookean (AddMaterialProperties).
+  vtkDataArray * law = grid->GetPointData()->GetArray("material_law");
+  vtkDataArray * share = grid->GetPointData()->GetArray("second_invariant_share");
+  if ((law == nullptr) != (share == nullptr) ||
+      (law != nullptr && (law->GetNumberOfTuples() != count || share->GetNumberOfTuples() != count)))
+  {
+    throw Error("integration points '" + path +
+                "' needs both point-data arrays 'material_law' and 'second_invariant_share' with one value per "
+                "point, or neither (neo-Hookean)");
+  }
   IntegrationPointData data;
   data.positions.resize(count);
   data.weights.resize(count);
@@ -812,6 +828,22 @@ ReadIntegrationPoints(const std::string & path)
     material.youngsModulus = youngs->GetTuple1(point);
     material.poissonRatio = poisson->GetTuple1(point);
     material.density = density->GetTuple1(point);
+    if (law != nullptr)
+    {
+      try
+      {
+        material.law = MaterialLawOfCode(law->GetTuple1(point));
+      }
+      catch (const Error & error)
+      {
+        throw Error("integration points '" + path + "': point " + std::to_string(point) + ": " + error.what());
+      }
+      material.secondInvariantShare = share->GetTuple1(point);
+      if (const std::string problem = MaterialLawProblem(material); !problem.empty())
+      {
+        throw Error("integration points '" + path + "': point " + std::to_string(point) + " " + problem);
+      }
+    }
     const bool valid = std::isfinite(data.positions[point].sum()) && data.weights[point] > 0.0 &&
                        material.youngsModulus > 0.0 && material.poissonRatio > -1.0 && material.poissonRatio < 0.5 &&
                        material.density > 0.0;

@@ -159,24 +159,31 @@ SceneParser::MaterialsComeWithIntegrationPoints() const
 Index
 SceneParser::MaterialIndex(Material material)
 {
-  const auto key = std::make_tuple(material.youngsModulus, material.poissonRatio, material.density);
+  const auto key = std::make_tuple(material.youngsModulus, material.poissonRatio, material.density, material.law,
+                                   material.secondInvariantShare);
   const auto [position, inserted] = m_MaterialIndexOfProperties.emplace(key, static_cast<Index>(TheModel().materials.size()));
   if (inserted)
   {
     std::ostringstream name;
     name << "E" << material.youngsModulus << "_nu" << material.poissonRatio;
+    if (material.law != MaterialLaw::NeoHookean)
+    {
+      name << "_" << DescribeMaterialLaw(material.law).name << material.secondInvariantShare;
+    }
     material.name = name.str();
     TheModel().materials.push_back(material);
   }
   return position->second;
 }
 
-/** "material_fields": each cell's neo-Hookean properties from cell-data arrays of the mesh file. */
+/** "material_fields": each cell's properties from cell-data arrays of the
+ *  mesh file; "law" (one for every cell) and its "second_invariant_share"
+ *  (an array) as a material's. */
 void
 SceneParser::AssignMaterialFields()
 {
   const SceneValue fields = m_Root.Child("material_fields");
-  fields.AllowOnly({ "youngs_modulus", "poisson_ratio", "density" });
+  fields.AllowOnly({ "youngs_modulus", "poisson_ratio", "density", "law", "second_invariant_share" });
   Model &           model = TheModel();
   const std::size_t cellCount = model.cells.size();
   auto              arrayOf = [&](const std::string & key) -> const std::vector<double> * {
@@ -202,6 +209,12 @@ SceneParser::AssignMaterialFields()
   const std::vector<double> * youngs = arrayOf("youngs_modulus");
   const std::vector<double> * poisson = arrayOf("poisson_ratio");
   const std::vector<double> * density = arrayOf("density");
+  const std::vector<double> * share = arrayOf("second_invariant_share");
+  Material                    lawOfEveryCell;
+  if (fields.Has("law"))
+  {
+    lawOfEveryCell.law = ParseMaterialLawName(fields.Child("law"));
+  }
   if (youngs == nullptr || poisson == nullptr)
   {
     fields.Fail("needs \"youngs_modulus\" and \"poisson_ratio\" (names of cell-data arrays); \"density\" is optional "
@@ -216,6 +229,12 @@ SceneParser::AssignMaterialFields()
     if (density != nullptr)
     {
       material.density = (*density)[cellId];
+    }
+    material.law = lawOfEveryCell.law;
+    material.secondInvariantShare = share != nullptr ? (*share)[cellId] : 0.0;
+    if (const std::string problem = MaterialLawProblem(material); !problem.empty())
+    {
+      fields.Fail("cell " + std::to_string(cellId) + " " + problem);
     }
     if (!(material.youngsModulus > 0.0 && material.poissonRatio > -1.0 && material.poissonRatio < 0.5 &&
           material.density > 0.0))

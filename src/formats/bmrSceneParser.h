@@ -328,10 +328,41 @@ ParseCurve(const SceneValue & value)
   return curve;
 }
 
+/** One of bmrMaterialLaw.h's names, e.g. "mooney-rivlin". */
+inline MaterialLaw
+ParseMaterialLawName(const SceneValue & value)
+{
+  std::vector<std::string> names;
+  for (const MaterialLawDescription & description : MaterialLaws())
+  {
+    names.push_back(description.name);
+  }
+  return MaterialLawNamed(value.Choice(names));
+}
+
+/** "law" (bmrMaterialLaw.h's names; default neo-hookean) and its parameter
+ *  "second_invariant_share" (Mooney-Rivlin: C01 / (C10 + C01)). */
+inline void
+ParseMaterialLaw(const SceneValue & value, Material & material)
+{
+  if (const auto law = value.Optional("law"))
+  {
+    material.law = ParseMaterialLawName(*law);
+  }
+  if (const auto share = value.Optional("second_invariant_share"))
+  {
+    material.secondInvariantShare = share->Number();
+  }
+  if (const std::string problem = MaterialLawProblem(material); !problem.empty())
+  {
+    value.Fail(problem);
+  }
+}
+
 inline Material
 ParseMaterial(const SceneValue & value, std::size_t index, std::optional<int> & label)
 {
-  value.AllowOnly({ "name", "label", "youngs_modulus", "poisson_ratio", "density" });
+  value.AllowOnly({ "name", "label", "youngs_modulus", "poisson_ratio", "density", "law", "second_invariant_share" });
   Material material;
   material.name = value.Has("name") ? value.Child("name").NonEmptyString() : "material" + std::to_string(index);
   if (const auto labelValue = value.Optional("label"))
@@ -349,6 +380,7 @@ ParseMaterial(const SceneValue & value, std::size_t index, std::optional<int> & 
   {
     material.density = density->PositiveNumber();
   }
+  ParseMaterialLaw(value, material);
   return material;
 }
 
@@ -441,7 +473,7 @@ private:
   Scene                            m_Scene;
   MeshData                         m_MeshData;
   bool                             m_MeshFromFile = false;
-  std::map<std::tuple<double, double, double>, Index> m_MaterialIndexOfProperties;
+  std::map<std::tuple<double, double, double, MaterialLaw, double>, Index> m_MaterialIndexOfProperties;
   std::vector<std::optional<int>>  m_MaterialLabels;
 };
 

@@ -1,6 +1,6 @@
 #include "bmrForceModel.h"
 
-#include "bmrNeoHookean.h"
+#include "bmrConstitutiveLaw.h"
 #include "bmrShape.h"
 #include "bmrUnits.h"
 
@@ -407,6 +407,9 @@ FiniteElementForceModel::FiniteElementForceModel(const Model & model, const Solv
   // The bound once the collapse barrier engages, for the masses of dynamic
   // relaxation: a collapsing soft cell must not outrun the time step.
   m_Collapse = CollapseModuli(m_Kappa, m_Volume, settings.collapseBulkModulus);
+  m_SecondModulus = SecondInvariantModuli(
+    cellCount, [&](std::size_t k) -> const Material & { return model.materials[model.cells[m_ModelCell[k]].material]; },
+    units::PascalToInternal);
   m_CollapseWaveBound.resize(cellCount);
   for (std::size_t k = 0; k < cellCount; ++k)
   {
@@ -480,8 +483,9 @@ FiniteElementForceModel::ComputeInternalForces(const double * u, double * f)
         ZeroFirstTouched(block, f);
         for (Index chunk = m_HexBlockOffsets[block]; chunk < m_HexBlockOffsets[block + 1]; chunk += kHexahedraPerBlock)
         {
-          const Index inverted =
-            AddHexahedronForces(chunk, std::min(chunk + kHexahedraPerBlock, m_HexBlockOffsets[block + 1]), u, f);
+          const Index last = std::min(chunk + kHexahedraPerBlock, m_HexBlockOffsets[block + 1]);
+          const Index inverted = m_SecondModulus.empty() ? AddHexahedronForces<false>(chunk, last, u, f)
+                                                         : AddHexahedronForces<true>(chunk, last, u, f);
           if (inverted >= 0)
           {
             firstInverted = std::min(firstInverted, inverted);
@@ -513,8 +517,9 @@ FiniteElementForceModel::ComputeInternalForces(const double * u, double * f)
         ZeroFirstTouched(hexBlockCount + block, f);
         for (Index chunk = m_TetBlockOffsets[block]; chunk < m_TetBlockOffsets[block + 1]; chunk += kTetrahedraPerBlock)
         {
-          const Index inverted =
-            AddTetrahedronForces(chunk, std::min(chunk + kTetrahedraPerBlock, m_TetBlockOffsets[block + 1]), u, f);
+          const Index last = std::min(chunk + kTetrahedraPerBlock, m_TetBlockOffsets[block + 1]);
+          const Index inverted = m_SecondModulus.empty() ? AddTetrahedronForces<false>(chunk, last, u, f)
+                                                         : AddTetrahedronForces<true>(chunk, last, u, f);
           if (inverted >= 0)
           {
             firstInverted = std::min(firstInverted, hexCount + inverted);
@@ -528,6 +533,7 @@ FiniteElementForceModel::ComputeInternalForces(const double * u, double * f)
 
 // The small inner loops are unrolled explicitly: GCC vectorises the loop over
 // cells (one cell per lane) only when no inner loop remains.
+template <bool kSecondInvariant>
 Index
 FiniteElementForceModel::AddHexahedronForces(Index begin, Index end, const double * u, double * f) const
 {
@@ -605,7 +611,9 @@ FiniteElementForceModel::AddHexahedronForces(Index begin, Index end, const doubl
         modes[alpha][i] = m;
       }
     }
-    Matrix3x3 A = ScaledFirstPiola(F, cof, J, m_Kappa[e] * (J - 1.0), m_Mu[e], m_Collapse[e], m_Volume[e]); // V P
+    Matrix3x3 A = ScaledMooneyRivlinFirstPiola<kSecondInvariant>(F, cof, J, m_Kappa[e] * (J - 1.0), m_Mu[e],
+                                                          kSecondInvariant ? m_SecondModulus[e] : 0.0, m_Collapse[e],
+                                                          m_Volume[e]); // V P
     const double k = m_HexHourglassStiffness[e];
     // Hourglass forces k Gamma m folded in: k h m directly, and -k B (X^T h) m
     // through the same B as the stress term.
@@ -669,6 +677,7 @@ FiniteElementForceModel::TetrahedronDilatations(Index begin, Index end, const do
   }
 }
 
+template <bool kSecondInvariant>
 Index
 FiniteElementForceModel::AddTetrahedronForces(Index begin, Index end, const double * u, double * f) const
 {
@@ -700,7 +709,8 @@ FiniteElementForceModel::AddTetrahedronForces(Index begin, Index end, const doub
       averaged * 0.25 * (nodalPressure[i0] + nodalPressure[i1] + nodalPressure[i2] + nodalPressure[i3]) +
       (1.0 - averaged) * m_Kappa[k] * (J - 1.0);
     // The collapse barrier acts on the cell's own J, which ANP leaves free.
-    const Matrix3x3 A = ScaledFirstPiola(F, cof, J, pressure, m_Mu[k], m_Collapse[k], m_Volume[k]); // V P
+    const Matrix3x3 A = ScaledMooneyRivlinFirstPiola<kSecondInvariant>(
+      F, cof, J, pressure, m_Mu[k], kSecondInvariant ? m_SecondModulus[k] : 0.0, m_Collapse[k], m_Volume[k]); // V P
     const Index local = t - begin;
     for (int a = 0; a < 4; ++a)
     {
@@ -719,7 +729,8 @@ FiniteElementForceModel::AddTetrahedronForces(Index begin, Index end, const doub
 std::size_t
 FiniteElementForceModel::StreamedBytesPerStep() const
 {
-  const std::size_t cellConstants = BytesOf(m_Volume) + BytesOf(m_Mu) + BytesOf(m_Kappa) + BytesOf(m_Collapse);
+  const std::size_t cellConstants =
+    BytesOf(m_Volume) + BytesOf(m_Mu) + BytesOf(m_SecondModulus) + BytesOf(m_Kappa) + BytesOf(m_Collapse);
   std::size_t       bytes = cellConstants + BytesOf(m_HexNodes) + BytesOf(m_HexB) + BytesOf(m_HexXH) +
                       BytesOf(m_HexHourglassStiffness) + BytesOf(m_FirstTouchOffsets) + BytesOf(m_FirstTouchNodes);
   // Tetrahedra: F in the dilatation pass and again in the force pass; with

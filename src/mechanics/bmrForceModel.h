@@ -10,6 +10,7 @@
 #define bmrForceModel_h
 
 #include "bmrMeshless.h"
+#include "bmrConstitutiveLaw.h"
 #include "bmrModel.h"
 #include "bmrNodeOrder.h"
 #include "bmrBinaryStream.h"
@@ -214,12 +215,13 @@ public:
   void                        Write(BinaryWriter & out) const override;
   /** The inverse of Write (one thread: a stored model is used through Clone); checks that every index lies in
    *  range (bmr::Error otherwise). */
-  static std::unique_ptr<FiniteElementForceModel> Read(BinaryReader & in);
+  static std::unique_ptr<FiniteElementForceModel> Read(BinaryReader & in, bool laws);
 
   /** Lists every member but the threads to `visit` (bmrBinaryStream.h), in
-   *  one order for writing and reading. */
+   *  one order for writing and reading; without `laws` as format version 1
+   *  wrote them (every material neo-Hookean). */
   template <typename Self, typename Visitor>
-  static void VisitMembers(Self & self, Visitor & visit)
+  static void VisitMembers(Self & self, Visitor & visit, bool laws = true)
   {
     visit(self.m_NodeCount);
     visit(self.m_AverageNodalPressure);
@@ -254,6 +256,10 @@ public:
     visit(self.m_FirstTouchOffsets);
     visit(self.m_FirstTouchNodes);
     visit(self.m_UntouchedNodes);
+    if (laws)
+    {
+      visit(self.m_SecondModulus);
+    }
   }
 
 private:
@@ -284,9 +290,13 @@ private:
   }
 
   void TetrahedronDilatations(Index begin, Index end, const double * u);
-  /** Adds the forces of hexahedra [begin, end) to f; returns the first inverted one or -1. */
+  /** Adds the forces of hexahedra [begin, end) to f; returns the first
+   *  inverted one or -1. kSecondInvariant: some material is Mooney-Rivlin
+   *  (bmrConstitutiveLaw.h). */
+  template <bool kSecondInvariant>
   Index AddHexahedronForces(Index begin, Index end, const double * u, double * f) const;
   /** Adds the forces of tetrahedra [begin, end) to f; returns the first inverted one or -1. */
+  template <bool kSecondInvariant>
   Index AddTetrahedronForces(Index begin, Index end, const double * u, double * f) const;
 
   int   m_Threads = 1;
@@ -321,6 +331,10 @@ private:
   std::vector<double> m_NodalVolume;
   std::vector<double> m_NodalBulkModulus;
 
+  /** 2 C01 of kernel cell k (0 for the neo-Hookean law). */
+  double SecondModulus(Index k) const { return m_SecondModulus.empty() ? 0.0 : m_SecondModulus[k]; }
+  UnitModuli UnitModuliOf(Index k) const { return { m_Mu[k], SecondModulus(k), m_Kappa[k], m_Collapse[k] }; }
+
   /** ANP: node n's pressure kappa_n (J_n - 1) from the tetrahedra's J. */
   double NodalPressure(Index n, const double * tetJacobian) const;
   /** ANP: the nodal pressures kappa_n (J_n - 1) at displacements u. */
@@ -331,7 +345,8 @@ private:
   // Per kernel cell (hexahedra first): reference volume, material constants
   // (internal units), characteristic wave-number bound q = n B:B (1 + hourglass).
   std::vector<double> m_Volume;
-  std::vector<double> m_Mu;
+  std::vector<double> m_Mu;            // the small-strain shear modulus, 2 (C10 + C01)
+  std::vector<double> m_SecondModulus; // 2 C01; empty when every material is neo-Hookean
   std::vector<double> m_Kappa;
   std::vector<double> m_Collapse; // the collapse barrier's bulk modulus (CollapseModuli)
   std::vector<double> m_Density;
@@ -388,11 +403,12 @@ public:
   void                        Write(BinaryWriter & out) const override;
   /** The inverse of Write (one thread: a stored model is used through Clone); checks that every index lies in
    *  range (bmr::Error otherwise). */
-  static std::unique_ptr<MeshlessForceModel> Read(BinaryReader & in);
+  static std::unique_ptr<MeshlessForceModel> Read(BinaryReader & in, bool laws);
 
-  /** Lists every member but the threads and the per-step buffers to `visit`. */
+  /** Lists every member but the threads and the per-step buffers to `visit`;
+   *  without `laws` as format version 1 wrote them. */
   template <typename Self, typename Visitor>
-  static void VisitMembers(Self & self, Visitor & visit)
+  static void VisitMembers(Self & self, Visitor & visit, bool laws = true)
   {
     visit(self.m_NodeCount);
     visit(self.m_Positions);
@@ -411,6 +427,10 @@ public:
     visit(self.m_KernelGradients);
     visit(self.m_KernelMaterial);
     visit(self.m_KernelIndexOfPoint);
+    if (laws)
+    {
+      visit(self.m_KernelSecondModulus);
+    }
   }
 
 private:
@@ -419,7 +439,13 @@ private:
   /** Adds the forces of kernel points [first, last) (at most kPointsPerBlock)
    *  to the padded forces; returns the first inverted point in the kernel's
    *  order (its index there, not the point's) or -1. */
+  template <bool kSecondInvariant>
   Index AddPointForces(Index first, Index last);
+  /** 2 C01 of integration point p (0 for the neo-Hookean law). */
+  double SecondModulusOfPoint(Index p) const
+  {
+    return m_KernelSecondModulus.empty() ? 0.0 : m_KernelSecondModulus[m_KernelIndexOfPoint[p]];
+  }
 
   /** Integration points per chunk of a slab, or per block of ScheduleByColour
    *  where slabs are too thin; measured with colours:
@@ -460,6 +486,7 @@ private:
     return Vector3(g[0], g[1], g[2]);
   }
   std::vector<double> m_KernelMaterial;  // weight, mu, kappa, collapse modulus per kernel point
+  std::vector<double> m_KernelSecondModulus; // 2 C01 per kernel point; empty when every material is neo-Hookean
   std::vector<Index>  m_KernelIndexOfPoint; // integration point -> its kernel point
   // u and f with 4 slots per node (x, y, z, 0), so that a neighbour's three
   // components are one SIMD load or store (brain-sized kernel, 1 thread:

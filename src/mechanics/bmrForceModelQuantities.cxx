@@ -3,7 +3,7 @@
 // nodal pressures, and the description of a cell or of the model.
 #include "bmrForceModel.h"
 
-#include "bmrNeoHookean.h"
+#include "bmrConstitutiveLaw.h"
 #include "bmrShape.h"
 #include "bmrUnits.h"
 
@@ -258,7 +258,7 @@ FiniteElementForceModel::ComputeEnergies(const double * u) const
   {
     const Eigen::Matrix3d F = DeformationGradient<8>(u, m_HexNodes[e], ComponentsOf<24>(m_HexB, e).data());
     const double          J = F.determinant();
-    energies.strain += m_Volume[e] * StrainEnergyDensity(F, J, J, m_Mu[e], m_Kappa[e], m_Collapse[e]);
+    energies.strain += m_Volume[e] * StrainEnergyDensityOfLaw(F, J, J, UnitModuliOf(e));
     double ue[8][3];
     for (int a = 0; a < 8; ++a)
     {
@@ -283,7 +283,8 @@ FiniteElementForceModel::ComputeEnergies(const double * u) const
     const double          J = F.determinant();
     const Index           k = hexCount + t;
     energies.strain +=
-      m_Volume[k] * StrainEnergyDensity(F, J, J, m_Mu[k], m_TetAveraged[t] > 0.0 ? 0.0 : m_Kappa[k], m_Collapse[k]);
+      m_Volume[k] * StrainEnergyDensityOfLaw(F, J, J, { m_Mu[k], SecondModulus(k),
+                                                        m_TetAveraged[t] > 0.0 ? 0.0 : m_Kappa[k], m_Collapse[k] });
   }
   if (averaged)
   {
@@ -325,7 +326,7 @@ FiniteElementForceModel::CauchyStress(const double * u) const
     }
     const Eigen::Matrix3d cof = Cofactor(F);
     const double          J = F.col(0).dot(cof.col(0));
-    const Eigen::Matrix3d P = FirstPiola(F, cof, J, volumeRatio, m_Mu[k], m_Kappa[k], m_Collapse[k]);
+    const Eigen::Matrix3d P = FirstPiolaOfLaw(F, cof, J, volumeRatio, UnitModuliOf(static_cast<Index>(k)));
     stress[m_ModelCell[k]] = (P * F.transpose() / J) * units::InternalToPascal;
   }
   return stress;

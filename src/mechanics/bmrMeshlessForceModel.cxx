@@ -1,6 +1,6 @@
 #include "bmrForceModel.h"
 
-#include "bmrNeoHookean.h"
+#include "bmrConstitutiveLaw.h"
 #include "bmrUnits.h"
 
 #include <omp.h>
@@ -117,6 +117,12 @@ MeshlessForceModel::MeshlessForceModel(const Model &          model,
   {
     m_KernelIndexOfPoint[m_KernelPoint[q]] = q;
   }
+  m_KernelSecondModulus = SecondInvariantModuli(
+    static_cast<std::size_t>(pointCount),
+    [&](std::size_t q) -> const Material & {
+      return model.materials[model.meshless.integrationMaterials[m_KernelPoint[q]]];
+    },
+    units::PascalToInternal);
 }
 
 Eigen::Matrix3d
@@ -178,6 +184,7 @@ StoreLanes(double * target, Lanes lanes)
 // constitutive law, with its divisions, was 40 % of a scalar one-pass
 // kernel), then f_I += w P grad phi_I scattered to the neighbours. Returns
 // the first inverted point's index in the kernel's order, or -1.
+template <bool kSecondInvariant>
 Index
 MeshlessForceModel::AddPointForces(Index first, Index last)
 {
@@ -235,7 +242,8 @@ MeshlessForceModel::AddPointForces(Index first, Index last)
     const Matrix3x3 cof = CofactorOf(F);
     const double    J = DeterminantOf(F, cof);
     const double *  m = material + 4 * static_cast<std::size_t>(q); // weight, mu, kappa, collapse
-    const Matrix3x3 A = ScaledFirstPiola(F, cof, J, m[2] * (J - 1.0), m[1], m[3], m[0]);
+    const Matrix3x3 A = ScaledMooneyRivlinFirstPiola<kSecondInvariant>(
+      F, cof, J, m[2] * (J - 1.0), m[1], kSecondInvariant ? m_KernelSecondModulus[q] : 0.0, m[3], m[0]);
     if (!(J > 0.0))
     {
       inverted = std::min(inverted, q); // the kernel's order: a lookup here kept GCC from vectorising the loop
@@ -296,7 +304,9 @@ MeshlessForceModel::ComputeInternalForces(const double * u, double * f)
         // A slab (ScheduleBySlabs) is one block of many chunks; a coloured block is one chunk.
         for (Index first = m_KernelBlockOffsets[block]; first < m_KernelBlockOffsets[block + 1]; first += kPointsPerBlock)
         {
-          const Index inverted = AddPointForces(first, std::min(first + kPointsPerBlock, m_KernelBlockOffsets[block + 1]));
+          const Index last = std::min(first + kPointsPerBlock, m_KernelBlockOffsets[block + 1]);
+          const Index inverted =
+            m_KernelSecondModulus.empty() ? AddPointForces<false>(first, last) : AddPointForces<true>(first, last);
           if (inverted >= 0)
           {
             firstInverted = std::min(firstInverted, inverted);
@@ -374,7 +384,8 @@ MeshlessForceModel::ComputeEnergies(const double * u) const
   {
     const Eigen::Matrix3d F = DeformationGradientAt(p, u);
     const double          J = F.determinant();
-    energies.strain += m_Weight[p] * StrainEnergyDensity(F, J, J, m_Mu[p], m_Kappa[p], m_Collapse[p]);
+    energies.strain +=
+      m_Weight[p] * StrainEnergyDensityOfLaw(F, J, J, { m_Mu[p], SecondModulusOfPoint(p), m_Kappa[p], m_Collapse[p] });
   }
   return energies;
 }
@@ -388,7 +399,8 @@ MeshlessForceModel::CauchyStress(const double * u) const
     const Eigen::Matrix3d F = DeformationGradientAt(p, u);
     const Eigen::Matrix3d cof = Cofactor(F);
     const double          J = F.col(0).dot(cof.col(0));
-    const Eigen::Matrix3d P = FirstPiola(F, cof, J, J, m_Mu[p], m_Kappa[p], m_Collapse[p]);
+    const Eigen::Matrix3d P =
+      FirstPiolaOfLaw(F, cof, J, J, { m_Mu[p], SecondModulusOfPoint(p), m_Kappa[p], m_Collapse[p] });
     stress[p] = (P * F.transpose() / J) * units::InternalToPascal;
   }
   return stress;
@@ -412,7 +424,8 @@ MeshlessForceModel::AddComponents(std::vector<std::string> & components) const
 std::size_t
 MeshlessForceModel::StreamedBytesPerStep() const
 {
-  return BytesOf(m_KernelOffsets) + BytesOf(m_KernelNodes) + BytesOf(m_KernelGradients) + BytesOf(m_KernelMaterial);
+  return BytesOf(m_KernelOffsets) + BytesOf(m_KernelNodes) + BytesOf(m_KernelGradients) + BytesOf(m_KernelMaterial) +
+         BytesOf(m_KernelSecondModulus);
 }
 
 } // namespace bmr

@@ -310,6 +310,10 @@ Model::Validate() const
     {
       throw Error(label + " has density " + std::to_string(material.density) + " kg/m^3; it must be positive.");
     }
+    if (const std::string problem = MaterialLawProblem(material); !problem.empty())
+    {
+      throw Error(label + " " + problem + ".");
+    }
   }
   const double lengthScale = std::max(box.diagonal().norm(), 1e-300);
   for (Index c = 0; c < static_cast<Index>(cells.size()); ++c)

@@ -43,7 +43,14 @@ Solver::Impl::Impl(const Model & m, const SolverSettings & s, const SolverPrecom
 
   lengthScale = BoundingBox(model.nodes).diagonal().norm();
 
-  components.push_back("neo-hookean");
+  for (const MaterialLawDescription & law : MaterialLaws())
+  {
+    if (std::any_of(model.materials.begin(), model.materials.end(),
+                    [&](const Material & material) { return material.law == law.law; }))
+    {
+      components.push_back(law.name);
+    }
+  }
   components.push_back("lumped-mass");
   if (meshless)
   {

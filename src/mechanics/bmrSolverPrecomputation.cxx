@@ -18,7 +18,8 @@ namespace
 {
 
 constexpr char        kPrecomputationMagic[8] = { 'B', 'M', 'R', 'P', 'R', 'E', 'C', 'O' };
-constexpr std::uint32_t kPrecomputationVersion = 1;
+// 2: the materials' laws (the second-invariant moduli); 1 (every material neo-Hookean) is still read.
+constexpr std::uint32_t kPrecomputationVersion = 2;
 
 /** 64-bit FNV-1a over 64-bit words: each value of up to 8 bytes is one word. */
 class Fingerprint
@@ -134,6 +135,11 @@ ReferenceConfigurationKey(const Model & model)
     key.Add(material.youngsModulus);
     key.Add(material.poissonRatio);
     key.Add(material.density);
+    if (material.law != MaterialLaw::NeoHookean) // neo-Hookean models keep the keys of format version 1
+    {
+      key.Add(material.law);
+      key.Add(material.secondInvariantShare);
+    }
   }
   if (model.discretization == Discretization::Meshless)
   {
@@ -171,10 +177,10 @@ FiniteElementForceModel::Write(BinaryWriter & out) const
 }
 
 std::unique_ptr<FiniteElementForceModel>
-FiniteElementForceModel::Read(BinaryReader & in)
+FiniteElementForceModel::Read(BinaryReader & in, bool laws)
 {
   std::unique_ptr<FiniteElementForceModel> model(new FiniteElementForceModel());
-  VisitMembers(*model, in);
+  VisitMembers(*model, in, laws);
   const FiniteElementForceModel & m = *model;
   const std::size_t hexCount = m.m_HexNodes.size();
   const std::size_t tetCount = m.m_TetNodes.size();
@@ -202,6 +208,10 @@ FiniteElementForceModel::Read(BinaryReader & in)
                                 &m.m_CollapseWaveBound })
   {
     CheckSize(in, perCell->size(), cellCount, "a per-cell table");
+  }
+  if (!m.m_SecondModulus.empty())
+  {
+    CheckSize(in, m.m_SecondModulus.size(), cellCount, "the second-invariant moduli");
   }
   CheckSize(in, m.m_ModelCell.size(), cellCount, "the kernel's cells");
   CheckIndices(in, m.m_ModelCell, static_cast<Index>(m.m_CellTypes.size()), "the kernel's cells");
@@ -233,10 +243,10 @@ MeshlessForceModel::Write(BinaryWriter & out) const
 }
 
 std::unique_ptr<MeshlessForceModel>
-MeshlessForceModel::Read(BinaryReader & in)
+MeshlessForceModel::Read(BinaryReader & in, bool laws)
 {
   std::unique_ptr<MeshlessForceModel> model(new MeshlessForceModel());
-  VisitMembers(*model, in);
+  VisitMembers(*model, in, laws);
   const MeshlessForceModel & m = *model;
   const std::size_t pointCount = m.m_Positions.size();
   const auto        nodeCount = static_cast<std::size_t>(m.m_NodeCount);
@@ -253,6 +263,10 @@ MeshlessForceModel::Read(BinaryReader & in)
   CheckIndices(in, m.m_KernelNodes, m.m_NodeCount, "the kernel's nodes");
   CheckSize(in, m.m_KernelGradients.size(), 3 * m.m_KernelNodes.size() + 1, "the kernel's gradients");
   CheckSize(in, m.m_KernelMaterial.size(), 4 * pointCount, "the kernel's materials");
+  if (!m.m_KernelSecondModulus.empty())
+  {
+    CheckSize(in, m.m_KernelSecondModulus.size(), pointCount, "the second-invariant moduli");
+  }
   CheckOffsets(in, m.m_KernelBlockOffsets, static_cast<Index>(pointCount), "the kernel's blocks");
   CheckOffsets(in, m.m_KernelColourOffsets, Intervals(m.m_KernelBlockOffsets), "the kernel's colours");
   if (!m.m_Numbering.IsPermutation(m.m_NodeCount))
@@ -382,9 +396,10 @@ SolverPrecomputation::Read(BinaryReader & in)
       in.Fail("not a solver precomputation");
     }
   }
-  if (const auto version = in.Value<std::uint32_t>(); version != kPrecomputationVersion)
+  const auto version = in.Value<std::uint32_t>();
+  if (version != kPrecomputationVersion && version != 1)
   {
-    in.Fail("format version " + std::to_string(version) + ", this module reads " +
+    in.Fail("format version " + std::to_string(version) + ", this module reads 1 and " +
             std::to_string(kPrecomputationVersion));
   }
   auto state = std::make_unique<Impl>();
@@ -396,11 +411,11 @@ SolverPrecomputation::Read(BinaryReader & in)
   in(state->collapseBulkModulus);
   if (state->meshless)
   {
-    state->forces = MeshlessForceModel::Read(in);
+    state->forces = MeshlessForceModel::Read(in, version >= 2);
   }
   else
   {
-    state->forces = FiniteElementForceModel::Read(in);
+    state->forces = FiniteElementForceModel::Read(in, version >= 2);
   }
   if (state->forces->NodeCount() != state->nodeCount)
   {

@@ -1,6 +1,6 @@
 #include "bmrToolStress.h"
 
-#include "bmrNeoHookean.h"
+#include "bmrConstitutiveLaw.h"
 #include "bmrUnits.h"
 
 #include <algorithm>
@@ -147,8 +147,9 @@ ToolStressRegion::Update(const double * u, double dt, const std::vector<Index> &
     const double          J = F.determinant();
     const Eigen::Matrix3d cofactor = Cofactor(F);
     // No collapse barrier (0): tissue at a tool keeps most of its volume, and the Ogden law has none.
-    const Eigen::Matrix3d neoHookean =
-      FirstPiola(F, cofactor, J, J, material.ShearModulus(), material.BulkModulus(), 0.0); // Pa
+    // The solve's own law (neo-Hookean or Mooney-Rivlin).
+    const Eigen::Matrix3d neoHookean = FirstPiolaOfLaw(
+      F, cofactor, J, J, { material.ShearModulus(), material.SecondInvariantModulus(), material.BulkModulus(), 0.0 }); // Pa
     m_NeoHookean[r] = neoHookean * F.transpose() / J;
     const Eigen::Matrix3d ogden = J * m_Ogden[r] * cofactor / J; // P = J sigma F^-T, F^-T = cof / J
     for (int a = 0; a < NodesPerCell(cell.type); ++a)

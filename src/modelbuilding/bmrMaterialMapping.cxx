@@ -411,13 +411,14 @@ MixtureName(double youngsModulus, double poissonRatio)
   return buffer;
 }
 
-/** Collects materials, one entry per distinct (E, nu, rho), in order of first use. */
+/** Collects materials, one entry per distinct (E, nu, rho, law), in order of first use. */
 class MaterialTable
 {
 public:
   Index Add(const Material & material)
   {
-    const auto key = std::make_tuple(material.youngsModulus, material.poissonRatio, material.density);
+    const auto key = std::make_tuple(material.youngsModulus, material.poissonRatio, material.density, material.law,
+                                     material.secondInvariantShare);
     const auto found = m_Index.find(key);
     if (found != m_Index.end())
     {
@@ -432,7 +433,7 @@ public:
 
 private:
   std::vector<Material>                                  m_Materials;
-  std::map<std::tuple<double, double, double>, Index>    m_Index;
+  std::map<std::tuple<double, double, double, MaterialLaw, double>, Index> m_Index;
 };
 
 void
@@ -566,7 +567,8 @@ MapMaterialsFromMemberships(Model &                         model,
     {
       const Material & other = materials[groupFirst[g]];
       if (other.youngsModulus == materials[k].youngsModulus && other.poissonRatio == materials[k].poissonRatio &&
-          other.density == materials[k].density)
+          other.density == materials[k].density && other.law == materials[k].law &&
+          other.secondInvariantShare == materials[k].secondInvariantShare)
       {
         groupOf[k] = static_cast<int>(g);
       }
@@ -736,17 +738,25 @@ MapMaterialsFromMemberships(Model &                         model,
         material = materials[groupFirst[last]]; // exactly the class values
         continue;
       }
-      material.youngsModulus = material.poissonRatio = material.density = 0.0;
+      material.youngsModulus = material.poissonRatio = material.density = material.secondInvariantShare = 0.0;
+      material.law = MaterialLaw::NeoHookean;
       for (int g = 0; g < groups; ++g)
       {
         const Material & pure = materials[groupFirst[g]];
         material.youngsModulus += groupWeight[g] * pure.youngsModulus;
         material.poissonRatio += groupWeight[g] * pure.poissonRatio;
         material.density += groupWeight[g] * pure.density;
+        // A neo-Hookean class is Mooney-Rivlin with no second invariant: mixed with one, it adds a share of 0.
+        material.secondInvariantShare += groupWeight[g] * pure.secondInvariantShare;
+        if (pure.law == MaterialLaw::MooneyRivlin)
+        {
+          material.law = MaterialLaw::MooneyRivlin;
+        }
       }
       material.youngsModulus = RoundSignificant(material.youngsModulus);
       material.poissonRatio = RoundSignificant(material.poissonRatio);
       material.density = RoundSignificant(material.density);
+      material.secondInvariantShare = RoundSignificant(material.secondInvariantShare);
       material.name = MixtureName(material.youngsModulus, material.poissonRatio);
     }
   }

@@ -7,6 +7,7 @@
 #include "itkBiomechanicalImageIO.h"
 #include "itk_zlib.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <ctime>
@@ -97,6 +98,8 @@ ModelBytes(const BrainModel & brain)
     out.Value(material.youngsModulus);
     out.Value(material.poissonRatio);
     out.Value(material.density);
+    out.Value(material.law);
+    out.Value(material.secondInvariantShare);
   }
   out.Value<std::uint64_t>(model.nodeSets.size());
   for (const auto & [name, nodes] : model.nodeSets)
@@ -136,10 +139,13 @@ ReadModelBytes(BinaryReader & in, BrainModel & brain)
       in.Fail("not a model file of this module");
     }
   }
-  if (const auto version = in.Value<std::uint32_t>(); version != kModelBundleVersion)
+  const auto version = in.Value<std::uint32_t>();
+  if (version < kOldestModelBundleVersion || version > kModelBundleVersion)
   {
-    in.Fail("format version " + std::to_string(version) + ", this module reads " + std::to_string(kModelBundleVersion));
+    in.Fail("format version " + std::to_string(version) + ", this module reads " +
+            std::to_string(kOldestModelBundleVersion) + " to " + std::to_string(kModelBundleVersion));
   }
+  const bool laws = version >= 3;
   Model model;
   model.nodes = in.Points();
   model.cells.resize(in.Count(sizeof(CellType) + sizeof(Cell::nodes) + sizeof(Index)));
@@ -149,13 +155,24 @@ ReadModelBytes(BinaryReader & in, BrainModel & brain)
     cell.nodes = in.Value<decltype(cell.nodes)>();
     cell.material = in.Value<Index>();
   }
-  model.materials.resize(in.Count(8 + 3 * sizeof(double)));
+  model.materials.resize(in.Count(8 + 3 * sizeof(double) + (laws ? sizeof(MaterialLaw) + sizeof(double) : 0)));
   for (Material & material : model.materials)
   {
     material.name = in.Text();
     material.youngsModulus = in.Value<double>();
     material.poissonRatio = in.Value<double>();
     material.density = in.Value<double>();
+    if (laws)
+    {
+      material.law = in.Value<MaterialLaw>();
+      material.secondInvariantShare = in.Value<double>();
+      if (std::none_of(MaterialLaws().begin(), MaterialLaws().end(),
+                       [&](const MaterialLawDescription & law) { return law.law == material.law; }))
+      {
+        in.Fail("material '" + material.name + "' has an unknown law code " +
+                std::to_string(static_cast<int>(material.law)));
+      }
+    }
   }
   const std::size_t sets = in.Count(16);
   for (std::size_t k = 0; k < sets; ++k)
@@ -450,11 +467,13 @@ ReadModelBundle(const fs::path & folder)
   {
     throw Error("cannot read the " + where + ": manifest.json is not a model bundle's manifest");
   }
-  if (manifest.value("version", -1) != kModelBundleVersion)
+  if (const int version = manifest.value("version", -1);
+      version < kOldestModelBundleVersion || version > kModelBundleVersion)
   {
     throw Error("cannot read the " + where + ": it is a bundle of format version " +
                 std::to_string(manifest.value("version", -1)) + " (module " + manifest.value("module_version", "?") +
-                "), this module (" + BMR_MODULE_VERSION + ") reads version " + std::to_string(kModelBundleVersion) +
+                "), this module (" + BMR_MODULE_VERSION + ") reads versions " + std::to_string(kOldestModelBundleVersion) +
+                " to " + std::to_string(kModelBundleVersion) +
                 "; prepare it again with this module");
   }
   try

@@ -74,6 +74,7 @@ from ._bmr import (
     make_grid,
     make_synthetic_brain_shift,
     make_synthetic_electrode_ct,
+    material_laws,
     map_materials,
     locate_electrodes,
     measure_displacement_error,

@@ -14,9 +14,10 @@ E, NU = 3000.0, 0.45
 SHEAR, BULK = E / (2 * (1 + NU)), E / (3 * (1 - 2 * NU))
 
 
-def uniaxial_block(stretch, divisions=(2, 2, 2), cells="hexahedra"):
+def uniaxial_block(stretch, divisions=(2, 2, 2), cells="hexahedra", material=None):
     """A 10 mm cube on rollers (xmin, ymin, zmin) pulled along x to `stretch`."""
-    model = bmr.make_block_mesh((10, 10, 10), divisions, cells=cells, material=bmr.Material("brain", E, NU, 1000))
+    material = material or bmr.Material("brain", E, NU, 1000)
+    model = bmr.make_block_mesh((10, 10, 10), divisions, cells=cells, material=material)
     model.fix("xmin", (True, False, False))
     model.fix("ymin", (False, True, False))
     model.fix("zmin", (False, False, True))
@@ -26,13 +27,17 @@ def uniaxial_block(stretch, divisions=(2, 2, 2), cells="hexahedra"):
     return model
 
 
-def uniaxial_neo_hookean(stretch):
-    """Lateral stretch and axial Cauchy stress (Pa) of W = mu/2 (I1bar - 3) + kappa/2 (J - 1)^2 in uniaxial stress."""
+def uniaxial_neo_hookean(stretch, share=0.0):
+    """Lateral stretch and axial Cauchy stress (Pa) in uniaxial stress of
+    W = C10 (I1bar - 3) + C01 (I2bar - 3) + kappa/2 (J - 1)^2, C01 = share * mu/2
+    (share 0: the neo-Hookean law): sigma = 2/J dev[(C10 + C01 I1bar) bbar - C01 bbar^2] + kappa (J - 1)."""
+    c10, c01 = (1.0 - share) * SHEAR / 2.0, share * SHEAR / 2.0
 
     def cauchy(lateral):
         j = stretch * lateral**2
         bbar = j ** (-2.0 / 3.0) * np.array([stretch**2, lateral**2, lateral**2])
-        return SHEAR / j * (bbar - bbar.sum() / 3.0) + BULK * (j - 1.0)
+        a = (c10 + c01 * bbar.sum()) * bbar - c01 * bbar**2
+        return 2.0 / j * (a - a.sum() / 3.0) + BULK * (j - 1.0)
 
     low, high = 0.5, 1.5
     for _ in range(200):  # bisection on sigma_yy(lateral) = 0, increasing in lateral
@@ -40,6 +45,24 @@ def uniaxial_neo_hookean(stretch):
         low, high = (middle, high) if cauchy(middle)[1] < 0 else (low, middle)
     lateral = 0.5 * (low + high)
     return lateral, cauchy(lateral)[0]
+
+
+def test_a_mooney_rivlin_material_solves_its_own_law_and_bad_laws_are_named():
+    assert bmr.material_laws() == ["neo-hookean", "mooney-rivlin"]
+    material = bmr.Material("brain", E, NU, 1000, law="mooney-rivlin", second_invariant_share=0.5)
+    assert material.law == "mooney-rivlin" and "second_invariant_share=0.5" in repr(material)
+    stretch = 1.2
+    result = bmr.solve(uniaxial_block(stretch, material=material), tolerance=1e-6, max_steps=200000)
+    assert result.converged, result.message
+    lateral, sigma_xx = uniaxial_neo_hookean(stretch, share=0.5)
+    force = result.reaction_forces[uniaxial_block(stretch).node_sets["xmax"], 0].sum()
+    np.testing.assert_allclose(force, sigma_xx * (10 * lateral) ** 2 * 1e-6, rtol=2e-3)
+    _, neo_hookean_sigma = uniaxial_neo_hookean(stretch)
+    assert abs(neo_hookean_sigma - sigma_xx) > 0.02 * abs(sigma_xx)  # the law shows in the answer
+    with pytest.raises(Exception, match="the laws are neo-hookean, mooney-rivlin"):
+        bmr.Material("brain", E, NU, 1000, law="ogden")
+    with pytest.raises(Exception, match="must lie in"):
+        bmr.Material("brain", E, NU, 1000, law="mooney-rivlin", second_invariant_share=2.0)
 
 
 @pytest.mark.parametrize("cells", ["hexahedra", "tetrahedra"])

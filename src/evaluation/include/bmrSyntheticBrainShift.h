@@ -145,6 +145,10 @@ struct SyntheticBrainShiftSettings
    *  ParenchymaMaterial()'s modulus on two classes, as the registration. */
   double greyMatterYoungsModulus = 0.0;
   double whiteMatterYoungsModulus = 0.0;
+  /** Another law: parenchyma and tumour Mooney-Rivlin (docs/materials.md)
+   *  with this share C01 / (C10 + C01) in (0, 1] and the same small-strain
+   *  moduli, where the registration is neo-Hookean; 0: neo-Hookean. */
+  double mooneyRivlinShare = 0.0;
 
   /** A synthetic spherical tumour (radius 0: none), stiffness x parenchyma. */
   Vector3 tumourCentre = Vector3::Zero();
