@@ -1,7 +1,8 @@
 // The one-call registration: the chain of the module's ITK filters from the
 // preoperative image to the warped image and its evaluation (its report and
-// overlays: bmrRegistrationReport.cxx). Over 800 lines on purpose: one chain,
-// and one translation unit for ITK's slow templates.
+// overlays: bmrRegistrationReport.cxx; the update's gravity fit:
+// bmrGravityFit.cxx). Over 800 lines on purpose: one chain, and one
+// translation unit for ITK's slow templates.
 #include "bmrBrainShiftRegistration.h"
 
 // ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.
@@ -22,6 +23,7 @@
 #include "itkTransformWarpImageFilter.h"
 
 #include "bmrPipelineDetail.h"
+#include "bmrRegistrationUpdate.h"
 #include "bmrScene.h"
 #include "bmrUnits.h"
 
@@ -157,93 +159,6 @@ IntraoperativeSurfaceOfImage(const IntraoperativeData & data, const AtlasSetting
   }
 }
 
-/** Runs one filter of the chain; its itk::ExceptionObject becomes the bmr::Error every caller translates. */
-template <typename TFilter>
-void
-UpdateStage(TFilter * filter, const char * what)
-{
-  try
-  {
-    filter->Update();
-  }
-  catch (const itk::ExceptionObject & exception)
-  {
-    throw Error(std::string(what) + ": " + itk::PlainDescription(exception.GetDescription()));
-  }
-}
-
-using SamplePointSet = itk::FixedWorkUnitsMattesMetric<RegistrationImage>::FixedSampledPointSetType;
-
-/** The centres of the voxels of `image` inside `brain` (a mask on any grid):
- *  every second voxel along each axis, then evenly thinned to at most
- *  `largest`; the same samples score every candidate of a fit. */
-SamplePointSet::Pointer
-BrainSamplePoints(const RegistrationImage * image, const RegistrationLabelImage * brain, std::size_t largest = 50000)
-{
-  std::vector<RegistrationImage::PointType> inside;
-  const auto                                size = image->GetLargestPossibleRegion().GetSize();
-  const auto                                start = image->GetLargestPossibleRegion().GetIndex();
-  RegistrationImage::IndexType              index;
-  for (index[2] = start[2]; index[2] < start[2] + static_cast<long>(size[2]); index[2] += 2)
-  {
-    for (index[1] = start[1]; index[1] < start[1] + static_cast<long>(size[1]); index[1] += 2)
-    {
-      for (index[0] = start[0]; index[0] < start[0] + static_cast<long>(size[0]); index[0] += 2)
-      {
-        RegistrationImage::PointType point;
-        image->TransformIndexToPhysicalPoint(index, point);
-        RegistrationLabelImage::IndexType maskIndex;
-        if (brain->TransformPhysicalPointToIndex(point, maskIndex) && brain->GetPixel(maskIndex) > 0)
-        {
-          inside.push_back(point);
-        }
-      }
-    }
-  }
-  if (inside.empty())
-  {
-    throw Error("the gravity fit found no voxel of the intraoperative image inside the brain: give an "
-                "intraoperative brain mask that overlaps the image");
-  }
-  auto         samples = SamplePointSet::New();
-  const double step = std::max(1.0, static_cast<double>(inside.size()) / static_cast<double>(largest));
-  std::size_t  count = 0;
-  for (double position = 0.0; position < static_cast<double>(inside.size()); position += step)
-  {
-    samples->SetPoint(count++, inside[static_cast<std::size_t>(position)]);
-  }
-  return samples;
-}
-
-/** Mattes mutual information (32 bins, one work unit: the same for any
- *  thread count) between `fixed` at `samples` and `moving` at their images
- *  under `transform`; higher: a better match. */
-double
-MutualInformation(const RegistrationImage *      fixed,
-                  const RegistrationImage *      moving,
-                  const RegistrationTransform *  transform,
-                  const SamplePointSet *         samples)
-{
-  auto metric = itk::FixedWorkUnitsMattesMetric<RegistrationImage>::New();
-  metric->SetNumberOfHistogramBins(32);
-  metric->SetFixedNumberOfWorkUnits(1);
-  metric->SetUseMovingImageGradientFilter(false);
-  metric->SetUseFixedImageGradientFilter(false);
-  metric->SetFixedImage(fixed);
-  metric->SetMovingImage(moving);
-  metric->SetMovingTransform(const_cast<RegistrationTransform *>(transform));
-  metric->SetFixedSampledPointSet(samples);
-  metric->SetUseSampledPointSet(true);
-  try
-  {
-    metric->Initialize();
-    return -metric->GetValue();
-  }
-  catch (const itk::ExceptionObject & exception)
-  {
-    throw Error("the gravity fit could not compare the images: " + itk::PlainDescription(exception.GetDescription()));
-  }
-}
 
 
 } // namespace
@@ -638,6 +553,47 @@ SolverThreads(const BrainShiftRegistrationSettings & settings)
 }
 } // namespace
 
+UpdateFilters::UpdateFilters(const BrainModel &                     model,
+                             const BrainShiftUpdateInputs &         inputs,
+                             const BrainShiftRegistrationSettings & settings)
+  : m_Model(model)
+  , m_Inputs(inputs)
+  , m_Settings(settings)
+{}
+
+UpdateDeformation::Pointer
+UpdateFilters::MakeDeformation(const itk::BiomechanicalModelObject * model) const
+{
+  auto deformation = UpdateDeformation::New();
+  deformation->SetModelInput(model);
+  if (m_Model.prescribedDisplacements.IsNotNull())
+  {
+    deformation->SetPrescribedDisplacements(m_Model.prescribedDisplacements);
+  }
+  if (m_Model.contactSurface.IsNotNull())
+  {
+    deformation->SetContactSurface(m_Model.contactSurface);
+  }
+  deformation->SetSolverSettings(m_Settings.solver);
+  deformation->SetWarmStart(m_Inputs.previous);
+  // 0: OpenMP's default (OMP_NUM_THREADS), as the solver's own default.
+  const int threads = SolverThreads(m_Settings);
+  deformation->SetNumberOfWorkUnits(static_cast<itk::ThreadIdType>(threads > 0 ? threads : omp_get_max_threads()));
+  return deformation;
+}
+
+UpdateFitter::Pointer
+UpdateFilters::FitTransform(const UpdateDeformation * deformation) const
+{
+  auto fitter = UpdateFitter::New();
+  fitter->SetInput(deformation->GetOutput());
+  fitter->SetReferenceImage(m_Inputs.preoperativeImage);
+  fitter->SetTolerance(m_Settings.fitTolerance);
+  fitter->SetMinimumControlPointSpacing(m_Settings.minimumControlPointSpacing);
+  UpdateStage(fitter.GetPointer(), "fitting the transform failed");
+  return fitter;
+}
+
 void
 PrecomputeBrainModel(BrainModel & model, const BrainShiftRegistrationSettings & settings, StageTimer & timer)
 {
@@ -814,34 +770,34 @@ CheckUpdateInputs(const BrainShiftUpdateInputs & inputs, const BrainShiftRegistr
   }
 }
 
-/** The intraoperative phase into `result`, whose model is prepared and whose timer runs on. */
+/** A bundle's precomputation serves every update made with its settings;
+ *  other solver settings, or a model prepared without it, make their own. */
 void
-UpdateInto(BrainShiftRegistrationResult &         result,
-           const BrainShiftUpdateInputs &         inputs,
-           const BrainShiftRegistrationSettings & settings,
-           const ProgressCallback &               solverProgress)
+RefreshPrecomputation(BrainShiftRegistrationResult & result, const BrainShiftRegistrationSettings & settings)
 {
-  StageTimer & timer = result.timer;
-  if (result.model.pipelineModel.IsNotNull())
+  if (result.model.pipelineModel.IsNull())
   {
-    // A bundle's precomputation serves every update made with its settings;
-    // other solver settings, or a model prepared without it, make their own.
-    const auto & stored = result.model.pipelineModel->GetPrecomputation();
-    const std::string mismatch =
-      stored ? stored->Mismatch(result.model.pipelineModel->GetModel(), settings.solver) : std::string();
-    if (!stored || !mismatch.empty())
-    {
-      if (stored)
-      {
-        result.model.warnings.push_back("the prepared model's precomputation was made " + mismatch +
-                                        ": made again for this update (stage precompute); prepare the bundle with "
-                                        "these settings to save it");
-      }
-      PrecomputeBrainModel(result.model, settings, timer);
-    }
+    return;
   }
-  LoadBrainModel(result.model, inputs.intraoperative, settings.model, timer);
-  result.warnings = result.model.warnings;
+  const auto &      stored = result.model.pipelineModel->GetPrecomputation();
+  const std::string mismatch =
+    stored ? stored->Mismatch(result.model.pipelineModel->GetModel(), settings.solver) : std::string();
+  if (!stored || !mismatch.empty())
+  {
+    if (stored)
+    {
+      result.model.warnings.push_back("the prepared model's precomputation was made " + mismatch +
+                                      ": made again for this update (stage precompute); prepare the bundle with "
+                                      "these settings to save it");
+    }
+    PrecomputeBrainModel(result.model, settings, result.timer);
+  }
+}
+
+/** Warnings about the weight the settings put on the brain. */
+void
+AddGravityWarnings(BrainShiftRegistrationResult & result, const BrainShiftRegistrationSettings & settings)
+{
   if (!settings.model.gravity.isZero())
   {
     // Soft CSF cells cannot carry a fluid's weight: they are crushed and the brain sinks through them.
@@ -862,178 +818,65 @@ UpdateInto(BrainShiftRegistrationResult &         result,
                               "sag and the soft cavity takes up part of the exposed surface's sag instead; give "
                               "gravity (--gravity, and --gravity-fit-candidates with an intraoperative image)");
   }
+}
+
+/** The registered and unregistered images on the intraoperative grid and their edge evaluations. */
+void
+EvaluateOnIntraoperativeImage(BrainShiftRegistrationResult &         result,
+                              const BrainShiftUpdateInputs &         inputs,
+                              const BrainShiftRegistrationSettings & settings)
+{
+  const RegistrationImage * intraoperativeImage = inputs.intraoperative.image.GetPointer();
+  auto                      identity = itk::IdentityTransform<double, 3>::New();
+  result.unregisteredOnIntraoperativeGrid = WarpImage(inputs.preoperativeImage, identity, intraoperativeImage);
+  result.registeredOnIntraoperativeGrid = WarpImage(inputs.preoperativeImage, result.transform, intraoperativeImage);
+  // The brain of the intraoperative image: its own mask, or the registered preoperative mask.
+  if (inputs.intraoperative.imageBrainMask.IsNotNull())
+  {
+    result.evaluationMask = const_cast<RegistrationLabelImage *>(inputs.intraoperative.imageBrainMask.GetPointer());
+  }
+  else
+  {
+    const auto preoperativeMask = itk::MakeImageFromBiomechanicalVolume<RegistrationLabelImage>(result.model.brainMask);
+    result.evaluationMask = WarpLabelImage(preoperativeMask, result.transform, intraoperativeImage);
+  }
+  result.unregistered = EvaluateEdges(intraoperativeImage, result.unregisteredOnIntraoperativeGrid,
+                                      result.evaluationMask, settings.evaluationSliceAxis,
+                                      settings.evaluationDistanceThreshold);
+  result.registered = EvaluateEdges(intraoperativeImage, result.registeredOnIntraoperativeGrid, result.evaluationMask,
+                                    settings.evaluationSliceAxis, settings.evaluationDistanceThreshold);
+}
+
+/** The intraoperative phase into `result`, whose model is prepared and whose timer runs on. */
+void
+UpdateInto(BrainShiftRegistrationResult &         result,
+           const BrainShiftUpdateInputs &         inputs,
+           const BrainShiftRegistrationSettings & settings,
+           const ProgressCallback &               solverProgress)
+{
+  StageTimer & timer = result.timer;
+  RefreshPrecomputation(result, settings);
+  LoadBrainModel(result.model, inputs.intraoperative, settings.model, timer);
+  result.warnings = result.model.warnings;
+  AddGravityWarnings(result, settings);
 
   // The solve and the fit continue the model's pipeline: the deformation
   // filter takes the regions' model, the loads' point set and the skull; its
   // output (the nodes carrying their displacements) is the fitter's input.
-  using PointSetType = itk::DisplacementPointSetType<3>;
-  using DeformationType = itk::BiomechanicalDeformationFilter<PointSetType>;
-  // 0: OpenMP's default (OMP_NUM_THREADS), as the solver's own default.
-  const int  threads = SolverThreads(settings);
-  const auto makeDeformation = [&](const itk::BiomechanicalModelObject * model) {
-    auto deformation = DeformationType::New();
-    deformation->SetModelInput(model);
-    if (result.model.prescribedDisplacements.IsNotNull())
-    {
-      deformation->SetPrescribedDisplacements(result.model.prescribedDisplacements);
-    }
-    if (result.model.contactSurface.IsNotNull())
-    {
-      deformation->SetContactSurface(result.model.contactSurface);
-    }
-    deformation->SetSolverSettings(settings.solver);
-    deformation->SetWarmStart(inputs.previous);
-    deformation->SetNumberOfWorkUnits(static_cast<itk::ThreadIdType>(threads > 0 ? threads : omp_get_max_threads()));
-    return deformation;
-  };
-  using FitterType = itk::DisplacementPointSetToBSplineTransformFilter<PointSetType>;
-  const auto fitTransform = [&](const DeformationType * deformation) {
-    auto fitter = FitterType::New();
-    fitter->SetInput(deformation->GetOutput());
-    fitter->SetReferenceImage(inputs.preoperativeImage);
-    fitter->SetTolerance(settings.fitTolerance);
-    fitter->SetMinimumControlPointSpacing(settings.minimumControlPointSpacing);
-    UpdateStage(fitter.GetPointer(), "fitting the transform failed");
-    return fitter;
-  };
-
-  auto deformation = makeDeformation(result.model.pipelineModel);
-  FitterType::Pointer fitted; // the gravity fit's best transform: its solve and fit are the registration's
+  const UpdateFilters        filters(result.model, inputs, settings);
+  UpdateDeformation::Pointer deformation;
+  UpdateFitter::Pointer      fitted; // the gravity fit's best transform: its solve and fit are the registration's
   result.gravity = result.model.model.bodyAcceleration;
   if (settings.gravityFitCandidates > 0)
   {
-    timer.Run("gravity fit", [&] {
-      const Vector3 largest = result.model.model.bodyAcceleration;
-      // Every candidate's weight comes from the filter's gravity; zero: the model's own, here none.
-      Model weightless = result.model.pipelineModel->GetModel();
-      weightless.bodyAcceleration.setZero();
-      auto weightlessModel = itk::BiomechanicalModelObject::New();
-      weightlessModel->SetModel(std::move(weightless));
-      weightlessModel->SetPrecomputation(result.model.pipelineModel->GetPrecomputation());
-      const auto samples = BrainSamplePoints(inputs.intraoperative.image,
-                                             inputs.intraoperative.imageBrainMask.IsNotNull()
-                                               ? inputs.intraoperative.imageBrainMask.GetPointer()
-                                               : itk::MakeImageFromBiomechanicalVolume<RegistrationLabelImage>(
-                                                   result.model.brainMask)
-                                                   .GetPointer());
-      double     bestInformation = -std::numeric_limits<double>::infinity();
-      double     bestSize = 0.0;
-      // A size's solve starts from the steady state of the nearest size solved
-      // so far when that weight is nearer its own than no weight is (else from
-      // the update's own start). Measured on Colin27 10 mm (2026-12-06), the
-      // 5-size fit and its refinements: from the nearest size always, 11 %
-      // (5 mm hexahedra) and 10 % (7 mm tetrahedra) fewer steps than every
-      // size from rest, but the first weighted size took 37-39 % more steps
-      // from the weightless state than from rest; so that one starts from rest.
-      std::vector<std::pair<double, WarmStart>> solvedStates;
-      const auto evaluate = [&](double size) {
-        auto candidate = makeDeformation(weightlessModel);
-        const Vector3 gravity = size * largest.normalized();
-        candidate->SetGravity(DeformationType::VectorType(gravity.data()));
-        const auto nearest = std::min_element(solvedStates.begin(), solvedStates.end(), [&](const auto & a, const auto & b) {
-          return std::abs(a.first - size) < std::abs(b.first - size);
-        });
-        BrainShiftRegistrationResult::GravityFitSolve solve;
-        if (nearest != solvedStates.end() && std::abs(nearest->first - size) < size)
-        {
-          candidate->SetWarmStart(nearest->second);
-          solve.startSize = nearest->first;
-        }
-        try
-        {
-          UpdateStage(candidate.GetPointer(), "the solve failed");
-        }
-        catch (const Error & error)
-        {
-          // A weight under which the model folds is not the brain's: left out, and said.
-          result.warnings.push_back("gravity fit: the solve at " + InG(size) + " failed and was left out (" +
-                                    error.what() + ")");
-          result.gravityFit.emplace_back(size, -std::numeric_limits<double>::infinity());
-          result.gravityFitSolves.push_back(solve);
-          return;
-        }
-        if (!candidate->GetConverged())
-        {
-          result.warnings.push_back("gravity fit: the solve at " + InG(size) + " did not converge (" +
-                                    candidate->GetSolveResult().message + ")");
-        }
-        else
-        {
-          solvedStates.emplace_back(size, WarmStartFrom(candidate->GetSolveResult()));
-        }
-        const auto fitter = fitTransform(candidate);
-        const double information =
-          MutualInformation(inputs.intraoperative.image, inputs.preoperativeImage, fitter->GetTransform(), samples);
-        result.gravityFit.emplace_back(size, information);
-        solve.steps = candidate->GetSolveResult().steps;
-        result.gravityFitSolves.push_back(solve);
-        if (information > bestInformation)
-        {
-          bestInformation = information;
-          bestSize = size;
-          deformation = candidate;
-          fitted = fitter;
-        }
-      };
-      const int count = settings.gravityFitCandidates;
-      for (int k = 0; k < count; ++k)
-      {
-        evaluate(k * largest.norm() / (count - 1));
-      }
-      // Three steps towards the best size: the vertex of the parabola through
-      // the best and its nearest neighbours each side (successive parabolic
-      // interpolation), or, when the best is at an end of the range, the
-      // midpoint between it and its neighbour (a coarse grid's best at 0 g
-      // may hide a better size below the next one).
-      const double resolution = 0.01 * largest.norm(); // sizes nearer than this to a solved one teach nothing
-      for (int refinement = 0; refinement < 3; ++refinement)
-      {
-        std::vector<std::pair<double, double>> tried = result.gravityFit;
-        std::sort(tried.begin(), tried.end());
-        const auto best = static_cast<std::size_t>(
-          std::max_element(tried.begin(), tried.end(),
-                           [](const auto & a, const auto & b) { return a.second < b.second; }) -
-          tried.begin());
-        double next = 0.5 * (tried[best].first + tried[best == 0 ? 1 : best - 1].first);
-        if (best > 0 && best + 1 < tried.size())
-        {
-          const auto [x0, y0] = tried[best - 1];
-          const auto [x1, y1] = tried[best];
-          const auto [x2, y2] = tried[best + 1];
-          const double denominator = (x1 - x0) * (y1 - y2) - (x1 - x2) * (y1 - y0);
-          next = x1 - 0.5 * ((x1 - x0) * (x1 - x0) * (y1 - y2) - (x1 - x2) * (x1 - x2) * (y1 - y0)) / denominator;
-          if (!(next > x0 && next < x2)) // flat, or a failed neighbour: no vertex between them
-          {
-            break;
-          }
-        }
-        const bool known = std::any_of(tried.begin(), tried.end(),
-                                       [&](const auto & size) { return std::abs(size.first - next) < resolution; });
-        if (known)
-        {
-          break;
-        }
-        evaluate(next);
-      }
-      if (!std::isfinite(bestInformation))
-      {
-        throw Error("gravity fit: every size's solve failed (" + result.warnings.back() +
-                    "); give a smaller gravity or a finer mesh");
-      }
-      if (bestSize == largest.norm())
-      {
-        result.warnings.push_back("gravity fit: the best size is the largest tried (" + InG(largest.norm()) +
-                                  "); give a larger gravity to try larger sizes");
-      }
-      result.gravity = bestSize * largest.normalized();
-      // The model the result reports is the one solved: with the fitted gravity.
-      result.model.model.bodyAcceleration = result.gravity;
-      Model solved = weightlessModel->GetModel();
-      solved.bodyAcceleration = result.gravity;
-      result.model.pipelineModel = itk::BiomechanicalModelObject::New();
-      result.model.pipelineModel->SetModel(std::move(solved));
-      result.model.pipelineModel->SetPrecomputation(weightlessModel->GetPrecomputation());
-    });
+    const GravityFitChoice choice =
+      timer.Run("gravity fit", [&] { return FitGravity(result, inputs, settings, filters); });
+    deformation = choice.deformation;
+    fitted = choice.fitter;
+  }
+  else
+  {
+    deformation = filters.MakeDeformation(result.model.pipelineModel);
   }
   if (solverProgress)
   {
@@ -1056,7 +899,7 @@ UpdateInto(BrainShiftRegistrationResult &         result,
   }
 
   timer.Run("fit", [&] {
-    const auto fitter = fitted ? fitted : fitTransform(deformation);
+    const auto fitter = fitted ? fitted : filters.FitTransform(deformation);
     result.transform = const_cast<RegistrationTransform *>(fitter->GetTransform());
     const itk::BSplineFitReport & report = fitter->GetReport();
     result.fitMaxResidual = report.maximumResidual;
@@ -1084,31 +927,9 @@ UpdateInto(BrainShiftRegistrationResult &         result,
       }
     });
   }
-
-  const RegistrationImage * intraoperativeImage = inputs.intraoperative.image.GetPointer();
-  if (intraoperativeImage != nullptr)
+  if (inputs.intraoperative.image.IsNotNull())
   {
-    timer.Run("evaluate", [&] {
-      auto identity = itk::IdentityTransform<double, 3>::New();
-      result.unregisteredOnIntraoperativeGrid = WarpImage(inputs.preoperativeImage, identity, intraoperativeImage);
-      result.registeredOnIntraoperativeGrid = WarpImage(inputs.preoperativeImage, result.transform, intraoperativeImage);
-      // The brain of the intraoperative image: its own mask, or the registered preoperative mask.
-      if (inputs.intraoperative.imageBrainMask.IsNotNull())
-      {
-        result.evaluationMask = const_cast<RegistrationLabelImage *>(inputs.intraoperative.imageBrainMask.GetPointer());
-      }
-      else
-      {
-        const auto preoperativeMask = itk::MakeImageFromBiomechanicalVolume<RegistrationLabelImage>(result.model.brainMask);
-        result.evaluationMask = WarpLabelImage(preoperativeMask, result.transform, intraoperativeImage);
-      }
-      result.unregistered = EvaluateEdges(intraoperativeImage, result.unregisteredOnIntraoperativeGrid,
-                                          result.evaluationMask, settings.evaluationSliceAxis,
-                                          settings.evaluationDistanceThreshold);
-      result.registered = EvaluateEdges(intraoperativeImage, result.registeredOnIntraoperativeGrid,
-                                        result.evaluationMask, settings.evaluationSliceAxis,
-                                        settings.evaluationDistanceThreshold);
-    });
+    timer.Run("evaluate", [&] { EvaluateOnIntraoperativeImage(result, inputs, settings); });
   }
 }
 
