@@ -1,4 +1,4 @@
-// The constitutive laws (include/bmrMaterialLaw.h, src/mechanics/materials/):
+// The constitutive laws (src/mechanics/include/bmrMaterialLaw.h, src/mechanics/materials/):
 // the Mooney-Rivlin kernel law against the textbook Cauchy stress of the same
 // strain energy (written here independently, in spatial form) and against
 // the derivative of its own energy; homogeneous uniaxial compression solved

@@ -1,4 +1,4 @@
-// The Ogden hyperviscoelastic law (Miller & Chinzei 2002, include/bmrOgden.h)
+// The Ogden hyperviscoelastic law (Miller & Chinzei 2002, src/mechanics/include/bmrOgden.h)
 // against analytic solutions and references computed here independently of
 // the implementation:
 // * elastic stress: closed-form uniaxial and equi-biaxial stress differences

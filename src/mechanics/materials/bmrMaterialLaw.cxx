@@ -1,4 +1,4 @@
-// The laws' names and parameters (include/bmrMaterialLaw.h): the one table
+// The laws' names and parameters (src/mechanics/include/bmrMaterialLaw.h): the one table
 // that scenes, mesh files, Python, reports and the CalculiX deck read.
 #include "bmrMaterialLaw.h"
 

@@ -1,5 +1,5 @@
 // Ogden-type hyperviscoelastic law of brain tissue (Miller & Chinzei 2002);
-// see include/bmrOgden.h for the law, its sources and its discretization.
+// see src/mechanics/include/bmrOgden.h for the law, its sources and its discretization.
 #include "bmrOgden.h"
 
 #include "bmrModel.h" // bmr::Error

@@ -1,3 +1,4 @@
-// Not compiled: a mechanics source that reaches up into the formats layer,
-// which the layering check must refuse.
+// A mechanics source that reaches up into the formats layer: compiled with the
+// mechanics layer's include directories it must fail to find the header
+// (test/CMakeLists.txt, LowerLayerCannotSeeAHigherLayersHeaders).
 #include "bmrScene.h"

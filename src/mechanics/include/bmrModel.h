@@ -10,6 +10,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "bmrError.h"
 #include "bmrMaterialLaw.h"
 #include "bmrOgden.h"
 
@@ -26,13 +27,6 @@ namespace bmr
 
 using Index = std::int32_t;
 using Vector3 = Eigen::Vector3d;
-
-/** Every error of the core: the message names the object and what to do. */
-class Error : public std::runtime_error
-{
-public:
-  using std::runtime_error::runtime_error;
-};
 
 enum class CellType : std::uint8_t
 {

@@ -5,7 +5,7 @@
 #ifndef bmrSettingsTable_h
 #define bmrSettingsTable_h
 
-#include "bmrModel.h" // bmr::Error
+#include "bmrError.h"
 
 #include <functional>
 #include <limits>

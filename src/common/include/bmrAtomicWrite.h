@@ -4,7 +4,7 @@
 #ifndef bmrAtomicWrite_h
 #define bmrAtomicWrite_h
 
-#include "bmrModel.h" // bmr::Error
+#include "bmrError.h"
 
 #include <filesystem>
 #include <string>
