@@ -1,8 +1,9 @@
 // B-spline intensity registration baseline (itk::BSplineIntensityRegistrationFilter
 // and `biomech bspline-register`): ITK's example brain slices registered
 // clearly better than unregistered (edge-based Hausdorff distance), a known
-// smooth deformation recovered, bitwise repeatability, and bad input named
-// with nothing written.
+// smooth deformation recovered, bitwise repeatability, its building blocks
+// (the fixed-work-unit metrics, the quiet L-BFGS-B optimizer) each on its
+// own, and bad input named with nothing written.
 //
 // ITK headers first: ITK's bundled Eigen must come before the system Eigen.
 // Over 800 lines: the tests of one filter and its command, which share their
@@ -11,6 +12,8 @@
 #include "itkBiomechanicalTransformIO.h"
 #include "itkDisplacementFieldTransform.h"
 #include "itkEdgeHausdorffDistanceImageFilter.h"
+#include "itkFixedWorkUnitsCorrelationMetric.h"
+#include "itkFixedWorkUnitsMattesMetric.h"
 #include "itkIdentityTransform.h"
 #include "itkImageFileReader.h"
 #include "itkImageFileWriter.h"
@@ -18,7 +21,9 @@
 #include "itkImageRegionConstIteratorWithIndex.h"
 #include "itkImageRegionIteratorWithIndex.h"
 #include "itkMultiThreaderBase.h"
+#include "itkQuietLBFGSBOptimizerv4.h"
 #include "itkResampleImageFilter.h"
+#include "itkTranslationTransform.h"
 
 #include "bmrTemporaryFolderTest.h"
 
@@ -505,6 +510,100 @@ TEST(BSplineIntensityRegistrationResults, RepeatsBitwiseAcrossRunsAndThreadCount
     EXPECT_TRUE(first == oneThread) << "1 and 2 threads differ";
     // Not trivially equal: the registration moved the coefficients.
     EXPECT_GT(std::abs(first[0]), 1.0);
+  }
+}
+
+// ---------------------------------------------------------------------------
+// The filter's building blocks (include/itkFixedWorkUnits*Metric.h,
+// include/itkQuietLBFGSBOptimizerv4.h), each on its own.
+// ---------------------------------------------------------------------------
+
+namespace
+{
+
+using Translation = itk::TranslationTransform<double, 2>;
+
+/** The metric's value and derivative at a translation of the blob pattern,
+ *  made and evaluated with `threads` as ITK's global thread count. */
+template <typename TMetric>
+std::pair<double, std::vector<double>>
+ValueAndDerivative(itk::ThreadIdType threads)
+{
+  const itk::ThreadIdType saved = itk::MultiThreaderBase::GetGlobalDefaultNumberOfThreads();
+  itk::MultiThreaderBase::SetGlobalDefaultNumberOfThreads(threads);
+  const BlobPattern pattern;
+  auto              transform = Translation::New();
+  Translation::ParametersType offset(2);
+  offset[0] = 0.7;
+  offset[1] = -0.4;
+  transform->SetParameters(offset);
+  auto metric = TMetric::New();
+  metric->SetFixedImage(SampledPattern(pattern, true));
+  metric->SetMovingImage(SampledPattern(pattern, false));
+  metric->SetMovingTransform(transform);
+  metric->SetFixedNumberOfWorkUnits(1);
+  metric->Initialize();
+  typename TMetric::MeasureType    value = 0.0;
+  typename TMetric::DerivativeType derivative;
+  metric->GetValueAndDerivative(value, derivative);
+  itk::MultiThreaderBase::SetGlobalDefaultNumberOfThreads(saved);
+  return { value, std::vector<double>(derivative.begin(), derivative.end()) };
+}
+
+template <typename TMetric>
+void
+ExpectThreadCountIndependent()
+{
+  const auto one = ValueAndDerivative<TMetric>(1);
+  const auto four = ValueAndDerivative<TMetric>(4);
+  EXPECT_TRUE(std::isfinite(one.first));
+  ASSERT_EQ(one.second.size(), 2u);
+  EXPECT_GT(std::abs(one.second[0]) + std::abs(one.second[1]), 0.0) << "a translated pattern has a gradient";
+  EXPECT_EQ(one.first, four.first) << "the value depends on the thread count";
+  EXPECT_TRUE(one.second == four.second) << "the derivative depends on the thread count";
+}
+
+} // namespace
+
+TEST(FixedWorkUnitsMattesMetric, ValueAndDerivativeDoNotDependOnTheThreadCount)
+{
+  ExpectThreadCountIndependent<itk::FixedWorkUnitsMattesMetric<SliceImage>>();
+}
+
+TEST(FixedWorkUnitsCorrelationMetric, ValueAndDerivativeDoNotDependOnTheThreadCount)
+{
+  ExpectThreadCountIndependent<itk::FixedWorkUnitsCorrelationMetric<SliceImage>>();
+}
+
+TEST(QuietLBFGSBOptimizerv4, StartsFromTheCurrentParametersUnboundedAndImproves)
+{
+  // Each start takes the metric's current parameters (LBFGSBOptimizerv4 keeps
+  // its first start while the parameter count does not grow), with an
+  // unbounded problem sized to them, and lowers the metric.
+  const BlobPattern pattern;
+  auto              transform = Translation::New();
+  auto              metric = itk::FixedWorkUnitsCorrelationMetric<SliceImage>::New();
+  metric->SetFixedImage(SampledPattern(pattern, false));
+  metric->SetMovingImage(SampledPattern(pattern, false));
+  metric->SetMovingTransform(transform);
+  metric->SetFixedNumberOfWorkUnits(1);
+  metric->Initialize();
+  auto optimizer = itk::QuietLBFGSBOptimizerv4::New();
+  optimizer->SetMetric(metric);
+  optimizer->SetNumberOfIterations(20);
+  for (const double start : { 1.5, -2.0 })
+  {
+    Translation::ParametersType offset(2);
+    offset[0] = start;
+    offset[1] = 0.5 * start;
+    transform->SetParameters(offset);
+    const double before = metric->GetValue();
+    optimizer->StartOptimization();
+    EXPECT_EQ(optimizer->GetInitialPosition()[0], start);
+    EXPECT_EQ(optimizer->GetInitialPosition()[1], 0.5 * start);
+    EXPECT_EQ(optimizer->GetBoundSelection().size(), 2u);
+    EXPECT_LT(metric->GetValue(), before) << "start " << start;
+    EXPECT_LT(std::abs(transform->GetParameters()[0]), std::abs(start)) << "towards the identity from " << start;
   }
 }
 

@@ -19,7 +19,6 @@
 #include "itkEdgeHausdorffDistanceImageFilter.h"
 #include "itkFuzzyCMeansClassifierImageFilter.h"
 #include "itkIdentityTransform.h"
-#include "itkRegistrationComponents.h"
 #include "itkTransformWarpImageFilter.h"
 
 #include "bmrPipelineDetail.h"

@@ -5,7 +5,7 @@
 #include "itkConnectedComponentImageFilter.h"
 #include "itkImageRegionConstIteratorWithIndex.h"
 #include "itkImageRegistrationMethodv4.h"
-#include "itkRegistrationComponents.h"
+#include "itkFixedWorkUnitsMattesMetric.h"
 #include "itkRegistrationParameterScalesFromPhysicalShift.h"
 #include "itkRegularStepGradientDescentOptimizerv4.h"
 

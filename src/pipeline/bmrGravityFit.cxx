@@ -3,7 +3,7 @@
 // intraoperative one (docs/registration.md, "Fitted gravity").
 #include "bmrRegistrationUpdate.h"
 
-#include "itkRegistrationComponents.h"
+#include "itkFixedWorkUnitsMattesMetric.h"
 
 #include "bmrPipelineDetail.h"
 
