@@ -110,22 +110,13 @@ TEST(Calculix, UniaxialCompressionHexahedraMatchAnalytic)
   }
 }
 
-Material
-MooneyRivlinMaterial(double poissonRatio)
-{
-  Material material = test::MakeMaterial(3000.0, poissonRatio);
-  material.law = MaterialLaw::MooneyRivlin;
-  material.secondInvariantShare = 0.5;
-  return material;
-}
-
 TEST(Calculix, MooneyRivlinUniaxialCompressionMatchesAnalytic)
 {
   // The deck's *HYPERELASTIC, MOONEY-RIVLIN card with C10, C01 and D1 = 2 /
   // kappa is the law of bmrMaterialLaw.h: CalculiX reproduces the analytic
   // reaction (the textbook form in bmrTestUtilities.h) on C3D8 and C3D20R,
   // down to 0.7 of the length.
-  const Model        model = test::UniaxialStressBlock(GridCells::Hexahedra, 0.7, 10.0, MooneyRivlinMaterial(0.45));
+  const Model        model = test::UniaxialStressBlock(GridCells::Hexahedra, 0.7, 10.0, test::MooneyRivlinMaterial(0.5, 0.45));
   std::ostringstream deck;
   WriteCalculixDeck(deck, model, MakeCalculixMesh(model));
   EXPECT_NE(deck.str().find("*HYPERELASTIC, MOONEY-RIVLIN\n"), std::string::npos);
@@ -135,7 +126,7 @@ TEST(Calculix, MooneyRivlinUniaxialCompressionMatchesAnalytic)
     CalculixSettings settings;
     settings.quadratic = quadratic;
     settings.threads = 1;
-    const UniaxialCheck check = CheckUniaxial(GridCells::Hexahedra, settings, MooneyRivlinMaterial(0.45), 0.7);
+    const UniaxialCheck check = CheckUniaxial(GridCells::Hexahedra, settings, test::MooneyRivlinMaterial(0.5, 0.45), 0.7);
     EXPECT_LT(check.displacementError, 1e-4) << (quadratic ? "C3D20R" : "C3D8");
     EXPECT_LT(check.forceError, 1e-4) << (quadratic ? "C3D20R" : "C3D8");
   }
@@ -524,7 +515,7 @@ TEST(CalculixIndentation, MooneyRivlinHexahedraConvergeToReference)
   // law, and the two laws' reference forces differ by more than the finest
   // grid's error, so the law is not ignored on the way.
   BMR_REQUIRE_CALCULIX();
-  const IndentationReference reference = SolveReference(MooneyRivlinMaterial(0.45));
+  const IndentationReference reference = SolveReference(test::MooneyRivlinMaterial(0.5, 0.45));
   CheckConvergence(reference, Discretisation::Hexahedra, 0.02, 0.05);
   const IndentationReference neoHookean = SolveReference(test::MakeMaterial(3000.0, 0.45));
   const double               lawEffect = std::abs(reference.forceZ - neoHookean.forceZ) / std::abs(reference.forceZ);

@@ -31,15 +31,7 @@ namespace
 using test::ErrorMessage;
 using test::Matrix3;
 using test::MooneyRivlin;
-
-Material
-MooneyRivlinMaterial(double share, double poissonRatio = 0.45)
-{
-  Material material = test::MakeMaterial(3000.0, poissonRatio);
-  material.law = MaterialLaw::MooneyRivlin;
-  material.secondInvariantShare = share;
-  return material;
-}
+using test::MooneyRivlinMaterial;
 
 /** Deformation gradients with stretch, shear and rotation, J from 0.7 to 1.3. */
 std::vector<Matrix3>

@@ -215,6 +215,16 @@ MakeMaterial(double youngsModulus, double poissonRatio, double density = 1000.0,
   return m;
 }
 
+/** E = 3 kPa, Mooney-Rivlin with C01 / (C10 + C01) = share. */
+inline Material
+MooneyRivlinMaterial(double share, double poissonRatio = 0.45)
+{
+  Material material = MakeMaterial(3000.0, poissonRatio);
+  material.law = MaterialLaw::MooneyRivlin;
+  material.secondInvariantShare = share;
+  return material;
+}
+
 /** Parenchyma (nu 0.49), a tumour twice as stiff and soft compressible CSF
  *  (10 Pa), as in a brain: a 20 x 20 x 10 mm block on 8 x 8 x 4 grid cells
  *  (times `refinement`), CSF where x < 7 mm, tumour where y > 12 mm, bottom fixed. */

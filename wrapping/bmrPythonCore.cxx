@@ -240,17 +240,7 @@ BindModel(py::module_ & module)
       text << ")";
       return text.str();
     });
-  module.def(
-    "material_laws",
-    [] {
-      std::vector<std::string> names;
-      for (const MaterialLawDescription & law : MaterialLaws())
-      {
-        names.push_back(law.name);
-      }
-      return names;
-    },
-    "The names of the constitutive laws a Material can take.");
+  module.def("material_laws", &MaterialLawNameList, "The names of the constitutive laws a Material can take.");
 
   py::class_<ContactSurface>(module, "Surface",
                              "Triangulated surface (mm): a rigid contact surface, a brain or skull surface, an "

@@ -332,12 +332,7 @@ ParseCurve(const SceneValue & value)
 inline MaterialLaw
 ParseMaterialLawName(const SceneValue & value)
 {
-  std::vector<std::string> names;
-  for (const MaterialLawDescription & description : MaterialLaws())
-  {
-    names.push_back(description.name);
-  }
-  return MaterialLawNamed(value.Choice(names));
+  return MaterialLawNamed(value.Choice(MaterialLawNameList()));
 }
 
 /** "law" (bmrMaterialLaw.h's names; default neo-hookean) and its parameter

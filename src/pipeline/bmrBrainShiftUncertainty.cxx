@@ -186,15 +186,8 @@ void
 SetExposedRegion(BrainModel & model, const BrainModelSettings & settings, const RegistrationImage * image, double radius)
 {
   const auto regions = BrainRegionsFilter(model.pipelineModel, settings, image, radius);
-  try
-  {
-    regions->Update();
-  }
-  catch (const itk::ExceptionObject & exception)
-  {
-    throw Error("uncertainty: the regions for a craniotomy of radius " + std::to_string(radius) +
-                " mm: " + itk::PlainDescription(exception.GetDescription()));
-  }
+  UpdateStage(regions.GetPointer(),
+              "uncertainty: the regions for a craniotomy of radius " + std::to_string(radius) + " mm");
   TakeRegions(model, regions->GetOutput());
 }
 

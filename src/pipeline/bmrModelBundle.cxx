@@ -7,7 +7,6 @@
 #include "itkBiomechanicalImageIO.h"
 #include "itk_zlib.h"
 
-#include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <ctime>
@@ -164,14 +163,15 @@ ReadModelBytes(BinaryReader & in, BrainModel & brain)
     material.density = in.Value<double>();
     if (laws)
     {
-      material.law = in.Value<MaterialLaw>();
-      material.secondInvariantShare = in.Value<double>();
-      if (std::none_of(MaterialLaws().begin(), MaterialLaws().end(),
-                       [&](const MaterialLawDescription & law) { return law.law == material.law; }))
+      try
       {
-        in.Fail("material '" + material.name + "' has an unknown law code " +
-                std::to_string(static_cast<int>(material.law)));
+        material.law = MaterialLawOfCode(in.Value<std::uint8_t>());
       }
+      catch (const Error & error)
+      {
+        in.Fail("material '" + material.name + "': " + error.what());
+      }
+      material.secondInvariantShare = in.Value<double>();
     }
   }
   const std::size_t sets = in.Count(16);

@@ -1,4 +1,5 @@
-// What the pipeline's sources share and nothing else needs: the patient's
+// What the pipeline's sources share and nothing else needs: running a filter
+// of the chain with ITK's exception as the module's error, the patient's
 // superior axis and skull base, the model's regions as the registration makes
 // them (PrepareBrainModel, and the uncertainty ensemble's drawn openings), and
 // text for messages (private to the pipeline, not installed).
@@ -6,6 +7,7 @@
 #define bmrPipelineDetail_h
 
 // ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.
+#include "itkBiomechanicalImageIO.h"
 #include "itkBiomechanicalRegionsFilter.h"
 
 #include "bmrBrainShiftRegistration.h"
@@ -18,6 +20,21 @@
 
 namespace bmr
 {
+
+/** Runs one filter of the chain; its itk::ExceptionObject becomes the bmr::Error every caller translates. */
+template <typename TFilter>
+void
+UpdateStage(TFilter * filter, const std::string & what)
+{
+  try
+  {
+    filter->Update();
+  }
+  catch (const itk::ExceptionObject & exception)
+  {
+    throw Error(what + ": " + itk::PlainDescription(exception.GetDescription()));
+  }
+}
 
 /** An acceleration (mm/s^2) in g, for messages. */
 inline std::string

@@ -6,10 +6,9 @@
 
 // ITK before the core: ITK's bundled Eigen must be seen before the system Eigen.
 #include "itkBiomechanicalDeformationFilter.h"
-#include "itkBiomechanicalImageIO.h"
 #include "itkDisplacementPointSetToBSplineTransformFilter.h"
 
-#include "bmrBrainShiftRegistration.h"
+#include "bmrPipelineDetail.h"
 
 #include <string>
 
@@ -19,21 +18,6 @@ namespace bmr
 using UpdatePointSet = itk::DisplacementPointSetType<3>;
 using UpdateDeformation = itk::BiomechanicalDeformationFilter<UpdatePointSet>;
 using UpdateFitter = itk::DisplacementPointSetToBSplineTransformFilter<UpdatePointSet>;
-
-/** Runs one filter of the chain; its itk::ExceptionObject becomes the bmr::Error every caller translates. */
-template <typename TFilter>
-void
-UpdateStage(TFilter * filter, const char * what)
-{
-  try
-  {
-    filter->Update();
-  }
-  catch (const itk::ExceptionObject & exception)
-  {
-    throw Error(std::string(what) + ": " + itk::PlainDescription(exception.GetDescription()));
-  }
-}
 
 /** The deformation filter of a model with the update's loads, contact,
  *  solver settings and warm start, and the transform fitted to a solve. */

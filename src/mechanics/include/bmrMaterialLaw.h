@@ -53,6 +53,10 @@ MaterialLawNamed(const std::string & name);
 MaterialLaw
 MaterialLawOfCode(double code);
 
+/** {"neo-hookean", "mooney-rivlin"}: the names in code order. */
+std::vector<std::string>
+MaterialLawNameList();
+
 /** "neo-hookean, mooney-rivlin". */
 std::string
 MaterialLawNames();

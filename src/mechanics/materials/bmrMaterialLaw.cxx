@@ -36,13 +36,24 @@ DescribeMaterialLaw(MaterialLaw law)
               " (internal error; please report it).");
 }
 
+std::vector<std::string>
+MaterialLawNameList()
+{
+  std::vector<std::string> names;
+  for (const MaterialLawDescription & description : MaterialLaws())
+  {
+    names.push_back(description.name);
+  }
+  return names;
+}
+
 std::string
 MaterialLawNames()
 {
   std::string names;
-  for (const MaterialLawDescription & description : MaterialLaws())
+  for (const std::string & name : MaterialLawNameList())
   {
-    names += (names.empty() ? "" : ", ") + std::string(description.name);
+    names += (names.empty() ? "" : ", ") + name;
   }
   return names;
 }
