@@ -106,7 +106,6 @@ Solver::Impl::Impl(const Model & m, const SolverSettings & s, const SolverPrecom
     {
       contacts.push_back(std::make_unique<RigidContact>(
         surface, surface.slaveNodeSet.empty() ? boundary : model.NodeSet(surface.slaveNodeSet), model.nodes));
-      contactSlaves.insert(contactSlaves.end(), contacts.back()->SlaveNodes().begin(), contacts.back()->SlaveNodes().end());
       const RigidContact::Penetrations start = contacts.back()->FindPenetrations(zero.data(), 1e-6); // mm
       if (start.count > 0)
       {
@@ -117,8 +116,10 @@ Solver::Impl::Impl(const Model & m, const SolverSettings & s, const SolverPrecom
         initialPenetration += words.str();
       }
     }
-    std::sort(contactSlaves.begin(), contactSlaves.end());
-    contactSlaves.erase(std::unique(contactSlaves.begin(), contactSlaves.end()), contactSlaves.end());
+    if (meshless)
+    {
+      meshlessContact = std::make_unique<MeshlessContact>(contacts, nodeShapes, static_cast<Index>(model.nodes.size()));
+    }
   }
   if (!model.tools.empty())
   {
@@ -273,23 +274,18 @@ void
 Solver::Impl::PrepareEssentialBoundary(const std::vector<double> & mass)
 {
   essential.reset();
+  std::vector<Index> dofs;
   if (meshless && !constrained.empty() && model.meshless.essentialBoundary == EssentialBoundaryImposition::Ebciem)
   {
-    std::vector<Index> dofs;
     for (const ConstrainedDof & c : constrained)
     {
       dofs.push_back(c.dof);
     }
     essential = std::make_unique<EssentialBoundary>(nodeShapes, dofs, mass);
-    essentialSupport.assign(3 * model.nodes.size(), 0);
-    for (const Index dof : dofs)
-    {
-      const Index node = dof / 3;
-      for (Index k = nodeShapes.offsets[node]; k < nodeShapes.offsets[node + 1]; ++k)
-      {
-        essentialSupport[3 * nodeShapes.nodes[k] + dof % 3] = 1;
-      }
-    }
+  }
+  if (meshlessContact)
+  {
+    meshlessContact->SetEssentialBoundary(essential.get(), dofs);
   }
 }
 
@@ -454,12 +450,12 @@ Solver::Impl::Finish(const std::vector<double> & u, const std::vector<char> & in
     }
     result.contactNodes += inContact[n] ? 1 : 0;
   }
-  if (meshless)
+  if (meshlessContact)
   {
     // The contact set of the last iteration may miss nodes that touch within
     // round-off; a free slave node carries no residual at rest, so every slave
     // reports its residual.
-    for (const Index node : contactSlaves)
+    for (const Index node : meshlessContact->SlaveNodes())
     {
       result.reactionForces[node] = Vector3(f[3 * node], f[3 * node + 1], f[3 * node + 2]);
     }

@@ -1,7 +1,8 @@
 // Private to the core: the solver's state shared by its translation units
 // (bmrSolver.cxx: set-up, constraints, the step's checks and the result;
-// bmrSolverContact.cxx: rigid surfaces and tools; bmrSolverIntegrators.cxx:
-// dynamic relaxation and explicit dynamics).
+// bmrSolverContact.cxx: rigid surfaces and tools, with meshless contact in
+// bmrMeshlessContact.cxx; bmrSolverDynamicRelaxation.cxx and
+// bmrSolverExplicitDynamics.cxx: the integrators).
 #ifndef bmrSolverImpl_h
 #define bmrSolverImpl_h
 
@@ -11,6 +12,8 @@
 #include "bmrEssentialBoundary.h"
 #include "bmrForceModel.h"
 #include "bmrMeshless.h"
+#include "bmrMeshlessContact.h"
+#include "bmrSolverReductions.h"
 #include "bmrToolContact.h"
 #include "bmrToolStress.h"
 
@@ -117,37 +120,12 @@ struct Solver::Impl
   SolvePartSeconds                           parts; // of the present solve
 
   // Meshless only: shape functions at the nodes (physical displacement =
-  // Phi u), the EBCIEM projection (built per solve, with that solve's masses),
-  // and the contact slave nodes with a buffer of their physical displacements.
+  // Phi u), the EBCIEM projection (built per solve, with that solve's masses)
+  // and contact on the interpolated positions (null without contact surfaces).
   bool                               meshless = false;
   ShapeFunctionTable                 nodeShapes;
   std::unique_ptr<EssentialBoundary> essential;
-  std::vector<Index>                 contactSlaves;
-  // Meshless contact, per step: interpolated positions projected onto the
-  // surfaces, the slaves penetrating at the last detection with the surface
-  // normals there (per contact), per node in contact its normal and target
-  // n . u, those slaves (ascending) and, per slave, sum_K phi_K^2 (n . M_K^-1 n)
-  // over its movable parameters; the parameters (dofs) that EBCIEM's
-  // constrained rows interpolate.
-  std::vector<double>                projectedBuffer;
-  std::vector<char>                  penetrating;
-  std::vector<Vector3>               slaveNormals;
-  std::vector<Vector3>               contactNormals;
-  std::vector<double>                contactTargets;
-  std::vector<Index>                 activeSlaves;
-  std::vector<double>                activeNorms;
-  std::vector<const std::array<EssentialBoundary::Coupling, 3> *> activeCouplings; // EBCIEM's share of a slave's correction, or null
-  std::vector<char>                  essentialSupport;
-  // Which slaves to interpolate: the parameters at the last detection, the
-  // sum of their largest changes since the solve began, per slave that sum
-  // when it was last interpolated and sum_K |phi_K|, and per node its
-  // clearance from the surfaces there (mm).
-  std::vector<double>                parameterSnapshot;
-  double                             parameterMotion = 0.0;
-  std::vector<double>                slaveMotionMark;
-  std::vector<double>                slaveShapeSum;
-  std::vector<double>                slaveClearance;
-  std::vector<double>                surfaceClearances; // per slave of one contact, from RigidContact::Enforce
+  std::unique_ptr<MeshlessContact>   meshlessContact;
   std::vector<double>                constraintTargets; // EBCIEM, per step
   std::vector<double>                dofTargets;        // per dof, the constrained dofs' targets of the step (fused update)
 
@@ -194,7 +172,6 @@ struct Solver::Impl
                            const std::vector<double> & inverseMass, double alpha, double time);
   /** Appends the tools' poses and last-step loads to their histories. */
   void        RecordTools(std::vector<ToolHistory> & histories) const;
-  void        EnforceMeshlessContact(double * u, std::vector<char> & inContact, const std::vector<double> & inverseMass);
   std::vector<double> PhysicalDisplacements(const std::vector<double> & u) const;
   void        CentralDifferenceStep(const std::vector<double> & u,
                                     const std::vector<double> & uPrevious,
@@ -213,6 +190,20 @@ struct Solver::Impl
   void        CheckHexahedronCorners(const std::vector<double> & u, int step) const;
   SolveResult Finish(const std::vector<double> & u, const std::vector<char> & inContact, double gravityFactor, int steps);
   double      LargestEigenvalueEstimate(const std::vector<double> & mass);
+  /** Dynamic relaxation's masses for its pseudo-time step: scaled to the
+   *  cells' stiffness, then to the largest eigenvalue's estimate. */
+  std::vector<double> RelaxationMasses();
+  /** u and uPrevious at the warm state (if any), with the loads it balances
+   *  (startForces, startTargets); clears those from rest. */
+  /** One step of dynamic relaxation, u -> uNext with the constraints,
+   *  contact and tools (`fused`: constraints only, in the update's pass);
+   *  the increment's size. */
+  IncrementStatistics RelaxationStep(bool fused, const std::vector<double> & u, const std::vector<double> & uPrevious,
+                                     const std::vector<double> & f, const std::vector<double> & inverseMass,
+                                     double alpha, double beta, double gravityFactor,
+                                     const std::vector<double> & curveFactors, std::vector<double> & uNext,
+                                     std::vector<char> & inContact, double toolTime);
+  void        StartFromWarmState(std::vector<double> & u, std::vector<double> & uPrevious, double h);
   SolveResult SolveDynamicRelaxation(const ProgressCallback & progress);
   SolveResult SolveExplicitDynamics(const ProgressCallback & progress, const FrameCallback & frames);
 };
