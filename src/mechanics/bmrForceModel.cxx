@@ -189,6 +189,50 @@ ScheduleCells(const Model & model, CellType type, Index blockSize)
   return schedule;
 }
 
+// One hexahedron's reference geometry: its nodes, shape-function gradients
+// (mean over the cell), the hourglass basis X^T Gamma_base, volume, and the
+// largest eigenvalue of gamma^T gamma for the Flanagan-Belytschko hourglass
+// shape vectors gamma (orthogonal to every linear field).
+struct HexahedronGeometry
+{
+  std::array<Index, 8>        nodes;
+  HexahedronGradients         gradients;
+  Eigen::Matrix<double, 3, 4> hourglassBasis;
+  double                      volume;
+  double                      hourglassNorm;
+};
+
+HexahedronGeometry
+HexahedronGeometryOf(const Model & model, const Cell & cell, const std::set<TriangleKey> & tetFaces)
+{
+  Eigen::Matrix<double, 8, 4> hourglassBase;
+  for (int a = 0; a < 8; ++a)
+  {
+    for (int alpha = 0; alpha < 4; ++alpha)
+    {
+      hourglassBase(a, alpha) = kHourglassBase[a][alpha];
+    }
+  }
+  HexahedronGeometry    geometry;
+  HexahedronCoordinates x;
+  for (int a = 0; a < 8; ++a)
+  {
+    geometry.nodes[a] = cell.nodes[a];
+    x.row(a) = model.nodes[geometry.nodes[a]].transpose();
+  }
+  HexahedronIntegralsResult integrals = HexahedronIntegrals(x);
+  if (!tetFaces.empty())
+  {
+    UseTetrahedronFacesOfHexahedron(geometry.nodes, x, tetFaces, integrals);
+  }
+  geometry.gradients = integrals.b / integrals.volume;
+  geometry.hourglassBasis = x.transpose() * hourglassBase;
+  geometry.volume = integrals.volume;
+  const Eigen::Matrix<double, 8, 4> gamma = hourglassBase - geometry.gradients * geometry.hourglassBasis;
+  geometry.hourglassNorm = (gamma.transpose() * gamma).selfadjointView<Eigen::Lower>().eigenvalues().maxCoeff();
+  return geometry;
+}
+
 } // namespace
 
 FiniteElementForceModel::FiniteElementForceModel(const Model & model, const SolverSettings & settings, int threads)
@@ -221,14 +265,6 @@ FiniteElementForceModel::FiniteElementForceModel(const Model & model, const Solv
   // modulus the bound was made for, to raise it for the collapse barrier below.
   std::vector<double> volumetricWaveNumber(cellCount), waveModulus(cellCount);
 
-  Eigen::Matrix<double, 8, 4> hourglassBase;
-  for (int a = 0; a < 8; ++a)
-  {
-    for (int alpha = 0; alpha < 4; ++alpha)
-    {
-      hourglassBase(a, alpha) = kHourglassBase[a][alpha];
-    }
-  }
   // Per cell, before the transposition to component-major storage below.
   std::vector<double>         tetGradients;      // 12 per tetrahedron
   std::vector<double>         hexGradients;      // 24 per hexahedron
@@ -249,26 +285,11 @@ FiniteElementForceModel::FiniteElementForceModel(const Model & model, const Solv
 
     if (cell.type == CellType::Hexahedron)
     {
-      HexahedronCoordinates x;
-      std::array<Index, 8>  nodes;
-      for (int a = 0; a < 8; ++a)
-      {
-        nodes[a] = cell.nodes[a];
-        x.row(a) = model.nodes[nodes[a]].transpose();
-      }
-      HexahedronIntegralsResult integrals = HexahedronIntegrals(x);
-      if (!tetFaces.empty())
-      {
-        UseTetrahedronFacesOfHexahedron(nodes, x, tetFaces, integrals);
-      }
-      const HexahedronGradients         B = integrals.b / integrals.volume;
-      const Eigen::Matrix<double, 3, 4> XH = x.transpose() * hourglassBase;
-      // Flanagan-Belytschko hourglass shape vectors: orthogonal to every linear field.
-      const Eigen::Matrix<double, 8, 4> gamma = hourglassBase - B * XH;
-      const double                      BB = B.squaredNorm();
-      const double gammaNorm = (gamma.transpose() * gamma).selfadjointView<Eigen::Lower>().eigenvalues().maxCoeff();
-
-      m_HexNodes.push_back(nodes);
+      const HexahedronGeometry hexahedron = HexahedronGeometryOf(model, cell, tetFaces);
+      const HexahedronGradients &         B = hexahedron.gradients;
+      const Eigen::Matrix<double, 3, 4> & XH = hexahedron.hourglassBasis;
+      const double                        BB = B.squaredNorm();
+      m_HexNodes.push_back(hexahedron.nodes);
       for (int a = 0; a < 8; ++a)
       {
         for (int j = 0; j < 3; ++j)
@@ -286,10 +307,10 @@ FiniteElementForceModel::FiniteElementForceModel(const Model & model, const Solv
       // Hourglass modes are (nearly) isochoric bending and twisting modes, so
       // their stiffness scales with the shear modulus; scaling it with
       // lambda + 2 mu (Flanagan-Belytschko) would lock nearly incompressible tissue.
-      const double hourglassStiffness = settings.hourglassCoefficient * 2.0 * mu * integrals.volume * BB / 8.0;
+      const double hourglassStiffness = settings.hourglassCoefficient * 2.0 * mu * hexahedron.volume * BB / 8.0;
       m_HexHourglassStiffness.push_back(hourglassStiffness);
-      m_Volume[k] = integrals.volume;
-      m_WaveBound[k] = 8.0 * BB + hourglassStiffness * gammaNorm / (integrals.volume * pWaveModulus);
+      m_Volume[k] = hexahedron.volume;
+      m_WaveBound[k] = 8.0 * BB + hourglassStiffness * hexahedron.hourglassNorm / (hexahedron.volume * pWaveModulus);
       volumetricWaveNumber[k] = 8.0 * BB;
     }
     else
@@ -330,78 +351,7 @@ FiniteElementForceModel::FiniteElementForceModel(const Model & model, const Solv
   m_TetAveraged.assign(tetCount, 0.0);
   if (UsesAverageNodalPressure())
   {
-    // Only nearly incompressible cells lock, so only they share nodal
-    // pressures; a compressible cell (CSF) keeps its own J, so its volume
-    // change does not load the parenchyma beside it nor the reverse
-    // (Joldes et al. 2010 treat each material apart for the same reason).
-    for (Index t = 0; t < static_cast<Index>(tetCount); ++t)
-    {
-      const Index k = hexCount + t;
-      m_TetAveraged[t] = m_Kappa[k] > kNearlyIncompressible * m_Mu[k] ? 1.0 : 0.0;
-    }
-    m_TetJacobian.assign(tetCount, 1.0);
-    m_NodeTetOffsets.assign(m_NodeCount + 1, 0);
-    for (Index t = 0; t < static_cast<Index>(tetCount); ++t)
-    {
-      for (const Index n : m_TetNodes[t])
-      {
-        m_NodeTetOffsets[n + 1] += m_TetAveraged[t] > 0.0 ? 1 : 0;
-      }
-    }
-    for (Index n = 0; n < m_NodeCount; ++n)
-    {
-      m_NodeTetOffsets[n + 1] += m_NodeTetOffsets[n];
-    }
-    m_NodeTets.resize(m_NodeTetOffsets.back());
-    m_NodeTetWeights.resize(m_NodeTetOffsets.back());
-    std::vector<Index>  fill(m_NodeTetOffsets.begin(), m_NodeTetOffsets.end() - 1);
-    std::vector<double> nodalVolume(m_NodeCount, 0.0);
-    for (Index t = 0; t < static_cast<Index>(tetCount); ++t)
-    {
-      for (const Index n : m_TetNodes[t])
-      {
-        if (m_TetAveraged[t] > 0.0)
-        {
-          m_NodeTets[fill[n]++] = t;
-          nodalVolume[n] += m_Volume[hexCount + t];
-        }
-      }
-    }
-    // One bulk modulus and one pressure per node, so that the volumetric
-    // energy sum_n V_n kappa_n (J_n - 1)^2 / 2 is a potential: averaging J
-    // but keeping each cell's kappa gives a non-symmetric stiffness at
-    // material interfaces (CSF beside parenchyma: 5000 to 1), whose
-    // non-conservative forces sustain oscillations that dynamic relaxation
-    // cannot damp.
-    m_NodalVolume.assign(m_NodeCount, 0.0);
-    m_NodalBulkModulus.assign(m_NodeCount, 0.0);
-    for (Index n = 0; n < m_NodeCount; ++n)
-    {
-      m_NodalVolume[n] = 0.25 * nodalVolume[n];
-      for (Index k = m_NodeTetOffsets[n]; k < m_NodeTetOffsets[n + 1]; ++k)
-      {
-        m_NodeTetWeights[k] = m_Volume[hexCount + m_NodeTets[k]] / nodalVolume[n];
-        m_NodalBulkModulus[n] += m_NodeTetWeights[k] * m_Kappa[hexCount + m_NodeTets[k]];
-      }
-    }
-    // The volumetric stiffness sum_n V_n kappa_n (J_n - 1)^2 is bounded cell
-    // by cell (Cauchy-Schwarz on the weighted mean) with the mean kappa_n of
-    // the cell's nodes in place of its own kappa.
-    for (Index t = 0; t < static_cast<Index>(tetCount); ++t)
-    {
-      const Index k = hexCount + t;
-      if (m_TetAveraged[t] > 0.0)
-      {
-        double kappa = 0.0;
-        for (const Index n : m_TetNodes[t])
-        {
-          kappa += 0.25 * m_NodalBulkModulus[n];
-        }
-        const double factor = std::max(1.0, (kappa + 4.0 * m_Mu[k] / 3.0) / (m_Kappa[k] + 4.0 * m_Mu[k] / 3.0));
-        m_WaveBound[k] *= factor;
-        waveModulus[k] *= factor;
-      }
-    }
+    PrepareAverageNodalPressure(hexCount, waveModulus);
   }
 
   // The bound once the collapse barrier engages, for the masses of dynamic
@@ -416,6 +366,90 @@ FiniteElementForceModel::FiniteElementForceModel(const Model & model, const Solv
     m_CollapseWaveBound[k] = volumetricWaveNumber[k] * std::max(0.0, m_Collapse[k] - waveModulus[k]);
   }
 
+  OrderFirstTouches();
+}
+
+void
+FiniteElementForceModel::PrepareAverageNodalPressure(Index hexCount, std::vector<double> & waveModulus)
+{
+  const std::size_t tetCount = m_TetNodes.size();
+  // Only nearly incompressible cells lock, so only they share nodal
+  // pressures; a compressible cell (CSF) keeps its own J, so its volume
+  // change does not load the parenchyma beside it nor the reverse
+  // (Joldes et al. 2010 treat each material apart for the same reason).
+  for (Index t = 0; t < static_cast<Index>(tetCount); ++t)
+  {
+    const Index k = hexCount + t;
+    m_TetAveraged[t] = m_Kappa[k] > kNearlyIncompressible * m_Mu[k] ? 1.0 : 0.0;
+  }
+  m_TetJacobian.assign(tetCount, 1.0);
+  m_NodeTetOffsets.assign(m_NodeCount + 1, 0);
+  for (Index t = 0; t < static_cast<Index>(tetCount); ++t)
+  {
+    for (const Index n : m_TetNodes[t])
+    {
+      m_NodeTetOffsets[n + 1] += m_TetAveraged[t] > 0.0 ? 1 : 0;
+    }
+  }
+  for (Index n = 0; n < m_NodeCount; ++n)
+  {
+    m_NodeTetOffsets[n + 1] += m_NodeTetOffsets[n];
+  }
+  m_NodeTets.resize(m_NodeTetOffsets.back());
+  m_NodeTetWeights.resize(m_NodeTetOffsets.back());
+  std::vector<Index>  fill(m_NodeTetOffsets.begin(), m_NodeTetOffsets.end() - 1);
+  std::vector<double> nodalVolume(m_NodeCount, 0.0);
+  for (Index t = 0; t < static_cast<Index>(tetCount); ++t)
+  {
+    for (const Index n : m_TetNodes[t])
+    {
+      if (m_TetAveraged[t] > 0.0)
+      {
+        m_NodeTets[fill[n]++] = t;
+        nodalVolume[n] += m_Volume[hexCount + t];
+      }
+    }
+  }
+  // One bulk modulus and one pressure per node, so that the volumetric
+  // energy sum_n V_n kappa_n (J_n - 1)^2 / 2 is a potential: averaging J
+  // but keeping each cell's kappa gives a non-symmetric stiffness at
+  // material interfaces (CSF beside parenchyma: 5000 to 1), whose
+  // non-conservative forces sustain oscillations that dynamic relaxation
+  // cannot damp.
+  m_NodalVolume.assign(m_NodeCount, 0.0);
+  m_NodalBulkModulus.assign(m_NodeCount, 0.0);
+  for (Index n = 0; n < m_NodeCount; ++n)
+  {
+    m_NodalVolume[n] = 0.25 * nodalVolume[n];
+    for (Index k = m_NodeTetOffsets[n]; k < m_NodeTetOffsets[n + 1]; ++k)
+    {
+      m_NodeTetWeights[k] = m_Volume[hexCount + m_NodeTets[k]] / nodalVolume[n];
+      m_NodalBulkModulus[n] += m_NodeTetWeights[k] * m_Kappa[hexCount + m_NodeTets[k]];
+    }
+  }
+  // The volumetric stiffness sum_n V_n kappa_n (J_n - 1)^2 is bounded cell
+  // by cell (Cauchy-Schwarz on the weighted mean) with the mean kappa_n of
+  // the cell's nodes in place of its own kappa.
+  for (Index t = 0; t < static_cast<Index>(tetCount); ++t)
+  {
+    const Index k = hexCount + t;
+    if (m_TetAveraged[t] > 0.0)
+    {
+      double kappa = 0.0;
+      for (const Index n : m_TetNodes[t])
+      {
+        kappa += 0.25 * m_NodalBulkModulus[n];
+      }
+      const double factor = std::max(1.0, (kappa + 4.0 * m_Mu[k] / 3.0) / (m_Kappa[k] + 4.0 * m_Mu[k] / 3.0));
+      m_WaveBound[k] *= factor;
+      waveModulus[k] *= factor;
+    }
+  }
+}
+
+void
+FiniteElementForceModel::OrderFirstTouches()
+{
   std::vector<char> touched(static_cast<std::size_t>(m_NodeCount), 0);
   m_FirstTouchOffsets = { 0 };
   const auto firstTouches = [&](const auto & cellNodes, const std::vector<Index> & blockOffsets) {

@@ -289,6 +289,12 @@ private:
     return out;
   }
 
+  /** ANP: which tetrahedra share nodal pressures (the nearly incompressible
+   *  ones), each node's cells, weights, volume and bulk modulus, and those
+   *  cells' bounds (and `waveModulus`) raised to their nodes' moduli. */
+  void PrepareAverageNodalPressure(Index hexCount, std::vector<double> & waveModulus);
+  /** The nodes each block touches first (ZeroFirstTouched) and those no cell touches. */
+  void OrderFirstTouches();
   void TetrahedronDilatations(Index begin, Index end, const double * u);
   /** Adds the forces of hexahedra [begin, end) to f; returns the first
    *  inverted one or -1. kSecondInvariant: some material is Mooney-Rivlin

@@ -269,6 +269,144 @@ ValidateMeshless(const Model & model)
   }
 }
 
+
+void
+CheckMaterial(const Material & material, std::size_t m)
+{
+  const std::string label = "material " + std::to_string(m) + (material.name.empty() ? "" : " ('" + material.name + "')");
+  if (!(material.youngsModulus > 0.0) || !std::isfinite(material.youngsModulus))
+  {
+    throw Error(label + " has Young's modulus " + std::to_string(material.youngsModulus) +
+                " Pa; it must be positive.");
+  }
+  if (!(material.poissonRatio > -1.0 && material.poissonRatio < 0.5))
+  {
+    throw Error(label + " has Poisson's ratio " + std::to_string(material.poissonRatio) +
+                "; it must lie in (-1, 0.5). Use 0.49 or 0.499 for nearly incompressible tissue.");
+  }
+  if (!(material.density > 0.0) || !std::isfinite(material.density))
+  {
+    throw Error(label + " has density " + std::to_string(material.density) + " kg/m^3; it must be positive.");
+  }
+  if (const std::string problem = MaterialLawProblem(material); !problem.empty())
+  {
+    throw Error(label + " " + problem + ".");
+  }
+}
+
+void
+CheckPrescribedDisplacement(const Model & model, const PrescribedDisplacement & load, std::size_t i)
+{
+  const std::string              label = "prescribed displacement " + std::to_string(i);
+  if (load.nodes.size() != load.displacements.size())
+  {
+    throw Error(label + " has " + std::to_string(load.nodes.size()) + " nodes but " +
+                std::to_string(load.displacements.size()) + " displacement vectors; give one per node.");
+  }
+  CheckNodeIds(model, load.nodes, label);
+  for (std::size_t k = 0; k < load.displacements.size(); ++k)
+  {
+    if (!load.displacements[k].allFinite())
+    {
+      throw Error(label + " has a non-finite displacement at node " + std::to_string(load.nodes[k]) + ".");
+    }
+  }
+  if (load.curve.shape != LoadCurve::Shape::Step && !(load.curve.rampTime > 0.0))
+  {
+    throw Error(label + " has a ramp time of " + std::to_string(load.curve.rampTime) + " s; it must be positive.");
+  }
+}
+
+void
+CheckContactSurface(const Model & model, const ContactSurface & surface)
+{
+  const std::string label = "contact surface '" + surface.name + "'";
+  if (surface.vertices.empty() || surface.triangles.empty())
+  {
+    throw Error(label + " has no triangles. Give a triangulated surface (.stl, .vtk, .obj).");
+  }
+  for (std::size_t t = 0; t < surface.triangles.size(); ++t)
+  {
+    for (const Index v : surface.triangles[t])
+    {
+      if (v < 0 || v >= static_cast<Index>(surface.vertices.size()))
+      {
+        throw Error(label + " triangle " + std::to_string(t) + " refers to vertex " + std::to_string(v) +
+                    ", which does not exist.");
+      }
+    }
+  }
+  if (!surface.slaveNodeSet.empty())
+  {
+    model.NodeSet(surface.slaveNodeSet);
+  }
+}
+
+void
+CheckTool(const Model & model, const RigidTool & tool)
+{
+  const std::string label = "tool '" + tool.name + "'";
+  if (tool.trajectory.empty())
+  {
+    throw Error(label + " has no trajectory. Give at least one pose (time, position, rotation).");
+  }
+  for (std::size_t k = 0; k < tool.trajectory.size(); ++k)
+  {
+    const ToolPose & pose = tool.trajectory[k];
+    if (!std::isfinite(pose.time) || !pose.position.allFinite() || !pose.rotation.allFinite())
+    {
+      throw Error(label + " pose " + std::to_string(k) + " is not finite.");
+    }
+    if (k > 0 && !(pose.time > tool.trajectory[k - 1].time))
+    {
+      throw Error(label + " pose " + std::to_string(k) + " at t = " + std::to_string(pose.time) +
+                  " s does not come after the previous one: the trajectory's times must increase.");
+    }
+  }
+  if (tool.shape == RigidTool::Shape::Surface)
+  {
+    if (tool.surface.vertices.empty() || tool.surface.triangles.empty())
+    {
+      throw Error(label + " has no surface. Give a closed triangulated surface in the tool's frame.");
+    }
+  }
+  else
+  {
+    if (!(tool.radius > 0.0) || !std::isfinite(tool.radius))
+    {
+      throw Error(label + " has radius " + std::to_string(tool.radius) + " mm; it must be positive.");
+    }
+    if (!(tool.length >= 0.0) || !std::isfinite(tool.length))
+    {
+      throw Error(label + " has length " + std::to_string(tool.length) + " mm; it must be 0 or more.");
+    }
+    if (tool.shape == RigidTool::Shape::Spatula && (!(tool.width > 0.0) || !std::isfinite(tool.width)))
+    {
+      throw Error(label + " has width " + std::to_string(tool.width) + " mm; a spatula's must be positive.");
+    }
+  }
+  if (!tool.slaveNodeSet.empty())
+  {
+    model.NodeSet(tool.slaveNodeSet);
+  }
+  if (!(tool.stressRegionRadius >= 0.0) || !std::isfinite(tool.stressRegionRadius))
+  {
+    throw Error(label + " has stress region radius " + std::to_string(tool.stressRegionRadius) +
+                " mm; it must be 0 (none) or positive.");
+  }
+  if (tool.stressRegionRadius > 0.0)
+  {
+    try
+    {
+      tool.stressMaterial.Validate();
+    }
+    catch (const Error & error)
+    {
+      throw Error(label + " stress material: " + error.what());
+    }
+  }
+}
+
 } // namespace
 
 void
@@ -294,26 +432,7 @@ Model::Validate() const
   }
   for (std::size_t m = 0; m < materials.size(); ++m)
   {
-    const Material & material = materials[m];
-    const std::string label = "material " + std::to_string(m) + (material.name.empty() ? "" : " ('" + material.name + "')");
-    if (!(material.youngsModulus > 0.0) || !std::isfinite(material.youngsModulus))
-    {
-      throw Error(label + " has Young's modulus " + std::to_string(material.youngsModulus) +
-                  " Pa; it must be positive.");
-    }
-    if (!(material.poissonRatio > -1.0 && material.poissonRatio < 0.5))
-    {
-      throw Error(label + " has Poisson's ratio " + std::to_string(material.poissonRatio) +
-                  "; it must lie in (-1, 0.5). Use 0.49 or 0.499 for nearly incompressible tissue.");
-    }
-    if (!(material.density > 0.0) || !std::isfinite(material.density))
-    {
-      throw Error(label + " has density " + std::to_string(material.density) + " kg/m^3; it must be positive.");
-    }
-    if (const std::string problem = MaterialLawProblem(material); !problem.empty())
-    {
-      throw Error(label + " " + problem + ".");
-    }
+    CheckMaterial(materials[m], m);
   }
   const double lengthScale = std::max(box.diagonal().norm(), 1e-300);
   for (Index c = 0; c < static_cast<Index>(cells.size()); ++c)
@@ -350,25 +469,7 @@ Model::Validate() const
   }
   for (std::size_t i = 0; i < prescribedDisplacements.size(); ++i)
   {
-    const PrescribedDisplacement & load = prescribedDisplacements[i];
-    const std::string              label = "prescribed displacement " + std::to_string(i);
-    if (load.nodes.size() != load.displacements.size())
-    {
-      throw Error(label + " has " + std::to_string(load.nodes.size()) + " nodes but " +
-                  std::to_string(load.displacements.size()) + " displacement vectors; give one per node.");
-    }
-    CheckNodeIds(*this, load.nodes, label);
-    for (std::size_t k = 0; k < load.displacements.size(); ++k)
-    {
-      if (!load.displacements[k].allFinite())
-      {
-        throw Error(label + " has a non-finite displacement at node " + std::to_string(load.nodes[k]) + ".");
-      }
-    }
-    if (load.curve.shape != LoadCurve::Shape::Step && !(load.curve.rampTime > 0.0))
-    {
-      throw Error(label + " has a ramp time of " + std::to_string(load.curve.rampTime) + " s; it must be positive.");
-    }
+    CheckPrescribedDisplacement(*this, prescribedDisplacements[i], i);
   }
   if (!bodyAcceleration.allFinite())
   {
@@ -382,89 +483,11 @@ Model::Validate() const
   }
   for (const ContactSurface & surface : contactSurfaces)
   {
-    const std::string label = "contact surface '" + surface.name + "'";
-    if (surface.vertices.empty() || surface.triangles.empty())
-    {
-      throw Error(label + " has no triangles. Give a triangulated surface (.stl, .vtk, .obj).");
-    }
-    for (std::size_t t = 0; t < surface.triangles.size(); ++t)
-    {
-      for (const Index v : surface.triangles[t])
-      {
-        if (v < 0 || v >= static_cast<Index>(surface.vertices.size()))
-        {
-          throw Error(label + " triangle " + std::to_string(t) + " refers to vertex " + std::to_string(v) +
-                      ", which does not exist.");
-        }
-      }
-    }
-    if (!surface.slaveNodeSet.empty())
-    {
-      NodeSet(surface.slaveNodeSet);
-    }
+    CheckContactSurface(*this, surface);
   }
   for (const RigidTool & tool : tools)
   {
-    const std::string label = "tool '" + tool.name + "'";
-    if (tool.trajectory.empty())
-    {
-      throw Error(label + " has no trajectory. Give at least one pose (time, position, rotation).");
-    }
-    for (std::size_t k = 0; k < tool.trajectory.size(); ++k)
-    {
-      const ToolPose & pose = tool.trajectory[k];
-      if (!std::isfinite(pose.time) || !pose.position.allFinite() || !pose.rotation.allFinite())
-      {
-        throw Error(label + " pose " + std::to_string(k) + " is not finite.");
-      }
-      if (k > 0 && !(pose.time > tool.trajectory[k - 1].time))
-      {
-        throw Error(label + " pose " + std::to_string(k) + " at t = " + std::to_string(pose.time) +
-                    " s does not come after the previous one: the trajectory's times must increase.");
-      }
-    }
-    if (tool.shape == RigidTool::Shape::Surface)
-    {
-      if (tool.surface.vertices.empty() || tool.surface.triangles.empty())
-      {
-        throw Error(label + " has no surface. Give a closed triangulated surface in the tool's frame.");
-      }
-    }
-    else
-    {
-      if (!(tool.radius > 0.0) || !std::isfinite(tool.radius))
-      {
-        throw Error(label + " has radius " + std::to_string(tool.radius) + " mm; it must be positive.");
-      }
-      if (!(tool.length >= 0.0) || !std::isfinite(tool.length))
-      {
-        throw Error(label + " has length " + std::to_string(tool.length) + " mm; it must be 0 or more.");
-      }
-      if (tool.shape == RigidTool::Shape::Spatula && (!(tool.width > 0.0) || !std::isfinite(tool.width)))
-      {
-        throw Error(label + " has width " + std::to_string(tool.width) + " mm; a spatula's must be positive.");
-      }
-    }
-    if (!tool.slaveNodeSet.empty())
-    {
-      NodeSet(tool.slaveNodeSet);
-    }
-    if (!(tool.stressRegionRadius >= 0.0) || !std::isfinite(tool.stressRegionRadius))
-    {
-      throw Error(label + " has stress region radius " + std::to_string(tool.stressRegionRadius) +
-                  " mm; it must be 0 (none) or positive.");
-    }
-    if (tool.stressRegionRadius > 0.0)
-    {
-      try
-      {
-        tool.stressMaterial.Validate();
-      }
-      catch (const Error & error)
-      {
-        throw Error(label + " stress material: " + error.what());
-      }
-    }
+    CheckTool(*this, tool);
   }
 }
 

@@ -200,7 +200,51 @@ struct MovingLeastSquares::Impl
   // empty string on success, else the reason (the caller names the point).
   template <int M>
   std::string ShapeFunctionsAt(const Vector3 & x, bool withGradients, Scratch & s) const;
+  /** The quadratic basis: where the plain moment matrix is (nearly) singular,
+   *  the round-off residual of linear consistency projected out with the
+   *  linear moment matrix `linear`. */
+  static void RestoreLinearConsistency(const Eigen::Matrix4d & linear, double inverseReference, bool withGradients,
+                                       Scratch & s);
 };
+
+void
+MovingLeastSquares::Impl::RestoreLinearConsistency(const Eigen::Matrix4d & linear, double inverseReference,
+                                                   bool withGradients, Scratch & s)
+{
+  const std::size_t n = s.phi.size();
+  // Where the plain quadratic moment matrix is (nearly) singular, gamma has
+  // components of order 1/mu^2 that cancel in phi only in exact arithmetic;
+  // round-off then breaks linear consistency. Project the round-off residual
+  // of sum phi_I p_I = p(x) (and of its derivatives) out with the linear
+  // moment matrix: zero in exact arithmetic, so phi and its exact
+  // derivatives are unchanged, but consistency holds to round-off.
+  const Eigen::LLT<Eigen::Matrix4d> linearLlt(linear);
+  Eigen::Matrix4d                   residual = Eigen::Matrix4d::Zero();
+  residual(0, 0) = -1.0; // sum phi_I p_I - p(x)
+  for (int i = 0; i < 3; ++i)
+  {
+    residual(1 + i, 1 + i) = -inverseReference; // sum phi_I,i p_I - p_,i
+  }
+  for (std::size_t k = 0; k < n; ++k)
+  {
+    const Eigen::Vector4d p(1.0, s.scaled[k].x(), s.scaled[k].y(), s.scaled[k].z());
+    residual.col(0) += s.phi[k] * p;
+    if (withGradients)
+    {
+      residual.rightCols<3>() += p * s.phiGradients[k].transpose();
+    }
+  }
+  const Eigen::Matrix4d correction = linearLlt.solve(residual); // columns 1..3 unused without gradients
+  for (std::size_t k = 0; k < n; ++k)
+  {
+    const Eigen::Vector4d p(1.0, s.scaled[k].x(), s.scaled[k].y(), s.scaled[k].z());
+    s.phi[k] -= s.weights[k] * correction.col(0).dot(p);
+    if (withGradients)
+    {
+      s.phiGradients[k] -= s.weights[k] * (correction.rightCols<3>().transpose() * p);
+    }
+  }
+}
 
 template <int M>
 std::string
@@ -323,38 +367,7 @@ MovingLeastSquares::Impl::ShapeFunctionsAt(const Vector3 & x, bool withGradients
 
   if constexpr (M == 10)
   {
-    // Where the plain quadratic moment matrix is (nearly) singular, gamma has
-    // components of order 1/mu^2 that cancel in phi only in exact arithmetic;
-    // round-off then breaks linear consistency. Project the round-off residual
-    // of sum phi_I p_I = p(x) (and of its derivatives) out with the linear
-    // moment matrix: zero in exact arithmetic, so phi and its exact
-    // derivatives are unchanged, but consistency holds to round-off.
-    const Eigen::LLT<Eigen::Matrix4d> linearLlt(linear);
-    Eigen::Matrix4d                   residual = Eigen::Matrix4d::Zero();
-    residual(0, 0) = -1.0; // sum phi_I p_I - p(x)
-    for (int i = 0; i < 3; ++i)
-    {
-      residual(1 + i, 1 + i) = -inverseReference; // sum phi_I,i p_I - p_,i
-    }
-    for (std::size_t k = 0; k < n; ++k)
-    {
-      const Eigen::Vector4d p(1.0, s.scaled[k].x(), s.scaled[k].y(), s.scaled[k].z());
-      residual.col(0) += s.phi[k] * p;
-      if (withGradients)
-      {
-        residual.rightCols<3>() += p * s.phiGradients[k].transpose();
-      }
-    }
-    const Eigen::Matrix4d correction = linearLlt.solve(residual); // columns 1..3 unused without gradients
-    for (std::size_t k = 0; k < n; ++k)
-    {
-      const Eigen::Vector4d p(1.0, s.scaled[k].x(), s.scaled[k].y(), s.scaled[k].z());
-      s.phi[k] -= s.weights[k] * correction.col(0).dot(p);
-      if (withGradients)
-      {
-        s.phiGradients[k] -= s.weights[k] * (correction.rightCols<3>().transpose() * p);
-      }
-    }
+    RestoreLinearConsistency(linear, inverseReference, withGradients, s);
   }
 
   for (std::size_t k = 0; k < n; ++k)
