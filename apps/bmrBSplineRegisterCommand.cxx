@@ -153,6 +153,59 @@ ArrayJson(const T & values, unsigned int count)
   return array;
 }
 
+// The report of a registration (without its stage times).
+template <unsigned int Dimension, typename Filter>
+json
+BSplineRegisterReport(const Filter & filter, const BSplineRegisterOptions & options, const ImageFileInfo & movingInfo)
+{
+  const unsigned int levels = static_cast<unsigned int>(options.shrinkFactors.size());
+  json               report;
+  report["fixed"] = options.fixed;
+  report["moving"] = options.moving;
+  report["mask"] = options.mask.empty() ? json(nullptr) : json(options.mask);
+  report["warped"] = options.output;
+  report["transform"] = options.transform.empty() ? json(nullptr) : json(options.transform);
+  report["dimension"] = Dimension;
+  report["warped_pixel_type"] = OutputPixelName(movingInfo.component);
+  std::vector<unsigned int> iterationsPerLevel(levels);
+  for (unsigned int level = 0; level < levels; ++level)
+  {
+    iterationsPerLevel[level] = filter.IterationsAtLevel(level);
+  }
+  report["parameters"] = { { "metric", options.metric },
+                           { "control_point_spacing_mm", options.controlPointSpacing },
+                           { "shrink_factors", options.shrinkFactors },
+                           { "smoothing_sigmas_mm", options.smoothingSigmas },
+                           { "max_iterations_per_level", iterationsPerLevel },
+                           { "refine_mesh_per_level", !options.noMeshRefinement },
+                           { "initialize", options.initialize },
+                           { "translation_stage", !options.noTranslation },
+                           { "histogram_bins", options.histogramBins },
+                           { "sampling_strategy", "random" },
+                           { "sampling_percentage", options.samplingPercentage },
+                           { "max_samples", options.maximumSamples },
+                           { "random_seed", options.seed },
+                           { "metric_work_units", options.metricWorkUnits },
+                           { "threads", itk::MultiThreaderBase::GetGlobalDefaultNumberOfThreads() } };
+  json meshSizes = json::array();
+  for (const auto & meshSize : filter.GetMeshSizesPerLevel())
+  {
+    meshSizes.push_back(ArrayJson(meshSize, Dimension));
+  }
+  report["mesh_sizes"] = meshSizes;
+  report["initial_translation_mm"] = ArrayJson(filter.GetInitialTranslation(), Dimension);
+  report["final_metric"] = filter.GetFinalMetricValue();
+  report["final_metric_meaning"] =
+    options.metric == "correlation" ? "-r^2 (normalised correlation squared, negated)" : "-(Mattes mutual information)";
+  report["iterations"] = { { "per_level", filter.GetIterationsPerLevel() },
+                           { "total", filter.GetIterationsRun() },
+                           { "translation_stage", filter.GetTranslationIterationsRun() } };
+  report["stop_condition"] = filter.GetStopConditionDescription();
+  report["registration_seconds"] = filter.GetElapsedSeconds();
+  report["warp_seconds"] = filter.GetWarpElapsedSeconds();
+  return report;
+}
+
 template <unsigned int Dimension>
 int
 RunBSplineRegister(const BSplineRegisterOptions & options, const ImageFileInfo & movingInfo)
@@ -209,51 +262,7 @@ RunBSplineRegister(const BSplineRegisterOptions & options, const ImageFileInfo &
     }
   });
 
-  const unsigned int levels = static_cast<unsigned int>(options.shrinkFactors.size());
-  json               report;
-  report["fixed"] = options.fixed;
-  report["moving"] = options.moving;
-  report["mask"] = options.mask.empty() ? json(nullptr) : json(options.mask);
-  report["warped"] = options.output;
-  report["transform"] = options.transform.empty() ? json(nullptr) : json(options.transform);
-  report["dimension"] = Dimension;
-  report["warped_pixel_type"] = OutputPixelName(movingInfo.component);
-  std::vector<unsigned int> iterationsPerLevel(levels);
-  for (unsigned int level = 0; level < levels; ++level)
-  {
-    iterationsPerLevel[level] = filter->IterationsAtLevel(level);
-  }
-  report["parameters"] = { { "metric", options.metric },
-                           { "control_point_spacing_mm", options.controlPointSpacing },
-                           { "shrink_factors", options.shrinkFactors },
-                           { "smoothing_sigmas_mm", options.smoothingSigmas },
-                           { "max_iterations_per_level", iterationsPerLevel },
-                           { "refine_mesh_per_level", !options.noMeshRefinement },
-                           { "initialize", options.initialize },
-                           { "translation_stage", !options.noTranslation },
-                           { "histogram_bins", options.histogramBins },
-                           { "sampling_strategy", "random" },
-                           { "sampling_percentage", options.samplingPercentage },
-                           { "max_samples", options.maximumSamples },
-                           { "random_seed", options.seed },
-                           { "metric_work_units", options.metricWorkUnits },
-                           { "threads", itk::MultiThreaderBase::GetGlobalDefaultNumberOfThreads() } };
-  json meshSizes = json::array();
-  for (const auto & meshSize : filter->GetMeshSizesPerLevel())
-  {
-    meshSizes.push_back(ArrayJson(meshSize, Dimension));
-  }
-  report["mesh_sizes"] = meshSizes;
-  report["initial_translation_mm"] = ArrayJson(filter->GetInitialTranslation(), Dimension);
-  report["final_metric"] = filter->GetFinalMetricValue();
-  report["final_metric_meaning"] =
-    options.metric == "correlation" ? "-r^2 (normalised correlation squared, negated)" : "-(Mattes mutual information)";
-  report["iterations"] = { { "per_level", filter->GetIterationsPerLevel() },
-                           { "total", filter->GetIterationsRun() },
-                           { "translation_stage", filter->GetTranslationIterationsRun() } };
-  report["stop_condition"] = filter->GetStopConditionDescription();
-  report["registration_seconds"] = filter->GetElapsedSeconds();
-  report["warp_seconds"] = filter->GetWarpElapsedSeconds();
+  json report = BSplineRegisterReport<Dimension>(*filter, options, movingInfo);
 
   // Everything is computed; a failed write removes what this run wrote.
   std::vector<fs::path> written;

@@ -457,51 +457,50 @@ RunDemo(DemoOptions options)
 
 } // namespace
 
-std::function<int()>
-AddDemoCommand(CLI::App & app)
+namespace
 {
-  auto options = std::make_shared<DemoOptions>();
-  CLI::App * demo = app.add_subcommand(
-    "demo", "Brain-shift registration against a known answer: ground truth from a finer, independent model, "
-            "biomechanical registration from the displaced exposed surface, B-spline baseline, report");
-  demo->add_option("--image", options->image, "Preoperative T1 image")->capture_default_str();
-  demo->add_option("--mask", options->mask, "Its brain mask (voxels > 0)")->capture_default_str();
-  demo->add_option("-o,--output-dir", options->outputDirectory, "Output folder")->capture_default_str();
-  demo->add_option("--craniotomy-centre", options->craniotomyCentre, "Craniotomy centre X Y Z (mm); default -11 43 84")
+// The scene: images, craniotomy, the ground truth's model and physics, the intraoperative image.
+void
+AddDemoSceneOptions(CLI::App & demo, DemoOptions & options)
+{
+  demo.add_option("--image", options.image, "Preoperative T1 image")->capture_default_str();
+  demo.add_option("--mask", options.mask, "Its brain mask (voxels > 0)")->capture_default_str();
+  demo.add_option("-o,--output-dir", options.outputDirectory, "Output folder")->capture_default_str();
+  demo.add_option("--craniotomy-centre", options.craniotomyCentre, "Craniotomy centre X Y Z (mm); default -11 43 84")
     ->expected(3);
-  demo->add_option("--craniotomy-radius", options->truth.craniotomyRadius, "Craniotomy radius (mm)")
+  demo.add_option("--craniotomy-radius", options.truth.craniotomyRadius, "Craniotomy radius (mm)")
     ->capture_default_str();
-  demo->add_option("--shift", options->truth.targetShift, "Largest displacement of the exposed surface (mm)")
+  demo.add_option("--shift", options.truth.targetShift, "Largest displacement of the exposed surface (mm)")
     ->capture_default_str();
-  demo->add_option("--free-rim", options->truth.freeRim,
+  demo.add_option("--free-rim", options.truth.freeRim,
                    "Width of the craniotomy's rim left to the model, as a fraction of its radius (0: the sag is "
                    "pinned at the rim; 0.2 for shifts of 15 mm and more)")
     ->capture_default_str()
     ->check(CLI::Range(0.0, 0.9));
-  demo->add_option("--gravity", options->truth.gravity, "Gravity on the brain (g), towards the brain's centroid")
+  demo.add_option("--gravity", options.truth.gravity, "Gravity on the brain (g), towards the brain's centroid")
     ->capture_default_str();
-  demo->add_option("--poisson-ratio", options->truth.poissonRatio, "Poisson's ratio of parenchyma and tumour")
+  demo.add_option("--poisson-ratio", options.truth.poissonRatio, "Poisson's ratio of parenchyma and tumour")
     ->capture_default_str();
-  demo->add_option("--csf-modulus", options->truth.csfYoungsModulus, "Young's modulus of the CSF class (Pa)")
+  demo.add_option("--csf-modulus", options.truth.csfYoungsModulus, "Young's modulus of the CSF class (Pa)")
     ->capture_default_str();
-  demo->add_option("--csf-poisson-ratio", options->truth.csfPoissonRatio,
+  demo.add_option("--csf-poisson-ratio", options.truth.csfPoissonRatio,
                    "Poisson's ratio of the CSF class (ground truth and registration); 0.49: fluid-like, keeps "
                    "CSF cells from being crushed by shifts of 20 mm and more")
     ->capture_default_str()
     ->check(CLI::Range(0.0, 0.4999));
-  demo->add_option("--tumour-centre", options->tumourCentre, "Synthetic spherical tumour centre X Y Z (mm)")->expected(3);
-  demo->add_option("--tumour-radius", options->truth.tumourRadius, "Tumour radius (mm); 0: none")->capture_default_str();
-  demo->add_option("--tumour-stiffness", options->truth.tumourStiffness, "Tumour Young's modulus / parenchyma's")
+  demo.add_option("--tumour-centre", options.tumourCentre, "Synthetic spherical tumour centre X Y Z (mm)")->expected(3);
+  demo.add_option("--tumour-radius", options.truth.tumourRadius, "Tumour radius (mm); 0: none")->capture_default_str();
+  demo.add_option("--tumour-stiffness", options.truth.tumourStiffness, "Tumour Young's modulus / parenchyma's")
     ->capture_default_str();
-  demo->add_option("--truth-grid", options->truthGrid, "Ground-truth grid: hexahedra, tetrahedra, mixed, meshless")
+  demo.add_option("--truth-grid", options.truthGrid, "Ground-truth grid: hexahedra, tetrahedra, mixed, meshless")
     ->capture_default_str();
-  demo->add_option("--truth-element-size", options->truth.grid.elementSize, "Ground-truth element size (mm)")
+  demo.add_option("--truth-element-size", options.truth.grid.elementSize, "Ground-truth element size (mm)")
     ->capture_default_str();
-  demo->add_option("--truth-max-steps", options->truth.solverMaxSteps,
+  demo.add_option("--truth-max-steps", options.truth.solverMaxSteps,
                    "Dynamic-relaxation steps before the ground-truth solve gives up (0: the solver's 100,000)")
     ->capture_default_str()
     ->check(CLI::NonNegativeNumber);
-  demo->add_option("--truth-skull-closing", options->truth.skullClosing,
+  demo.add_option("--truth-skull-closing", options.truth.skullClosing,
                    "Radius (mm) of the closing of the ground truth's brain before its skull is made: the skull stays "
                    "out of fissures narrower than twice (radius + gap) and its creases are rounded to the radius, as the "
                    "registration's skull_closing; 0: it follows every fold (a meshless truth under gravity at large "
@@ -509,113 +508,132 @@ AddDemoCommand(CLI::App & app)
     ->capture_default_str()
     ->check(CLI::NonNegativeNumber);
   // Physics only the truth has (docs/validation.md, "Truths of another kind"): the registration does not model them.
-  demo->add_option("--truth-csf-drained-depth", options->truth.csfDrainedDepth,
+  demo.add_option("--truth-csf-drained-depth", options.truth.csfDrainedDepth,
                    "The ground truth's CSF drained only to this depth (mm) below the brain's top along gravity: the "
                    "tissue below stays buoyed (weightless); the registration assumes it drained completely")
     ->check(CLI::NonNegativeNumber);
-  demo->add_option("--truth-bonded-depth", options->truth.bondedDepth,
+  demo.add_option("--truth-bonded-depth", options.truth.bondedDepth,
                    "The ground truth's skull-contact nodes deeper than this (mm below the craniotomy's centre along "
                    "gravity) are bonded to the skull instead of sliding; the registration lets them slide")
     ->check(CLI::NonNegativeNumber);
-  demo->add_option("--truth-grey-white-moduli", options->greyWhiteModuli,
+  demo.add_option("--truth-grey-white-moduli", options.greyWhiteModuli,
                    "The ground truth's grey and white matter Young's moduli (Pa) on three tissue classes, e.g. 1390 "
                    "1895 (Budday et al. 2015); the registration has one parenchyma of 3 kPa")
     ->expected(2)
     ->check(CLI::PositiveNumber);
-  demo->add_option("--truth-mooney-rivlin-share", options->truth.mooneyRivlinShare,
+  demo.add_option("--truth-mooney-rivlin-share", options.truth.mooneyRivlinShare,
                    "The ground truth's parenchyma and tumour Mooney-Rivlin with this C01 / (C10 + C01) and the same "
                    "small-strain moduli (docs/materials.md); the registration is neo-Hookean")
     ->check(CLI::Range(0.0, 1.0));
-  demo->add_option("--noise", options->truth.noise, "Noise of the intraoperative image (fraction of the bright level)")
+  demo.add_option("--noise", options.truth.noise, "Noise of the intraoperative image (fraction of the bright level)")
     ->capture_default_str();
-  demo->add_option("--noise-model", options->noiseModel,
+  demo.add_option("--noise-model", options.noiseModel,
                    "Noise of the intraoperative image: gaussian, or rician (magnitude images at low field)")
     ->check(CLI::IsMember({ "gaussian", "rician" }))
     ->capture_default_str();
-  demo->add_option("--intraoperative-contrast", options->contrast,
+  demo.add_option("--intraoperative-contrast", options.contrast,
                    "Contrast of the intraoperative image: preoperative (the T1's), t2 (CSF bright), low-field-t1 "
                    "(half the tissue contrast)")
     ->check(CLI::IsMember({ "preoperative", "t2", "low-field-t1" }))
     ->capture_default_str();
-  demo->add_option("--bias-field", options->truth.biasField,
+  demo.add_option("--bias-field", options.truth.biasField,
                    "Smooth multiplicative bias field of the intraoperative image: largest deviation from 1 (0.2: +-20 %)")
     ->check(CLI::Range(0.0, 0.9))
     ->capture_default_str();
-  demo->add_option("--intraoperative-spacing", options->intraoperativeSpacing,
+  demo.add_option("--intraoperative-spacing", options.intraoperativeSpacing,
                    "Voxel spacing of the intraoperative image X Y Z (mm); default 0.86 0.86 2.5")
     ->expected(3)
     ->check(CLI::PositiveNumber);
-  demo->add_option("--field-of-view", options->truth.fieldOfView,
+  demo.add_option("--field-of-view", options.truth.fieldOfView,
                    "Edge of the intraoperative image's cubic field of view around the craniotomy and beneath it (mm); "
                    "0: the whole head")
     ->check(CLI::NonNegativeNumber)
     ->capture_default_str();
-  demo->add_option("--resection-margin", options->truth.resectionMargin,
+  demo.add_option("--resection-margin", options.truth.resectionMargin,
                    "Resect the tumour and this margin (mm) before the intraoperative image: a fluid-filled cavity whose "
                    "walls sag (needs --tumour-radius)")
     ->check(CLI::NonNegativeNumber);
-  demo->add_option("--variant", options->variants,
+}
+
+// The methods compared: the registrations, their loads, the baselines and peers, the outputs.
+void
+AddDemoMethodOptions(CLI::App & demo, DemoOptions & options)
+{
+  demo.add_option("--variant", options.variants,
                    "Registration grid KIND:SIZE (hexahedra, tetrahedra, mixed, meshless); repeat for several; none: "
                    "the intensity registrations only")
     ->capture_default_str();
-  demo->add_option("--truth-check", options->truthCheck,
+  demo.add_option("--truth-check", options.truthCheck,
                    "Solve the ground truth a second time on this grid KIND:SIZE (e.g. tetrahedra:5 beside the "
                    "hexahedral truth) and report how far the two truths differ (ground_truth_check)");
-  demo->add_option("--load", options->load,
+  demo.add_option("--load", options.load,
                    "What the registration is given: the displaced exposed surface, its tracked points, or the "
                    "contacts of an 8 x 8 electrode grid found in a simulated CT")
     ->check(CLI::IsMember({ "surface", "points", "electrodes" }))
     ->capture_default_str();
-  demo->add_option("--surface-match", options->surfaceMatch,
+  demo.add_option("--surface-match", options.surfaceMatch,
                    "With --load surface: match the displaced surface by closest points, or along gravity (the "
                    "direction the head's position gives, in which the brain sinks)")
     ->check(CLI::IsMember({ "closest", "gravity" }))
     ->capture_default_str();
-  demo->add_option("--registration-gravity", options->registrationGravity,
+  demo.add_option("--registration-gravity", options.registrationGravity,
                    "Gravity in the registration's model (g, along the ground truth's direction); 0: surface only")
     ->capture_default_str();
-  demo->add_option("--gravity-fit-candidates", options->gravityFitCandidates,
+  demo.add_option("--gravity-fit-candidates", options.gravityFitCandidates,
                    "Fit the registration's gravity to the intraoperative image: this many sizes from 0 to "
                    "--registration-gravity solved, the best match (mutual information) kept (3 or more); 0: as given")
     ->check(CLI::NonNegativeNumber)
     ->needs("--registration-gravity");
-  options->uncertainty.Add(demo); // each row then also reports how well the map bounds its true error
-  demo->add_flag("--no-baseline", options->noBaseline, "Skip the B-spline intensity registration");
-  demo->add_flag("--no-registration-resection", options->noRegistrationResection,
+  options.uncertainty.Add(&demo); // each row then also reports how well the map bounds its true error
+  demo.add_flag("--no-baseline", options.noBaseline, "Skip the B-spline intensity registration");
+  demo.add_flag("--no-registration-resection", options.noRegistrationResection,
                  "On a scene with a resection, do not give the biomechanical registration the planned resection "
                  "(the tumour and its margin, filled with fluid in its model)");
-  demo->add_flag("--elastix", options->elastix,
+  demo.add_flag("--elastix", options.elastix,
                  "Also register with elastix (Debian's elastix; affine then B-spline, Mattes mutual information; "
                  "the parameter files in examples/elastix)");
-  demo->add_option("--elastix-parameters", options->elastixParameters,
+  demo.add_option("--elastix-parameters", options.elastixParameters,
                    "elastix parameter files, in order (default: the module's affine.txt and bspline.txt)")
     ->check(CLI::ExistingFile);
   // A peer registration run elsewhere (examples/validation_peers.py: ANTs SyN, itk-elastix), scored like the others.
   CLI::Option * peerField =
-    demo->add_option("--peer-field", options->peerField,
+    demo.add_option("--peer-field", options.peerField,
                      "Also score a peer registration of the --truth-from scene run elsewhere: its displacement "
                      "field over the preoperative grid (3-vector image: the intraoperative point's preoperative "
                      "point minus the point, LPS mm)")
       ->check(CLI::ExistingFile);
   CLI::Option * peerWarped =
-    demo->add_option("--peer-warped", options->peerWarped,
+    demo.add_option("--peer-warped", options.peerWarped,
                      "The peer's preoperative image warped onto the intraoperative grid (its edges are measured)")
       ->check(CLI::ExistingFile);
-  CLI::Option * peerName = demo->add_option("--peer-name", options->peerName, "The peer's name in the report");
-  demo->add_option("--peer-seconds", options->peerSeconds, "The peer's registration time (s)")->needs(peerField);
-  demo->add_option("--peer-details", options->peerDetails, "JSON object describing the peer (tool, version, parameters)")
+  CLI::Option * peerName = demo.add_option("--peer-name", options.peerName, "The peer's name in the report");
+  demo.add_option("--peer-seconds", options.peerSeconds, "The peer's registration time (s)")->needs(peerField);
+  demo.add_option("--peer-details", options.peerDetails, "JSON object describing the peer (tool, version, parameters)")
     ->check(CLI::ExistingFile)
     ->needs(peerField);
   peerField->needs(peerWarped)->needs(peerName);
   peerWarped->needs(peerField);
   peerName->needs(peerField);
-  demo->add_option("--baseline-shrink-factors", options->baselineShrinkFactors, "Baseline pyramid")
+  demo.add_option("--baseline-shrink-factors", options.baselineShrinkFactors, "Baseline pyramid")
     ->capture_default_str();
-  demo->add_option("--baseline-iterations", options->baselineIterations, "Baseline iterations per level (0: default)")
+  demo.add_option("--baseline-iterations", options.baselineIterations, "Baseline iterations per level (0: default)")
     ->capture_default_str();
-  demo->add_option("--overlays", options->overlays, "Edge-overlay PNGs per method")->capture_default_str();
-  demo->add_option("--threads", options->truth.threads, "Worker threads (0: all)");
-  demo->add_flag("--quiet,-q", options->quiet, "Print nothing but warnings and errors");
+  demo.add_option("--overlays", options.overlays, "Edge-overlay PNGs per method")->capture_default_str();
+  demo.add_option("--threads", options.truth.threads, "Worker threads (0: all)");
+  demo.add_flag("--quiet,-q", options.quiet, "Print nothing but warnings and errors");
+}
+
+} // namespace
+
+std::function<int()>
+AddDemoCommand(CLI::App & app)
+{
+  auto options = std::make_shared<DemoOptions>();
+  CLI::App * demo = app.add_subcommand(
+    "demo", "Brain-shift registration against a known answer: ground truth from a finer, independent model, "
+            "biomechanical registration from the displaced exposed surface, B-spline baseline, report");
+  AddDemoSceneOptions(*demo, *options);
+  AddDemoMethodOptions(*demo, *options);
   // A study solves each scene's truth once and registers it in separate jobs (examples/validation).
   CLI::Option * truthOnly =
     demo->add_flag("--truth-only", options->truthOnly,
@@ -626,7 +644,7 @@ AddDemoCommand(CLI::App & app)
                      "Read the ground truth that --truth-only wrote into this folder instead of solving it; the "
                      "scene (images, craniotomy, materials, intraoperative image) is the folder's")
       ->check(CLI::ExistingDirectory);
-  peerField->needs(truthFrom);
+  demo->get_option("--peer-field")->needs(truthFrom);
   for (const char * scene :
        { "--image", "--mask", "--craniotomy-centre", "--craniotomy-radius", "--shift", "--free-rim", "--gravity",
          "--poisson-ratio", "--csf-modulus", "--csf-poisson-ratio", "--tumour-centre", "--tumour-radius",

@@ -461,51 +461,17 @@ struct ModelOptions
   bool                quiet = false;
 };
 
-int
-RunModel(const ModelOptions & options)
+// The scene `biomech solve` runs on the model's folder.
+json
+ModelScene(const BrainModel & brain, const BrainModelSettings & settings, const std::string & image)
 {
-  const fs::path outputDirectory(options.outputDirectory);
-  StepTimer      timer(!options.quiet);
-  json           report;
-  const PatientModelOptions & patient = options.patient;
-  const BrainModelSettings    settings = patient.Settings();
-  report["image"] = patient.image;
-  report["mask"] = patient.mask.empty() ? "atlas: " + settings.atlas.image : patient.mask;
-  if (!patient.skullSurface.empty())
-  {
-    report["skull_surface"] = patient.skullSurface;
-  }
-
-  // Everything is computed before anything is written, so a failure leaves no partial model.
-  const PatientModelOptions::Inputs inputs = timer.Run("read", [&] { return patient.Read(); });
-  if (options.measurements.Given() && !patient.regions.HasCraniotomy())
-  {
-    throw Error("intraoperative measurements need the craniotomy region they belong to: give --craniotomy-centre "
-                "and --craniotomy-radius, or --craniotomy-mask");
-  }
-  const std::optional<IntraoperativeData> measurements = options.measurements.Data();
-  const BrainModel brain = BuildBrainModel(inputs.image, inputs.brainMask, inputs.tumourMask, inputs.skullSurface,
-                                           measurements ? &*measurements : nullptr, settings, timer);
   const Model &                  model = brain.model;
-  const std::vector<Index> &     exposed = brain.exposedNodes;
   const PrescribedDisplacement & load = brain.load;
-  const BrainSurfaces &          surfaces = brain.surfaces;
-  const std::vector<Index> &     surfaceNodes = model.NodeSet("surface");
-  std::vector<std::string>       warnings = brain.warnings;
-  report["classification"] = { { "classes", settings.classifier.classes },
-                               { "centroids", brain.classificationFit.centroids },
-                               { "iterations", brain.classificationFit.iterations },
-                               { "converged", brain.classificationFit.converged } };
-  if (measurements)
-  {
-    report["loads"] = LoadReportJson(brain.loadReport);
-  }
-
-  // The scene `biomech solve` runs.
+  const std::vector<Index> &     exposed = brain.exposedNodes;
   const bool meshless = model.discretization == Discretization::Meshless;
   json       scene;
   std::ostringstream description;
-  description << "Brain model of " << fs::path(patient.image).filename().string() << " made by biomech model ("
+  description << "Brain model of " << fs::path(image).filename().string() << " made by biomech model ("
               << ImageGridKindName(settings.grid.kind) << ", " << settings.grid.elementSize << " mm)";
   scene["description"] = description.str();
   scene["mesh"] = "model.vtu";
@@ -553,6 +519,50 @@ RunModel(const ModelOptions & options)
   // reached by CGAL tetrahedra (slivers, soft CSF) that stall near 0.001 mm with contact.
   scene["solver"] = { { "integrator", "dynamic_relaxation" }, { "tolerance", 0.01 } };
   scene["output"] = { { "vtu", "brain-result.vtu" }, { "report", "brain-report.json" } };
+  return scene;
+}
+
+int
+RunModel(const ModelOptions & options)
+{
+  const fs::path outputDirectory(options.outputDirectory);
+  StepTimer      timer(!options.quiet);
+  json           report;
+  const PatientModelOptions & patient = options.patient;
+  const BrainModelSettings    settings = patient.Settings();
+  report["image"] = patient.image;
+  report["mask"] = patient.mask.empty() ? "atlas: " + settings.atlas.image : patient.mask;
+  if (!patient.skullSurface.empty())
+  {
+    report["skull_surface"] = patient.skullSurface;
+  }
+
+  // Everything is computed before anything is written, so a failure leaves no partial model.
+  const PatientModelOptions::Inputs inputs = timer.Run("read", [&] { return patient.Read(); });
+  if (options.measurements.Given() && !patient.regions.HasCraniotomy())
+  {
+    throw Error("intraoperative measurements need the craniotomy region they belong to: give --craniotomy-centre "
+                "and --craniotomy-radius, or --craniotomy-mask");
+  }
+  const std::optional<IntraoperativeData> measurements = options.measurements.Data();
+  const BrainModel brain = BuildBrainModel(inputs.image, inputs.brainMask, inputs.tumourMask, inputs.skullSurface,
+                                           measurements ? &*measurements : nullptr, settings, timer);
+  const Model &                  model = brain.model;
+  const std::vector<Index> &     exposed = brain.exposedNodes;
+  const PrescribedDisplacement & load = brain.load;
+  const BrainSurfaces &          surfaces = brain.surfaces;
+  const std::vector<Index> &     surfaceNodes = model.NodeSet("surface");
+  std::vector<std::string>       warnings = brain.warnings;
+  report["classification"] = { { "classes", settings.classifier.classes },
+                               { "centroids", brain.classificationFit.centroids },
+                               { "iterations", brain.classificationFit.iterations },
+                               { "converged", brain.classificationFit.converged } };
+  if (measurements)
+  {
+    report["loads"] = LoadReportJson(brain.loadReport);
+  }
+
+  const json scene = ModelScene(brain, settings, patient.image);
 
   const ModelCounts counts = CountModel(model);
   report["grid"] = { { "kind", ImageGridKindName(settings.grid.kind) },
@@ -588,7 +598,7 @@ RunModel(const ModelOptions & options)
     fs::remove(outputDirectory / "scene.json", ignored);
     fs::remove(outputDirectory / "model-report.json", ignored);
     WriteMesh((outputDirectory / "model.vtu").string(), model);
-    if (meshless)
+    if (model.discretization == Discretization::Meshless)
     {
       WriteIntegrationPoints((outputDirectory / "integration-points.vtu").string(), model);
     }

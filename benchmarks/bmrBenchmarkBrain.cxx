@@ -323,27 +323,12 @@ RunBrainCase(double spacing, const std::string & kind, int threads, int throughp
   return out;
 }
 
-void
-BrainSection(const Options & options, const std::string & self, std::ostream & md, std::vector<std::string> & summary)
+namespace
 {
-  int          nodes = 0;
-  const double spacing = options.quick ? 6.0 : BrainSpacing(kBrainTargetNodes, nodes);
-  const int    steps = options.quick ? 50 : 300;
-  const int    repeats = options.quick ? 2 : 5;
-  // Rounds: the cases run in turn, `rounds` times; each case's figures are the
-  // median over the rounds (run-to-run variation on a shared machine is large).
-  const int         rounds = options.quick ? 1 : options.rounds;
-  std::vector<Json> brain = RunBrainCases(options, self, spacing, steps, repeats, rounds);
-
-  const Json & first = brain.front();
-  md << "## Brain-sized model\n\n"
-     << "Ellipsoid with semi-axes (70, 85, 60) mm on a regular grid of spacing " << Fixed(spacing, 3)
-     << " mm (chosen for about 33,000 nodes; the demo scenes in examples/scenes use 3.6 mm), E = 3000 Pa, "
-     << "nu = 0.49, density 1000 kg/m^3. Surface nodes with z <= " << kBrainBaseZ
-     << " mm are held; surface nodes within " << kCraniotomyRadius
-     << " mm of the top (0, 0, 60) are pushed 10 mm in (-z): " << first["craniotomy_nodes"].get<int>()
-     << " craniotomy nodes, " << first["base_nodes"].get<int>() << " base nodes.\n\n";
-
+// Force-kernel throughput per element kind and thread count, and its targets.
+void
+BrainThroughput(const std::vector<Json> & brain, std::ostream & md, std::vector<std::string> & summary)
+{
   // (i) throughput
   md << "### Force-kernel throughput\n\n"
      << "Explicit dynamics (central difference) for a fixed number of steps at 0.8 x the critical time step, "
@@ -433,7 +418,12 @@ BrainSection(const Options & options, const std::string & self, std::ostream & m
       }
     }
   }
+}
 
+// The kernels' streamed bytes against STREAM's triad.
+void
+BrainRoofline(const std::vector<Json> & brain, const std::string & self, std::ostream & md)
+{
   // (i b) the memory roofline: the kernels' streamed bytes against STREAM's triad
   std::map<int, double> triad;
   for (const Json & r : brain)
@@ -482,7 +472,12 @@ BrainSection(const Options & options, const std::string & self, std::ostream & m
                          "quarter less traffic) was 2-3 % faster (docs/thread-scaling.md, 2026-11-26), since its "
                          "node-indexed gathers wait on latency, not on the stream.")
      << "\n";
+}
 
+// Time to dynamic-relaxation convergence, finite elements.
+void
+BrainRelaxation(const std::vector<Json> & brain, std::ostream & md, std::vector<std::string> & summary)
+{
   // (ii) dynamic relaxation
   md << "\n### Time to dynamic-relaxation convergence (tolerance " << kBrainTolerance << " mm)\n\n"
      << "Adaptive dynamic relaxation from rest to an estimated max nodal error below 0.01 mm. \"Solve\" is the "
@@ -524,6 +519,12 @@ BrainSection(const Options & options, const std::string & self, std::ostream & m
                       Fixed(solve, 2) + " s (+ " + Fixed(r["setup_seconds"].get<double>(), 2) + " s setup) | " +
                       (met ? "met" : "**MISSED**") + " |");
   }
+}
+
+// Meshless: precomputation split, tables, and the total beside TLED.
+void
+BrainMeshless(const std::vector<Json> & brain, std::ostream & md, std::vector<std::string> & summary)
+{
   // (iii) meshless: precomputation split, tables, and the total beside TLED.
   bool meshlessHeader = false;
   for (const Json & r : brain)
@@ -609,7 +610,12 @@ BrainSection(const Options & options, const std::string & self, std::ostream & m
       }
     }
   }
+}
 
+// The published reference, determinism across thread counts and rounds, the rounds' spread, the notes.
+void
+BrainNotes(const std::vector<Json> & brain, const Options & options, std::ostream & md)
+{
   md << "\nPublished reference: Miller et al. (TLED with dynamic relaxation) report " << kMillerDesktopSeconds
      << " s for about 100,000 DOF on a desktop CPU and under " << kMillerGpuSeconds << " s on a GPU.\n\n";
 
@@ -653,6 +659,36 @@ BrainSection(const Options & options, const std::string & self, std::ostream & m
      << "kept busy while the case ran (/proc/stat minus this process's CPU time); above about 0.2 the timings, "
      << "the 2-thread ones most, are pessimistic. Each case waited up to " << options.waitQuiet
      << " s for a quiet machine before it started.\n\n";
+}
+
+} // namespace
+
+void
+BrainSection(const Options & options, const std::string & self, std::ostream & md, std::vector<std::string> & summary)
+{
+  int          nodes = 0;
+  const double spacing = options.quick ? 6.0 : BrainSpacing(kBrainTargetNodes, nodes);
+  const int    steps = options.quick ? 50 : 300;
+  const int    repeats = options.quick ? 2 : 5;
+  // Rounds: the cases run in turn, `rounds` times; each case's figures are the
+  // median over the rounds (run-to-run variation on a shared machine is large).
+  const int         rounds = options.quick ? 1 : options.rounds;
+  std::vector<Json> brain = RunBrainCases(options, self, spacing, steps, repeats, rounds);
+
+  const Json & first = brain.front();
+  md << "## Brain-sized model\n\n"
+     << "Ellipsoid with semi-axes (70, 85, 60) mm on a regular grid of spacing " << Fixed(spacing, 3)
+     << " mm (chosen for about 33,000 nodes; the demo scenes in examples/scenes use 3.6 mm), E = 3000 Pa, "
+     << "nu = 0.49, density 1000 kg/m^3. Surface nodes with z <= " << kBrainBaseZ
+     << " mm are held; surface nodes within " << kCraniotomyRadius
+     << " mm of the top (0, 0, 60) are pushed 10 mm in (-z): " << first["craniotomy_nodes"].get<int>()
+     << " craniotomy nodes, " << first["base_nodes"].get<int>() << " base nodes.\n\n";
+
+  BrainThroughput(brain, md, summary);
+  BrainRoofline(brain, self, md);
+  BrainRelaxation(brain, md, summary);
+  BrainMeshless(brain, md, summary);
+  BrainNotes(brain, options, md);
 }
 
 } // namespace benchmark

@@ -217,33 +217,12 @@ Score(ImplicitRow & row, const Json & reference)
   row.maxError = comparison.maxError;
 }
 
-} // namespace
-
-void
-ImplicitSection(const Options & options, const std::string & self, std::ostream & md, std::vector<std::string> & summary)
+// Every solver's rows, each timed over the rounds and scored against the
+// reference; the other processes' load while they ran into `otherCores`.
+std::vector<ImplicitRow>
+MeasureImplicitRows(const Options & options, const std::string & self, double bodySpacing, int threads,
+                    const std::vector<int> & compared, const Json & reference, double & otherCores)
 {
-  md << "## Side by side with an implicit solver (CalculiX, brain-like case)\n\n";
-  const std::string ccx = bmr::FindCalculix();
-  if (ccx.empty())
-  {
-    md << "Not measured: CalculiX (`ccx`) was not found. Install Debian's calculix-ccx.\n\n";
-    return;
-  }
-  const bmr::BrainSagProblem problem;
-  const double               bodySpacing = options.quick ? kQuickBodySpacing : kBodySpacing;
-  const int                  threads = *std::max_element(options.threads.begin(), options.threads.end());
-  const std::vector<int>     compared{ 1, kReferenceSubdivisions };
-
-  Log("brain-like case: CalculiX C3D10 reference, quarter model, body spacing " + Fixed(bodySpacing, 1) + " mm / " +
-      std::to_string(kReferenceSubdivisions) + "...");
-  const Json reference = Reference(self, options.referenceCache, bodySpacing, kReferenceSubdivisions, threads);
-  Log("  " + Fixed(reference["seconds"].get<double>(), 1) + " s" + (reference["cached"].get<bool>() ? " (from the cache)" : ""));
-  Log("  self-check: the same at " + Fixed(bodySpacing, 1) + " mm...");
-  ImplicitRow selfCheck;
-  selfCheck.kind = "c3d10-quarter";
-  selfCheck.result = Reference(self, options.referenceCache, bodySpacing, 1, threads);
-  Score(selfCheck, reference);
-
   std::vector<ImplicitRow> rows;
   WaitForQuiet(options.waitQuiet);
   ContentionMeter meter;
@@ -287,61 +266,17 @@ ImplicitSection(const Options & options, const std::string & self, std::ostream 
       rows.push_back(row);
     }
   }
-  const double otherCores = meter.OtherCores();
+  otherCores = meter.OtherCores();
+  return rows;
+}
 
+// The conclusion, computed: ANP against C3D4 on each mesh (the target on the
+// finest), at equal or better accuracy, meshless beside ANP, and C3D10.
+void
+ImplicitConclusions(const std::vector<ImplicitRow> & rows, const std::vector<int> & compared, double bodySpacing,
+                    int threads, std::ostream & md, std::vector<std::string> & summary)
+{
   const double h = bodySpacing / kReferenceSubdivisions;
-  md << "The brain-sized ellipsoid (semi-axes 70, 85, 60 mm) as the grid cells of " << Fixed(bodySpacing, 1)
-     << " mm whose centre lies inside, each split into 1 or " << kReferenceSubdivisions << "^3 cells of 6 tetrahedra "
-     << "(the meshes nest and bound the same body); the surface at or below the body grid's node plane nearest z = " << problem.baseZ << " mm held; the surface "
-     << "nodes within " << problem.craniotomyRadius << " mm of the top sag by " << problem.depth
-     << " (1 - (r / " << problem.craniotomyRadius << ")^2) mm (all components prescribed); neo-Hookean E = "
-     << problem.material.youngsModulus << " Pa, nu = " << problem.material.poissonRatio << ". "
-     << "ANP: adaptive dynamic relaxation to an estimated error of " << kTolerance << " mm, and of";
-  for (const double tolerance : kLooserTolerances)
-  {
-    md << (tolerance == kLooserTolerances[0] ? " " : ", ") << Fixed(tolerance, 2);
-  }
-  md << " mm for the time to a solution as accurate as CalculiX's (the cheapest of them at least as accurate as "
-     << "C3D4, in RMS and maximum error, is what the target compares); time = setup + solve. Meshless (MTLED): the "
-     << "tetrahedra's nodes and body made meshless with the default settings (as the brain-sized meshless case), "
-     << "the same dynamic relaxation to " << kTolerance << " mm; its setup includes MakeMeshlessFromCells. "
-     << "CalculiX " << ccx << ": static step, NLGEOM, the whole load as the first increment (CalculiX cuts it back "
-     << "when Newton diverges), its default convergence criteria (residual " << kCalculixResidualTolerance
-     << " of the mean force, correction " << kCalculixCorrectionTolerance << "), SPOOLES; time = the ccx process "
-     << "(reading the deck, solving, writing results; writing the deck is not counted). Both with " << threads
-     << " threads, each solve in its own process; peak memory is that process's (ANP) or ccx's (ru_maxrss). "
-     << "Medians of " << options.rounds << " rounds (C3D10: 1 run). Other processes kept " << Fixed(otherCores, 2)
-     << " cores busy on average.\n\n"
-     << "Reference: CalculiX C3D10 on the quarter model (x, y >= 0, symmetry conditions) of the " << Fixed(h, 1)
-     << " mm mesh, Newton to a residual of 1e-5 of the mean force: " << reference["dof"].get<int>() << " DOF, "
-     << Fixed(reference["seconds"].get<double>(), 1) << " s"
-     << (reference["cached"].get<bool>() ? " when it was computed (read from --reference-cache)" : "") << ", "
-     << reference["increments"].get<int>() << " increments, " << reference["iterations"].get<int>()
-     << " Newton iterations, peak memory " << Fixed(reference["peak_mib"].get<double>(), 0) << " MiB. "
-     << "Self-check: the same on the " << Fixed(bodySpacing, 1) << " mm mesh differs from it by "
-     << Fixed(selfCheck.rmsError, 3) << " mm RMS and " << Fixed(selfCheck.maxError, 3)
-     << " mm at most over its nodes, a bound on the coarser reference's own error (the finer one's is smaller).\n\n"
-     << "Errors are |u - u_ref| at every node of the solved mesh (each is a reference node, after reflection), in mm "
-     << "(the sag is " << problem.depth << " mm).\n\n"
-     << "| Solver | h mm | Nodes | Elements | DOF | Time s (median) | rounds min..max | DR steps / Newton iterations | "
-        "RMS error mm | Max error mm | Peak memory MiB |\n"
-     << "|---|---|---|---|---|---|---|---|---|---|---|\n";
-  for (const ImplicitRow & row : rows)
-  {
-    const Json & r = row.result;
-    const auto   range = std::minmax_element(row.seconds.begin(), row.seconds.end());
-    md << "| " << SolverLabel(row.kind, row.tolerance) << " | " << Fixed(bodySpacing / row.subdivisions, 1) << " | "
-       << r["nodes"].get<int>() << " | " << r["elements"].get<int>() << " | " << r["dof"].get<int>() << " | "
-       << Fixed(Median(row.seconds), 2) << " | " << Fixed(*range.first, 2) << ".." << Fixed(*range.second, 2) << " | "
-       << (row.kind == "anp" || row.kind == "mtled" ? std::to_string(r["steps"].get<int>()) +
-                                 (r["converged"].get<bool>() ? "" : " (**not converged**)")
-                             : std::to_string(r["iterations"].get<int>()) + " (" +
-                                 std::to_string(r["increments"].get<int>()) + " increments)")
-       << " | " << Fixed(row.rmsError, 3) << " | " << Fixed(row.maxError, 3) << " | "
-       << Fixed(r["peak_mib"].get<double>(), 0) << " |\n";
-  }
-
-  // The conclusion, computed: ANP against C3D4 on each mesh; the target on the finest.
   md << "\n";
   // ANP rows are found at the default tolerance.
   const auto find = [&](const std::string & kind, int subdivisions) -> const ImplicitRow * {
@@ -461,6 +396,92 @@ ImplicitSection(const Options & options, const std::string & self, std::ostream 
        << " times its time.\n";
   }
   md << "\n";
+}
+
+} // namespace
+
+void
+ImplicitSection(const Options & options, const std::string & self, std::ostream & md, std::vector<std::string> & summary)
+{
+  md << "## Side by side with an implicit solver (CalculiX, brain-like case)\n\n";
+  const std::string ccx = bmr::FindCalculix();
+  if (ccx.empty())
+  {
+    md << "Not measured: CalculiX (`ccx`) was not found. Install Debian's calculix-ccx.\n\n";
+    return;
+  }
+  const bmr::BrainSagProblem problem;
+  const double               bodySpacing = options.quick ? kQuickBodySpacing : kBodySpacing;
+  const int                  threads = *std::max_element(options.threads.begin(), options.threads.end());
+  const std::vector<int>     compared{ 1, kReferenceSubdivisions };
+
+  Log("brain-like case: CalculiX C3D10 reference, quarter model, body spacing " + Fixed(bodySpacing, 1) + " mm / " +
+      std::to_string(kReferenceSubdivisions) + "...");
+  const Json reference = Reference(self, options.referenceCache, bodySpacing, kReferenceSubdivisions, threads);
+  Log("  " + Fixed(reference["seconds"].get<double>(), 1) + " s" + (reference["cached"].get<bool>() ? " (from the cache)" : ""));
+  Log("  self-check: the same at " + Fixed(bodySpacing, 1) + " mm...");
+  ImplicitRow selfCheck;
+  selfCheck.kind = "c3d10-quarter";
+  selfCheck.result = Reference(self, options.referenceCache, bodySpacing, 1, threads);
+  Score(selfCheck, reference);
+
+  double                         otherCores = 0.0;
+  const std::vector<ImplicitRow> rows =
+    MeasureImplicitRows(options, self, bodySpacing, threads, compared, reference, otherCores);
+
+  const double h = bodySpacing / kReferenceSubdivisions;
+  md << "The brain-sized ellipsoid (semi-axes 70, 85, 60 mm) as the grid cells of " << Fixed(bodySpacing, 1)
+     << " mm whose centre lies inside, each split into 1 or " << kReferenceSubdivisions << "^3 cells of 6 tetrahedra "
+     << "(the meshes nest and bound the same body); the surface at or below the body grid's node plane nearest z = " << problem.baseZ << " mm held; the surface "
+     << "nodes within " << problem.craniotomyRadius << " mm of the top sag by " << problem.depth
+     << " (1 - (r / " << problem.craniotomyRadius << ")^2) mm (all components prescribed); neo-Hookean E = "
+     << problem.material.youngsModulus << " Pa, nu = " << problem.material.poissonRatio << ". "
+     << "ANP: adaptive dynamic relaxation to an estimated error of " << kTolerance << " mm, and of";
+  for (const double tolerance : kLooserTolerances)
+  {
+    md << (tolerance == kLooserTolerances[0] ? " " : ", ") << Fixed(tolerance, 2);
+  }
+  md << " mm for the time to a solution as accurate as CalculiX's (the cheapest of them at least as accurate as "
+     << "C3D4, in RMS and maximum error, is what the target compares); time = setup + solve. Meshless (MTLED): the "
+     << "tetrahedra's nodes and body made meshless with the default settings (as the brain-sized meshless case), "
+     << "the same dynamic relaxation to " << kTolerance << " mm; its setup includes MakeMeshlessFromCells. "
+     << "CalculiX " << ccx << ": static step, NLGEOM, the whole load as the first increment (CalculiX cuts it back "
+     << "when Newton diverges), its default convergence criteria (residual " << kCalculixResidualTolerance
+     << " of the mean force, correction " << kCalculixCorrectionTolerance << "), SPOOLES; time = the ccx process "
+     << "(reading the deck, solving, writing results; writing the deck is not counted). Both with " << threads
+     << " threads, each solve in its own process; peak memory is that process's (ANP) or ccx's (ru_maxrss). "
+     << "Medians of " << options.rounds << " rounds (C3D10: 1 run). Other processes kept " << Fixed(otherCores, 2)
+     << " cores busy on average.\n\n"
+     << "Reference: CalculiX C3D10 on the quarter model (x, y >= 0, symmetry conditions) of the " << Fixed(h, 1)
+     << " mm mesh, Newton to a residual of 1e-5 of the mean force: " << reference["dof"].get<int>() << " DOF, "
+     << Fixed(reference["seconds"].get<double>(), 1) << " s"
+     << (reference["cached"].get<bool>() ? " when it was computed (read from --reference-cache)" : "") << ", "
+     << reference["increments"].get<int>() << " increments, " << reference["iterations"].get<int>()
+     << " Newton iterations, peak memory " << Fixed(reference["peak_mib"].get<double>(), 0) << " MiB. "
+     << "Self-check: the same on the " << Fixed(bodySpacing, 1) << " mm mesh differs from it by "
+     << Fixed(selfCheck.rmsError, 3) << " mm RMS and " << Fixed(selfCheck.maxError, 3)
+     << " mm at most over its nodes, a bound on the coarser reference's own error (the finer one's is smaller).\n\n"
+     << "Errors are |u - u_ref| at every node of the solved mesh (each is a reference node, after reflection), in mm "
+     << "(the sag is " << problem.depth << " mm).\n\n"
+     << "| Solver | h mm | Nodes | Elements | DOF | Time s (median) | rounds min..max | DR steps / Newton iterations | "
+        "RMS error mm | Max error mm | Peak memory MiB |\n"
+     << "|---|---|---|---|---|---|---|---|---|---|---|\n";
+  for (const ImplicitRow & row : rows)
+  {
+    const Json & r = row.result;
+    const auto   range = std::minmax_element(row.seconds.begin(), row.seconds.end());
+    md << "| " << SolverLabel(row.kind, row.tolerance) << " | " << Fixed(bodySpacing / row.subdivisions, 1) << " | "
+       << r["nodes"].get<int>() << " | " << r["elements"].get<int>() << " | " << r["dof"].get<int>() << " | "
+       << Fixed(Median(row.seconds), 2) << " | " << Fixed(*range.first, 2) << ".." << Fixed(*range.second, 2) << " | "
+       << (row.kind == "anp" || row.kind == "mtled" ? std::to_string(r["steps"].get<int>()) +
+                                 (r["converged"].get<bool>() ? "" : " (**not converged**)")
+                             : std::to_string(r["iterations"].get<int>()) + " (" +
+                                 std::to_string(r["increments"].get<int>()) + " increments)")
+       << " | " << Fixed(row.rmsError, 3) << " | " << Fixed(row.maxError, 3) << " | "
+       << Fixed(r["peak_mib"].get<double>(), 0) << " |\n";
+  }
+
+  ImplicitConclusions(rows, compared, bodySpacing, threads, md, summary);
 }
 
 } // namespace benchmark

@@ -296,6 +296,82 @@ RunIndentation(const Reference & reference,
   return run;
 }
 
+// TLED hexahedra, ANP tetrahedra, then meshless (MTLED) on the hexahedral
+// grid's nodes, on every grid that refines the reference; a failed solve is a
+// row with its failure (hexahedra: tried again with stiffer hourglass control).
+std::vector<IndentationRun>
+MeasureIndentation(const bmr::IndentationProblem & problem, const Reference & reference, const Options & options,
+                   const std::vector<int> & divisionsList, int referenceDivisions, int threads, double & otherCores)
+{
+  std::vector<IndentationRun> runs;
+  WaitForQuiet(options.waitQuiet);
+  ContentionMeter meter;
+  meter.Start();
+  const std::vector<std::pair<bmr::GridCells, bool>> discretizations{ { bmr::GridCells::Hexahedra, false },
+                                                                      { bmr::GridCells::Tetrahedra, false },
+                                                                      { bmr::GridCells::Hexahedra, true } };
+  for (const auto & [cells, meshless] : discretizations)
+  {
+    for (const int n : divisionsList)
+    {
+      if (meshless && n > kMeshlessIndentationMaxDivisions)
+      {
+        Log("skipping meshless " + std::to_string(n) + " divisions (finer than " +
+            std::to_string(kMeshlessIndentationMaxDivisions) + ")");
+        continue;
+      }
+      // TLED nodes (spacing 20/n mm) must be nodes of the quadratic reference (spacing 5/R mm),
+      // and the patch edges (5 mm from the block's sides) grid lines.
+      if ((4 * referenceDivisions) % n != 0 || n % 4 != 0)
+      {
+        Log("skipping " + std::to_string(n) + " divisions: not a refinement of the reference");
+        continue;
+      }
+      Log("indentation " + (meshless ? std::string("meshless (MTLED)") : CellsName(cells)) + " " + std::to_string(n) + "x" + std::to_string(n) + "x" +
+          std::to_string(n / 2) + "...");
+      try
+      {
+        runs.push_back(RunIndentation(reference, cells, n, threads, options.indentationTolerance, -1.0, meshless));
+        const IndentationRun & r = runs.back();
+        Log("  " + Fixed(r.setupSeconds + r.solveSeconds, 2) + " s, rms error " + Fixed(100 * r.rmsError, 3) +
+            " %, force error " + Fixed(100 * r.forceError, 2) + " %");
+      }
+      catch (const bmr::Error & error)
+      {
+        IndentationRun failed;
+        failed.cells = cells;
+        failed.divisions = n;
+        failed.threads = threads;
+        failed.spacing = problem.size.x() / n;
+        failed.failure = error.what();
+        failed.meshless = meshless;
+        runs.push_back(failed);
+        Log("  FAILED: " + failed.failure);
+        if (cells == bmr::GridCells::Hexahedra && !meshless)
+        {
+          // The solver suggests a stiffer hourglass control; show what it gives.
+          const double k = 2.0 * bmr::SolverSettings{}.hourglassCoefficient;
+          Log("  again with hourglass coefficient " + Fixed(k, 2) + "...");
+          try
+          {
+            runs.push_back(RunIndentation(reference, cells, n, threads, options.indentationTolerance, k));
+            const IndentationRun & r = runs.back();
+            Log("  " + Fixed(r.setupSeconds + r.solveSeconds, 2) + " s, rms error " + Fixed(100 * r.rmsError, 3) +
+                " %, force error " + Fixed(100 * r.forceError, 2) + " %");
+          }
+          catch (const bmr::Error & again)
+          {
+            Log("  FAILED again: " + std::string(again.what()));
+          }
+        }
+      }
+    }
+  }
+
+  otherCores = meter.OtherCores();
+  return runs;
+}
+
 } // namespace
 
 void
@@ -337,73 +413,9 @@ IndentationSection(const Options & options, std::ostream & md)
 
     const std::vector<int> divisionsList = options.quick ? std::vector<int>{ 4, 8 } : options.indentationDivisions;
     const int              threads = *std::max_element(options.threads.begin(), options.threads.end());
-    std::vector<IndentationRun> runs;
-    WaitForQuiet(options.waitQuiet);
-    ContentionMeter meter;
-    meter.Start();
-    // TLED hexahedra, ANP tetrahedra, then meshless (MTLED) on the hexahedral grid's nodes.
-    const std::vector<std::pair<bmr::GridCells, bool>> discretizations{ { bmr::GridCells::Hexahedra, false },
-                                                                        { bmr::GridCells::Tetrahedra, false },
-                                                                        { bmr::GridCells::Hexahedra, true } };
-    for (const auto & [cells, meshless] : discretizations)
-    {
-      for (const int n : divisionsList)
-      {
-        if (meshless && n > kMeshlessIndentationMaxDivisions)
-        {
-          Log("skipping meshless " + std::to_string(n) + " divisions (finer than " +
-              std::to_string(kMeshlessIndentationMaxDivisions) + ")");
-          continue;
-        }
-        // TLED nodes (spacing 20/n mm) must be nodes of the quadratic reference (spacing 5/R mm),
-        // and the patch edges (5 mm from the block's sides) grid lines.
-        if ((4 * referenceDivisions) % n != 0 || n % 4 != 0)
-        {
-          Log("skipping " + std::to_string(n) + " divisions: not a refinement of the reference");
-          continue;
-        }
-        Log("indentation " + (meshless ? std::string("meshless (MTLED)") : CellsName(cells)) + " " + std::to_string(n) + "x" + std::to_string(n) + "x" +
-            std::to_string(n / 2) + "...");
-        try
-        {
-          runs.push_back(RunIndentation(reference, cells, n, threads, options.indentationTolerance, -1.0, meshless));
-          const IndentationRun & r = runs.back();
-          Log("  " + Fixed(r.setupSeconds + r.solveSeconds, 2) + " s, rms error " + Fixed(100 * r.rmsError, 3) +
-              " %, force error " + Fixed(100 * r.forceError, 2) + " %");
-        }
-        catch (const bmr::Error & error)
-        {
-          IndentationRun failed;
-          failed.cells = cells;
-          failed.divisions = n;
-          failed.threads = threads;
-          failed.spacing = problem.size.x() / n;
-          failed.failure = error.what();
-          failed.meshless = meshless;
-          runs.push_back(failed);
-          Log("  FAILED: " + failed.failure);
-          if (cells == bmr::GridCells::Hexahedra && !meshless)
-          {
-            // The solver suggests a stiffer hourglass control; show what it gives.
-            const double k = 2.0 * bmr::SolverSettings{}.hourglassCoefficient;
-            Log("  again with hourglass coefficient " + Fixed(k, 2) + "...");
-            try
-            {
-              runs.push_back(RunIndentation(reference, cells, n, threads, options.indentationTolerance, k));
-              const IndentationRun & r = runs.back();
-              Log("  " + Fixed(r.setupSeconds + r.solveSeconds, 2) + " s, rms error " + Fixed(100 * r.rmsError, 3) +
-                  " %, force error " + Fixed(100 * r.forceError, 2) + " %");
-            }
-            catch (const bmr::Error & again)
-            {
-              Log("  FAILED again: " + std::string(again.what()));
-            }
-          }
-        }
-      }
-    }
-
-    const double otherCores = meter.OtherCores();
+    double                            otherCores = 0.0;
+    const std::vector<IndentationRun> runs =
+      MeasureIndentation(problem, reference, options, divisionsList, referenceDivisions, threads, otherCores);
     const double h = 0.5 * problem.size.x() / referenceDivisions;
     md << "Block 20 x 20 x 10 mm, bottom face held, top-face nodes in the centred 10 x 10 mm square pushed (0, 0, "
        << -problem.depth << ") mm (all components prescribed), neo-Hookean E = 3000 Pa, nu = " << problem.material.poissonRatio << ". "

@@ -144,38 +144,23 @@ PrintWarnings(const std::vector<std::string> & warnings)
   }
 }
 
-int
-Run(int argc, char * argv[])
+using PointSetType = itk::DisplacementPointSetType<3>;
+
+// The filters that hold the model: its regions (fixed, exposed, contact
+// nodes; the model object flows out of them), the exposed nodes' loads and
+// the skull the brain stays inside.
+struct PatientModel
 {
-  const std::string           preoperativePath = argv[1];
-  const std::string           maskPath = argv[2];
-  const std::string           sparsePath = argv[3];
-  const bmr::Vector3          craniotomyCentre(ParseNumber(argv[4], "CX"), ParseNumber(argv[5], "CY"),
-                                               ParseNumber(argv[6], "CZ"));
-  const double                craniotomyRadius = ParseNumber(argv[7], "RADIUS");
-  const std::filesystem::path outputDirectory = argv[8];
-  const double                elementSize = argc > 9 ? ParseNumber(argv[9], "ELEMENT_SIZE_MM") : 6.0;
-  std::vector<std::string>    warnings;
-  StageClock                  clock;
+  itk::BiomechanicalRegionsFilter<MaskImageType>::Pointer regions;
+  itk::BiomechanicalLoadsFilter<PointSetType>::Pointer    loads;
+  itk::BrainSurfaceMeshSource<MaskImageType>::Pointer     surfaces;
+};
 
-  // An earlier run's summary must not pass for this run's if this one fails.
-  std::filesystem::create_directories(outputDirectory);
-  std::filesystem::remove(outputDirectory / "summary.json");
-
-  // 1. Inputs. ch2bet.nii.gz is a brain-extracted image, not a 0/1 mask: every voxel > 0 is brain.
-  const ImageType::Pointer preoperative = ReadInputImage(preoperativePath, "preoperative image");
-  auto                     threshold = itk::BinaryThresholdImageFilter<ImageType, MaskImageType>::New();
-  threshold->SetInput(ReadInputImage(maskPath, "brain mask"));
-  threshold->SetLowerThreshold(std::numeric_limits<float>::min()); // smallest float > 0 (inclusive bound)
-  threshold->SetUpperThreshold(std::numeric_limits<float>::max());
-  threshold->SetInsideValue(1);
-  threshold->SetOutsideValue(0);
-  threshold->Update();
-  const MaskImageType::Pointer mask = threshold->GetOutput();
-  // The intraoperative measurements: points on the exposed surface and their displacements (mm).
-  const bmr::SparseDisplacements measured = bmr::ReadSparseDisplacements(sparsePath);
-  std::cout << "read       " << preoperativePath << ", mask " << maskPath << " (" << clock.Lap("read") << " s)\n";
-
+PatientModel
+BuildPatientModel(const ImageType * preoperative, const MaskImageType * mask, const bmr::SparseDisplacements & measured,
+                  const bmr::Vector3 & craniotomyCentre, double craniotomyRadius, double elementSize, StageClock & clock,
+                  std::vector<std::string> & warnings)
+{
   // 2. Tissue classes. Three, not two: on T1 two classes split grey from white
   // matter and grey matter would get the (very soft) CSF material.
   auto classifier = itk::FuzzyCMeansClassifierImageFilter<ImageType, MaskImageType>::New();
@@ -215,7 +200,7 @@ Run(int argc, char * argv[])
   // still lie inside the skull.
   auto surfaces = itk::BrainSurfaceMeshSource<MaskImageType>::New();
   surfaces->SetInput(itk::MakeImageFromBiomechanicalVolume<MaskImageType>(
-    bmr::RasterizeCells(grid->GetModel(), itk::MakeBiomechanicalGeometry(mask.GetPointer()))));
+    bmr::RasterizeCells(grid->GetModel(), itk::MakeBiomechanicalGeometry(mask))));
   surfaces->SetSkullGap(1.5); // mm of CSF between brain and skull
   surfaces->Update();
   std::cout << "surfaces   brain " << surfaces->GetBrainSurface().triangles.size() << " triangles, skull "
@@ -236,7 +221,6 @@ Run(int argc, char * argv[])
 
   //    The loads: the sparse displacements, interpolated (thin-plate spline)
   //    to every exposed node, as a point set of the exposed nodes.
-  using PointSetType = itk::DisplacementPointSetType<3>;
   auto loads = itk::BiomechanicalLoadsFilter<PointSetType>::New();
   loads->SetModelInput(regions->GetOutput());
   loads->SetSparseDisplacements(itk::MakeDisplacementPointSet<PointSetType>(measured.points, measured.displacements));
@@ -247,14 +231,54 @@ Run(int argc, char * argv[])
   std::cout << "regions    " << model.NodeSet("skull_base").size() << " fixed, " << loadedNodes
             << " loaded from " << loadReport.usedPoints << " measurements (" << loadReport.rejectedPoints
             << " rejected), " << contactNodes << " may touch the skull (" << clock.Lap("regions") << " s)\n";
+  return { regions, loads, surfaces };
+}
+
+int
+Run(int argc, char * argv[])
+{
+  const std::string           preoperativePath = argv[1];
+  const std::string           maskPath = argv[2];
+  const std::string           sparsePath = argv[3];
+  const bmr::Vector3          craniotomyCentre(ParseNumber(argv[4], "CX"), ParseNumber(argv[5], "CY"),
+                                               ParseNumber(argv[6], "CZ"));
+  const double                craniotomyRadius = ParseNumber(argv[7], "RADIUS");
+  const std::filesystem::path outputDirectory = argv[8];
+  const double                elementSize = argc > 9 ? ParseNumber(argv[9], "ELEMENT_SIZE_MM") : 6.0;
+  std::vector<std::string>    warnings;
+  StageClock                  clock;
+
+  // An earlier run's summary must not pass for this run's if this one fails.
+  std::filesystem::create_directories(outputDirectory);
+  std::filesystem::remove(outputDirectory / "summary.json");
+
+  // 1. Inputs. ch2bet.nii.gz is a brain-extracted image, not a 0/1 mask: every voxel > 0 is brain.
+  const ImageType::Pointer preoperative = ReadInputImage(preoperativePath, "preoperative image");
+  auto                     threshold = itk::BinaryThresholdImageFilter<ImageType, MaskImageType>::New();
+  threshold->SetInput(ReadInputImage(maskPath, "brain mask"));
+  threshold->SetLowerThreshold(std::numeric_limits<float>::min()); // smallest float > 0 (inclusive bound)
+  threshold->SetUpperThreshold(std::numeric_limits<float>::max());
+  threshold->SetInsideValue(1);
+  threshold->SetOutsideValue(0);
+  threshold->Update();
+  const MaskImageType::Pointer mask = threshold->GetOutput();
+  // The intraoperative measurements: points on the exposed surface and their displacements (mm).
+  const bmr::SparseDisplacements measured = bmr::ReadSparseDisplacements(sparsePath);
+  std::cout << "read       " << preoperativePath << ", mask " << maskPath << " (" << clock.Lap("read") << " s)\n";
+
+  // 2.-6. The model: tissue classes, grid, materials, surfaces, regions and loads.
+  const PatientModel patient =
+    BuildPatientModel(preoperative, mask, measured, craniotomyCentre, craniotomyRadius, elementSize, clock, warnings);
+  const bmr::Model & model = patient.regions->GetOutput()->GetModel();
+  const std::size_t  loadedNodes = patient.loads->GetOutput()->GetNumberOfPoints();
 
   // 7. Steady state of the nonlinear model under the enforced displacements,
   // the skull (the body stays inside it) as contact surface of the nodes in
   // the model's "contact" set. 0.01 mm: far below the 0.1 mm the registration needs.
   auto deformation = itk::BiomechanicalDeformationFilter<PointSetType>::New();
-  deformation->SetModelInput(regions->GetOutput());
-  deformation->SetPrescribedDisplacements(loads->GetOutput());
-  deformation->SetContactSurface(surfaces->GetSkullOutput());
+  deformation->SetModelInput(patient.regions->GetOutput());
+  deformation->SetPrescribedDisplacements(patient.loads->GetOutput());
+  deformation->SetContactSurface(patient.surfaces->GetSkullOutput());
   bmr::SolverSettings settings;
   settings.integrator = bmr::Integrator::DynamicRelaxation;
   settings.tolerance = 0.01;

@@ -259,6 +259,32 @@ protected:
   GenerateData() override;
 
 private:
+  /** Throws naming a setting out of range. */
+  void
+  CheckSettings() const;
+
+  /** The atlas brain (mask > 0) as a 0/1 float image; sets m_AtlasBrainVolume. */
+  typename RealImageType::Pointer
+  MakeAtlasBrain();
+
+  /** Progress of a stage that spans [start, start + span], `levels` levels
+   * of `iterationsPerLevel` iterations, after an iteration of `optimizer`. */
+  void
+  ReportIterationProgress(const Object * optimizer, float start, float span, unsigned int levels,
+                          unsigned int iterationsPerLevel, unsigned int level);
+
+  /** Moments initialisation, then the affine stage (m_AffineTransform). */
+  void
+  RegisterAffine(const RealImageType * subject, const RealImageType * atlas);
+
+  /** The B-spline stage after the affine one (m_BSplineTransform). */
+  void
+  RegisterBSpline(const RealImageType * subject, const RealImageType * atlas);
+
+  /** The atlas brain resampled onto the subject's grid: the output; checks its volume. */
+  void
+  PropagateAtlasBrain(const RealImageType * atlasBrain, const RealImageType * subject);
+
   typename RealImageType::Pointer
   MakeRealImage(const InputImageType * image, const char * role) const;
 

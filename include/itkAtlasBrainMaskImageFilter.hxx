@@ -241,10 +241,37 @@ template <typename TInputImage, typename TOutputImage>
 void
 AtlasBrainMaskImageFilter<TInputImage, TOutputImage>::GenerateData()
 {
-  using RegistrationType = ImageRegistrationMethodv4<RealImageType, RealImageType, AffineTransformType>;
-  using BSplineRegistrationType = ImageRegistrationMethodv4<RealImageType, RealImageType, BSplineTransformType>;
-  using MetricType = FixedWorkUnitsMattesMetric<RealImageType>;
+  this->CheckSettings();
+  m_AffineTransform = nullptr;
+  m_BSplineTransform = nullptr;
+  m_CompositeTransform = nullptr;
+  m_AffineFinalMetricValue = 0.0;
+  m_BSplineFinalMetricValue = 0.0;
+  m_AffineIterationsRun = 0;
+  m_BSplineIterationsRun = 0;
+  m_PropagatedBrainVolume = 0.0;
 
+  const typename RealImageType::Pointer atlasBrain = this->MakeAtlasBrain();
+  const typename RealImageType::Pointer subject = this->MakeRealImage(this->GetInput(), "subject");
+  const typename RealImageType::Pointer atlas = this->MakeRealImage(this->GetAtlasImage(), "atlas");
+  this->RegisterAffine(subject, atlas);
+  this->UpdateProgress(0.5f);
+  m_CompositeTransform = CompositeTransformType::New();
+  m_CompositeTransform->AddTransform(m_AffineTransform);
+  if (m_UseBSplineStage)
+  {
+    this->RegisterBSpline(subject, atlas);
+    m_CompositeTransform->AddTransform(m_BSplineTransform);
+  }
+  this->UpdateProgress(0.95f);
+  this->PropagateAtlasBrain(atlasBrain, subject);
+  this->UpdateProgress(1.0f);
+}
+
+template <typename TInputImage, typename TOutputImage>
+void
+AtlasBrainMaskImageFilter<TInputImage, TOutputImage>::CheckSettings() const
+{
   if (m_AffineLevelSpacings.empty() || m_AffineLevelSpacings.size() != m_AffineSmoothingSigmas.size())
   {
     itkExceptionMacro("AtlasBrainMaskImageFilter: AffineLevelSpacings (" << m_AffineLevelSpacings.size()
@@ -262,18 +289,13 @@ AtlasBrainMaskImageFilter<TInputImage, TOutputImage>::GenerateData()
     itkExceptionMacro("AtlasBrainMaskImageFilter: BSplineControlPointSpacing must be positive (mm), got "
                       << m_BSplineControlPointSpacing << '.');
   }
+}
 
-  m_AffineTransform = nullptr;
-  m_BSplineTransform = nullptr;
-  m_CompositeTransform = nullptr;
-  m_AffineFinalMetricValue = 0.0;
-  m_BSplineFinalMetricValue = 0.0;
-  m_AffineIterationsRun = 0;
-  m_BSplineIterationsRun = 0;
-  m_PropagatedBrainVolume = 0.0;
-
+template <typename TInputImage, typename TOutputImage>
+typename AtlasBrainMaskImageFilter<TInputImage, TOutputImage>::RealImageType::Pointer
+AtlasBrainMaskImageFilter<TInputImage, TOutputImage>::MakeAtlasBrain()
+{
   const AtlasMaskImageType * atlasMask = this->GetAtlasMaskImage();
-
   // Atlas brain: voxels > 0, as a 0/1 float image for resampling.
   auto atlasBrain = RealImageType::New();
   atlasBrain->CopyInformation(atlasMask);
@@ -301,9 +323,30 @@ AtlasBrainMaskImageFilter<TInputImage, TOutputImage>::GenerateData()
     atlasVoxelVolume *= atlasMask->GetSpacing()[d];
   }
   m_AtlasBrainVolume = static_cast<double>(atlasBrainVoxels) * atlasVoxelVolume;
+  return atlasBrain;
+}
 
-  const typename RealImageType::Pointer subject = this->MakeRealImage(this->GetInput(), "subject");
-  const typename RealImageType::Pointer atlas = this->MakeRealImage(this->GetAtlasImage(), "atlas");
+template <typename TInputImage, typename TOutputImage>
+void
+AtlasBrainMaskImageFilter<TInputImage, TOutputImage>::ReportIterationProgress(const Object * optimizer, float start, float span, unsigned int levels,
+                                                                              unsigned int iterationsPerLevel, unsigned int level)
+{
+  // The stage's fraction spread over levels x iterations.
+  const auto * base = dynamic_cast<const ObjectToObjectOptimizerBaseTemplate<double> *>(optimizer);
+  const double perLevel = 1.0 / static_cast<double>(std::max(1u, levels));
+  const double within = base == nullptr ? 0.0
+                                        : std::min(1.0, static_cast<double>(base->GetCurrentIteration() + 1) /
+                                                          static_cast<double>(std::max(1u, iterationsPerLevel)));
+  this->UpdateProgress(start + span * static_cast<float>(perLevel * (level + within)));
+}
+
+template <typename TInputImage, typename TOutputImage>
+void
+AtlasBrainMaskImageFilter<TInputImage, TOutputImage>::RegisterAffine(const RealImageType * subject,
+                                                                     const RealImageType * atlas)
+{
+  using RegistrationType = ImageRegistrationMethodv4<RealImageType, RealImageType, AffineTransformType>;
+  using MetricType = FixedWorkUnitsMattesMetric<RealImageType>;
 
   // Initialisation: centres of mass (image moments) aligned.
   m_AffineTransform = AffineTransformType::New();
@@ -318,172 +361,161 @@ AtlasBrainMaskImageFilter<TInputImage, TOutputImage>::GenerateData()
   }
   this->UpdateProgress(0.02f);
 
-  // Progress per optimizer iteration: stage fraction spread over levels x iterations.
-  const auto reportIterations = [this](const Object * optimizer, float start, float span, unsigned int levels,
-                                       unsigned int iterationsPerLevel, const unsigned int * level) {
-    const auto * base = dynamic_cast<const ObjectToObjectOptimizerBaseTemplate<double> *>(optimizer);
-    const double perLevel = 1.0 / static_cast<double>(std::max(1u, levels));
-    const double within =
-      base == nullptr ? 0.0
-                      : std::min(1.0, static_cast<double>(base->GetCurrentIteration() + 1) /
-                                        static_cast<double>(std::max(1u, iterationsPerLevel)));
-    this->UpdateProgress(start + span * static_cast<float>(perLevel * (*level + within)));
-  };
+  auto metric = MetricType::New();
+  metric->SetNumberOfHistogramBins(m_NumberOfHistogramBins);
+  metric->SetUseMovingImageGradientFilter(false);
+  metric->SetUseFixedImageGradientFilter(false);
+  metric->SetFixedNumberOfWorkUnits(m_MetricNumberOfWorkUnits);
 
-  // Affine stage.
+  using ScalesEstimatorType = RegistrationParameterScalesFromPhysicalShift<MetricType>;
+  auto scalesEstimator = ScalesEstimatorType::New();
+  scalesEstimator->SetMetric(metric);
+  scalesEstimator->SetTransformForward(true);
+
+  using OptimizerType = ConjugateGradientLineSearchOptimizerv4Template<double>;
+  auto optimizer = OptimizerType::New();
+  optimizer->SetScalesEstimator(scalesEstimator);
+  optimizer->SetDoEstimateLearningRateOnce(true);
+  optimizer->SetDoEstimateLearningRateAtEachIteration(false);
+  optimizer->SetLowerLimit(0.0);
+  optimizer->SetUpperLimit(2.0);
+  optimizer->SetEpsilon(0.2);
+  optimizer->SetMaximumLineSearchIterations(20);
+  optimizer->SetNumberOfIterations(m_AffineNumberOfIterations);
+  optimizer->SetMinimumConvergenceValue(1e-6);
+  optimizer->SetConvergenceWindowSize(10);
+
+  auto registration = RegistrationType::New();
+  registration->SetFixedImage(subject);
+  registration->SetMovingImage(atlas);
+  registration->SetMetric(metric);
+  registration->SetOptimizer(optimizer);
+  registration->SetInitialTransform(m_AffineTransform);
+  registration->InPlaceOn();
+
+  const auto levels = static_cast<unsigned int>(m_AffineLevelSpacings.size());
+  registration->SetNumberOfLevels(levels);
+  typename RegistrationType::SmoothingSigmasArrayType sigmas(levels);
+  for (unsigned int level = 0; level < levels; ++level)
   {
-    auto metric = MetricType::New();
-    metric->SetNumberOfHistogramBins(m_NumberOfHistogramBins);
-    metric->SetUseMovingImageGradientFilter(false);
-    metric->SetUseFixedImageGradientFilter(false);
-    metric->SetFixedNumberOfWorkUnits(m_MetricNumberOfWorkUnits);
-
-    using ScalesEstimatorType = RegistrationParameterScalesFromPhysicalShift<MetricType>;
-    auto scalesEstimator = ScalesEstimatorType::New();
-    scalesEstimator->SetMetric(metric);
-    scalesEstimator->SetTransformForward(true);
-
-    using OptimizerType = ConjugateGradientLineSearchOptimizerv4Template<double>;
-    auto optimizer = OptimizerType::New();
-    optimizer->SetScalesEstimator(scalesEstimator);
-    optimizer->SetDoEstimateLearningRateOnce(true);
-    optimizer->SetDoEstimateLearningRateAtEachIteration(false);
-    optimizer->SetLowerLimit(0.0);
-    optimizer->SetUpperLimit(2.0);
-    optimizer->SetEpsilon(0.2);
-    optimizer->SetMaximumLineSearchIterations(20);
-    optimizer->SetNumberOfIterations(m_AffineNumberOfIterations);
-    optimizer->SetMinimumConvergenceValue(1e-6);
-    optimizer->SetConvergenceWindowSize(10);
-
-    auto registration = RegistrationType::New();
-    registration->SetFixedImage(subject);
-    registration->SetMovingImage(atlas);
-    registration->SetMetric(metric);
-    registration->SetOptimizer(optimizer);
-    registration->SetInitialTransform(m_AffineTransform);
-    registration->InPlaceOn();
-
-    const auto levels = static_cast<unsigned int>(m_AffineLevelSpacings.size());
-    registration->SetNumberOfLevels(levels);
-    typename RegistrationType::SmoothingSigmasArrayType sigmas(levels);
+    registration->SetShrinkFactorsPerDimension(level, this->ShrinkFactorsFor(subject, m_AffineLevelSpacings[level]));
+    sigmas[level] = m_AffineSmoothingSigmas[level];
+  }
+  registration->SetSmoothingSigmasPerLevel(sigmas);
+  registration->SetSmoothingSigmasAreSpecifiedInPhysicalUnits(true);
+  if (m_MetricSamplingStrategy != MetricSamplingStrategyEnum::NONE)
+  {
+    typename RegistrationType::MetricSamplingPercentageArrayType percentages(levels);
     for (unsigned int level = 0; level < levels; ++level)
     {
-      registration->SetShrinkFactorsPerDimension(level, this->ShrinkFactorsFor(subject, m_AffineLevelSpacings[level]));
-      sigmas[level] = m_AffineSmoothingSigmas[level];
+      percentages[level] = this->SamplingPercentageFor(
+        subject, registration->GetShrinkFactorsPerDimension(level), m_MaximumNumberOfMetricSamples);
     }
-    registration->SetSmoothingSigmasPerLevel(sigmas);
-    registration->SetSmoothingSigmasAreSpecifiedInPhysicalUnits(true);
-    if (m_MetricSamplingStrategy != MetricSamplingStrategyEnum::NONE)
-    {
-      typename RegistrationType::MetricSamplingPercentageArrayType percentages(levels);
-      for (unsigned int level = 0; level < levels; ++level)
-      {
-        percentages[level] = this->SamplingPercentageFor(
-          subject, registration->GetShrinkFactorsPerDimension(level), m_MaximumNumberOfMetricSamples);
-      }
-      registration->SetMetricSamplingStrategy(m_MetricSamplingStrategy);
-      registration->SetMetricSamplingPercentagePerLevel(percentages);
-    }
-    registration->MetricSamplingReinitializeSeed(m_RandomSeed);
-
-    unsigned int currentLevel = 0;
-    registration->AddObserver(MultiResolutionIterationEvent(), [&](const EventObject &) {
-      currentLevel = static_cast<unsigned int>(registration->GetCurrentLevel());
-    });
-    const OptimizerType * optimizerPointer = optimizer.GetPointer();
-    optimizer->AddObserver(IterationEvent(), [&](const EventObject &) {
-      reportIterations(optimizerPointer, 0.02f, 0.48f, levels, m_AffineNumberOfIterations, &currentLevel);
-    });
-
-    registration->Update();
-    m_AffineFinalMetricValue = optimizer->GetCurrentMetricValue();
-    m_AffineIterationsRun = static_cast<unsigned int>(optimizer->GetCurrentIteration());
+    registration->SetMetricSamplingStrategy(m_MetricSamplingStrategy);
+    registration->SetMetricSamplingPercentagePerLevel(percentages);
   }
-  this->UpdateProgress(0.5f);
+  registration->MetricSamplingReinitializeSeed(m_RandomSeed);
 
-  m_CompositeTransform = CompositeTransformType::New();
-  m_CompositeTransform->AddTransform(m_AffineTransform);
+  unsigned int currentLevel = 0;
+  registration->AddObserver(MultiResolutionIterationEvent(), [&](const EventObject &) {
+    currentLevel = static_cast<unsigned int>(registration->GetCurrentLevel());
+  });
+  const OptimizerType * optimizerPointer = optimizer.GetPointer();
+  optimizer->AddObserver(IterationEvent(), [&](const EventObject &) {
+    this->ReportIterationProgress(optimizerPointer, 0.02f, 0.48f, levels, m_AffineNumberOfIterations, currentLevel);
+  });
 
-  // B-spline stage, composed after the affine (the affine is its moving initial transform).
-  if (m_UseBSplineStage)
+  registration->Update();
+  m_AffineFinalMetricValue = optimizer->GetCurrentMetricValue();
+  m_AffineIterationsRun = static_cast<unsigned int>(optimizer->GetCurrentIteration());
+}
+
+// Composed after the affine (the affine is its moving initial transform).
+template <typename TInputImage, typename TOutputImage>
+void
+AtlasBrainMaskImageFilter<TInputImage, TOutputImage>::RegisterBSpline(const RealImageType * subject,
+                                                                      const RealImageType * atlas)
+{
+  using BSplineRegistrationType = ImageRegistrationMethodv4<RealImageType, RealImageType, BSplineTransformType>;
+  using MetricType = FixedWorkUnitsMattesMetric<RealImageType>;
+
+  m_BSplineTransform = BSplineTransformType::New();
   {
-    m_BSplineTransform = BSplineTransformType::New();
+    typename BSplineTransformType::MeshSizeType meshSize;
+    for (unsigned int d = 0; d < ImageDimension; ++d)
     {
-      typename BSplineTransformType::MeshSizeType meshSize;
-      for (unsigned int d = 0; d < ImageDimension; ++d)
-      {
-        const double extent = subject->GetSpacing()[d] *
-                              static_cast<double>(subject->GetLargestPossibleRegion().GetSize()[d] - 1);
-        meshSize[d] = static_cast<unsigned int>(std::max(1.0, std::round(extent / m_BSplineControlPointSpacing)));
-      }
-      using InitializerType = BSplineTransformInitializer<BSplineTransformType, RealImageType>;
-      auto initializer = InitializerType::New();
-      initializer->SetTransform(m_BSplineTransform);
-      initializer->SetImage(subject);
-      initializer->SetTransformDomainMeshSize(meshSize);
-      initializer->InitializeTransform();
-      m_BSplineTransform->SetIdentity();
+      const double extent = subject->GetSpacing()[d] *
+                            static_cast<double>(subject->GetLargestPossibleRegion().GetSize()[d] - 1);
+      meshSize[d] = static_cast<unsigned int>(std::max(1.0, std::round(extent / m_BSplineControlPointSpacing)));
     }
-
-    auto metric = MetricType::New();
-    metric->SetNumberOfHistogramBins(m_NumberOfHistogramBins);
-    metric->SetUseMovingImageGradientFilter(false);
-    metric->SetUseFixedImageGradientFilter(false);
-    metric->SetFixedNumberOfWorkUnits(m_MetricNumberOfWorkUnits);
-
-    auto optimizer = QuietLBFGSBOptimizerv4::New();
-    const unsigned int numberOfParameters = m_BSplineTransform->GetNumberOfParameters();
-    LBFGSBOptimizerv4::BoundSelectionType unbounded(numberOfParameters);
-    LBFGSBOptimizerv4::BoundValueType     bounds(numberOfParameters);
-    unbounded.Fill(0);
-    bounds.Fill(0.0);
-    optimizer->SetBoundSelection(unbounded);
-    optimizer->SetLowerBound(bounds);
-    optimizer->SetUpperBound(bounds);
-    optimizer->SetCostFunctionConvergenceFactor(1e7);
-    optimizer->SetGradientConvergenceTolerance(1e-6);
-    optimizer->SetNumberOfIterations(m_BSplineNumberOfIterations);
-    optimizer->SetMaximumNumberOfFunctionEvaluations(2 * m_BSplineNumberOfIterations + 10);
-    optimizer->SetMaximumNumberOfCorrections(7);
-
-    auto registration = BSplineRegistrationType::New();
-    registration->SetFixedImage(subject);
-    registration->SetMovingImage(atlas);
-    registration->SetMetric(metric);
-    registration->SetOptimizer(optimizer);
-    registration->SetMovingInitialTransform(m_AffineTransform);
-    registration->SetInitialTransform(m_BSplineTransform);
-    registration->InPlaceOn();
-    registration->SetNumberOfLevels(1);
-    registration->SetShrinkFactorsPerDimension(0, this->ShrinkFactorsFor(subject, m_BSplineLevelSpacing));
-    typename BSplineRegistrationType::SmoothingSigmasArrayType sigmas(1);
-    sigmas[0] = m_BSplineSmoothingSigma;
-    registration->SetSmoothingSigmasPerLevel(sigmas);
-    registration->SetSmoothingSigmasAreSpecifiedInPhysicalUnits(true);
-    if (m_MetricSamplingStrategy != MetricSamplingStrategyEnum::NONE)
-    {
-      typename BSplineRegistrationType::MetricSamplingPercentageArrayType percentages(1);
-      percentages[0] = this->SamplingPercentageFor(
-        subject, registration->GetShrinkFactorsPerDimension(0), m_BSplineMaximumNumberOfMetricSamples);
-      registration->SetMetricSamplingStrategy(m_MetricSamplingStrategy);
-      registration->SetMetricSamplingPercentagePerLevel(percentages);
-    }
-    registration->MetricSamplingReinitializeSeed(m_RandomSeed + 1);
-
-    const unsigned int     level = 0;
-    const LBFGSBOptimizerv4 * optimizerPointer = optimizer.GetPointer();
-    optimizer->AddObserver(IterationEvent(), [&](const EventObject &) {
-      reportIterations(optimizerPointer, 0.5f, 0.45f, 1, m_BSplineNumberOfIterations, &level);
-    });
-
-    registration->Update();
-    m_BSplineFinalMetricValue = optimizer->GetCurrentMetricValue();
-    m_BSplineIterationsRun = static_cast<unsigned int>(optimizer->GetCurrentIteration());
-    m_CompositeTransform->AddTransform(m_BSplineTransform);
+    using InitializerType = BSplineTransformInitializer<BSplineTransformType, RealImageType>;
+    auto initializer = InitializerType::New();
+    initializer->SetTransform(m_BSplineTransform);
+    initializer->SetImage(subject);
+    initializer->SetTransformDomainMeshSize(meshSize);
+    initializer->InitializeTransform();
+    m_BSplineTransform->SetIdentity();
   }
-  this->UpdateProgress(0.95f);
 
+  auto metric = MetricType::New();
+  metric->SetNumberOfHistogramBins(m_NumberOfHistogramBins);
+  metric->SetUseMovingImageGradientFilter(false);
+  metric->SetUseFixedImageGradientFilter(false);
+  metric->SetFixedNumberOfWorkUnits(m_MetricNumberOfWorkUnits);
+
+  auto optimizer = QuietLBFGSBOptimizerv4::New();
+  const unsigned int numberOfParameters = m_BSplineTransform->GetNumberOfParameters();
+  LBFGSBOptimizerv4::BoundSelectionType unbounded(numberOfParameters);
+  LBFGSBOptimizerv4::BoundValueType     bounds(numberOfParameters);
+  unbounded.Fill(0);
+  bounds.Fill(0.0);
+  optimizer->SetBoundSelection(unbounded);
+  optimizer->SetLowerBound(bounds);
+  optimizer->SetUpperBound(bounds);
+  optimizer->SetCostFunctionConvergenceFactor(1e7);
+  optimizer->SetGradientConvergenceTolerance(1e-6);
+  optimizer->SetNumberOfIterations(m_BSplineNumberOfIterations);
+  optimizer->SetMaximumNumberOfFunctionEvaluations(2 * m_BSplineNumberOfIterations + 10);
+  optimizer->SetMaximumNumberOfCorrections(7);
+
+  auto registration = BSplineRegistrationType::New();
+  registration->SetFixedImage(subject);
+  registration->SetMovingImage(atlas);
+  registration->SetMetric(metric);
+  registration->SetOptimizer(optimizer);
+  registration->SetMovingInitialTransform(m_AffineTransform);
+  registration->SetInitialTransform(m_BSplineTransform);
+  registration->InPlaceOn();
+  registration->SetNumberOfLevels(1);
+  registration->SetShrinkFactorsPerDimension(0, this->ShrinkFactorsFor(subject, m_BSplineLevelSpacing));
+  typename BSplineRegistrationType::SmoothingSigmasArrayType sigmas(1);
+  sigmas[0] = m_BSplineSmoothingSigma;
+  registration->SetSmoothingSigmasPerLevel(sigmas);
+  registration->SetSmoothingSigmasAreSpecifiedInPhysicalUnits(true);
+  if (m_MetricSamplingStrategy != MetricSamplingStrategyEnum::NONE)
+  {
+    typename BSplineRegistrationType::MetricSamplingPercentageArrayType percentages(1);
+    percentages[0] = this->SamplingPercentageFor(
+      subject, registration->GetShrinkFactorsPerDimension(0), m_BSplineMaximumNumberOfMetricSamples);
+    registration->SetMetricSamplingStrategy(m_MetricSamplingStrategy);
+    registration->SetMetricSamplingPercentagePerLevel(percentages);
+  }
+  registration->MetricSamplingReinitializeSeed(m_RandomSeed + 1);
+
+  const LBFGSBOptimizerv4 * optimizerPointer = optimizer.GetPointer();
+  optimizer->AddObserver(IterationEvent(), [&](const EventObject &) {
+    this->ReportIterationProgress(optimizerPointer, 0.5f, 0.45f, 1, m_BSplineNumberOfIterations, 0);
+  });
+
+  registration->Update();
+  m_BSplineFinalMetricValue = optimizer->GetCurrentMetricValue();
+  m_BSplineIterationsRun = static_cast<unsigned int>(optimizer->GetCurrentIteration());
+}
+
+template <typename TInputImage, typename TOutputImage>
+void
+AtlasBrainMaskImageFilter<TInputImage, TOutputImage>::PropagateAtlasBrain(const RealImageType * atlasBrain, const RealImageType * subject)
+{
   // Propagate the atlas brain onto the subject grid.
   using ResampleType = ResampleImageFilter<RealImageType, RealImageType, double>;
   auto resample = ResampleType::New();
@@ -531,7 +563,6 @@ AtlasBrainMaskImageFilter<TInputImage, TOutputImage>::GenerateData()
                       << "). Check that the subject is a T1-weighted head image with its spacing in mm, or supply "
                          "a brain mask instead of computing one.");
   }
-  this->UpdateProgress(1.0f);
 }
 
 template <typename TInputImage, typename TOutputImage>

@@ -370,6 +370,22 @@ private:
   typename RealImageType::Pointer
   MakeRealImage(const TImage * image, const char * role) const;
 
+  /** Throws unless both images have at least 4 voxels per axis. */
+  void
+  CheckImageSizes(const RealImageType * fixed, const RealImageType * moving) const;
+
+  /** The fixed mask as a spatial object (voxels > 0 inside; null without a
+   *  mask) and the share of the fixed domain it covers; throws when it holds
+   *  no voxel inside the fixed image (no metric sample could be drawn). */
+  typename SpatialObject<ImageDimension>::Pointer
+  MakeMaskObject(const RealImageType * fixed, double & maskFraction) const;
+
+  /** m_Transform over the fixed domain at the coarsest mesh, moved by the
+   *  initial translation (moments, translation stage). */
+  void
+  InitializeTransform(const RealImageType * fixed, const RealImageType * moving,
+                      const SpatialObject<ImageDimension> * mask, double maskFraction);
+
   ShrinkFactorsType
   ShrinkFactorsFor(const RealImageType * image, unsigned int factor) const;
 

@@ -440,118 +440,13 @@ BSplineIntensityRegistrationFilter<TFixedImage, TMovingImage, TMaskImage>::Gener
   this->VerifyParameters();
   const typename RealImageType::Pointer fixed = this->MakeRealImage(this->GetFixedImage(), "fixed");
   const typename RealImageType::Pointer moving = this->MakeRealImage(this->GetMovingImage(), "moving");
-  for (const RealImageType * image : { fixed.GetPointer(), moving.GetPointer() })
-  {
-    const auto size = image->GetLargestPossibleRegion().GetSize();
-    for (unsigned int d = 0; d < ImageDimension; ++d)
-    {
-      if (size[d] < 4)
-      {
-        itkExceptionMacro("BSplineIntensityRegistrationFilter: the "
-                          << (image == fixed.GetPointer() ? "fixed" : "moving") << " image has " << size[d]
-                          << " voxel(s) along axis " << d
-                          << "; registration needs at least 4 per axis (a 2D image stored as 3D? register it as 2D).");
-      }
-    }
-  }
+  this->CheckImageSizes(fixed, moving);
 
-  // The fixed mask as a spatial object (voxels > 0 inside); it must hold
-  // voxels inside the fixed image, or no metric sample could be drawn.
-  using MaskSpatialObjectType = ImageMaskSpatialObject<ImageDimension>;
-  typename MaskSpatialObjectType::Pointer maskObject;
-  double                                  maskFraction = 1.0;
-  if (const MaskImageType * mask = this->GetFixedMask())
-  {
-    using BinaryImageType = typename MaskSpatialObjectType::ImageType;
-    auto binary = BinaryImageType::New();
-    binary->CopyInformation(mask);
-    binary->SetRegions(mask->GetLargestPossibleRegion());
-    binary->Allocate();
-    SizeValueType inside = 0;
-    SizeValueType insideFixed = 0;
-    using MaskIteratorType = ImageRegionConstIteratorWithIndex<MaskImageType>;
-    ImageRegionIterator<BinaryImageType> out(binary, binary->GetLargestPossibleRegion());
-    for (MaskIteratorType in(mask, mask->GetLargestPossibleRegion()); !in.IsAtEnd(); ++in, ++out)
-    {
-      const bool isInside = in.Get() > NumericTraits<typename MaskImageType::PixelType>::ZeroValue();
-      out.Set(isInside ? 1 : 0);
-      if (isInside)
-      {
-        ++inside;
-        typename RealImageType::PointType point;
-        mask->TransformIndexToPhysicalPoint(in.GetIndex(), point);
-        typename RealImageType::IndexType index;
-        insideFixed += fixed->TransformPhysicalPointToIndex(point, index) ? 1 : 0;
-      }
-    }
-    if (inside == 0)
-    {
-      itkExceptionMacro("BSplineIntensityRegistrationFilter: the fixed mask is empty (no voxel > 0); give a mask of "
-                        "the region to register (e.g. the brain) or no mask.");
-    }
-    if (insideFixed == 0)
-    {
-      itkExceptionMacro("BSplineIntensityRegistrationFilter: none of the fixed mask's "
-                        << inside
-                        << " voxels lies inside the fixed image; the mask must be in the fixed image's physical "
-                           "space (check its origin, spacing and direction).");
-    }
-    // Share of the fixed domain's volume inside the mask (for the sample bound).
-    double maskVoxelVolume = 1.0;
-    double fixedVolume = 1.0;
-    for (unsigned int d = 0; d < ImageDimension; ++d)
-    {
-      maskVoxelVolume *= mask->GetSpacing()[d];
-      fixedVolume *= fixed->GetSpacing()[d] * static_cast<double>(fixed->GetLargestPossibleRegion().GetSize()[d]);
-    }
-    maskFraction = std::min(1.0, static_cast<double>(insideFixed) * maskVoxelVolume / fixedVolume);
-    maskObject = MaskSpatialObjectType::New();
-    maskObject->SetImage(binary);
-    maskObject->Update();
-  }
+  double     maskFraction = 1.0;
+  const auto maskObject = this->MakeMaskObject(fixed, maskFraction);
 
-  // The B-spline over the fixed domain, starting at the coarsest mesh.
-  m_MeshSizesPerLevel = this->MeshSizesFor(fixed);
+  this->InitializeTransform(fixed, moving, maskObject, maskFraction);
   const auto levels = static_cast<unsigned int>(m_ShrinkFactors.size());
-  m_Transform = BSplineTransformType::New();
-  {
-    using InitializerType = BSplineTransformInitializer<BSplineTransformType, RealImageType>;
-    auto initializer = InitializerType::New();
-    initializer->SetTransform(m_Transform);
-    initializer->SetImage(fixed);
-    initializer->SetTransformDomainMeshSize(m_MeshSizesPerLevel[0]);
-    initializer->InitializeTransform();
-    m_Transform->SetIdentity();
-  }
-
-  // Optional translation stage, folded into the B-spline: a cubic B-spline
-  // whose coefficients all equal t moves every point of its domain by t.
-  if (m_TranslationInitialization == TranslationInitializationType::Moments)
-  {
-    // Centres of mass of the whole images (not the mask: the moving image has none).
-    using MomentsType = ImageMomentsCalculator<RealImageType>;
-    auto fixedMoments = MomentsType::New();
-    fixedMoments->SetImage(fixed);
-    fixedMoments->Compute();
-    auto movingMoments = MomentsType::New();
-    movingMoments->SetImage(moving);
-    movingMoments->Compute();
-    m_InitialTranslation = movingMoments->GetCenterOfGravity() - fixedMoments->GetCenterOfGravity();
-  }
-  if (m_UseTranslationStage)
-  {
-    m_InitialTranslation = this->RegisterTranslation(fixed, moving, maskObject, maskFraction, m_InitialTranslation);
-  }
-  if (m_InitialTranslation.GetSquaredNorm() > 0.0)
-  {
-    typename BSplineTransformType::ParametersType parameters(m_Transform->GetNumberOfParameters());
-    const SizeValueType                           controlPoints = parameters.Size() / ImageDimension;
-    for (unsigned int d = 0; d < ImageDimension; ++d)
-    {
-      std::fill_n(parameters.data_block() + d * controlPoints, controlPoints, m_InitialTranslation[d]);
-    }
-    m_Transform->SetParameters(parameters);
-  }
   const float start = m_UseTranslationStage ? TranslationProgress : 0.0f;
 
   const typename ImageMetricType::Pointer metric = this->MakeMetric(maskObject);
@@ -626,6 +521,139 @@ BSplineIntensityRegistrationFilter<TFixedImage, TMovingImage, TMaskImage>::Gener
 
   this->Warp(moving);
   this->UpdateProgress(1.0f);
+}
+
+template <typename TFixedImage, typename TMovingImage, typename TMaskImage>
+void
+BSplineIntensityRegistrationFilter<TFixedImage, TMovingImage, TMaskImage>::CheckImageSizes(const RealImageType * fixed, const RealImageType * moving) const
+{
+  for (const RealImageType * image : { fixed, moving })
+  {
+    const auto size = image->GetLargestPossibleRegion().GetSize();
+    for (unsigned int d = 0; d < ImageDimension; ++d)
+    {
+      if (size[d] < 4)
+      {
+        itkExceptionMacro("BSplineIntensityRegistrationFilter: the "
+                          << (image == fixed ? "fixed" : "moving") << " image has " << size[d]
+                          << " voxel(s) along axis " << d
+                          << "; registration needs at least 4 per axis (a 2D image stored as 3D? register it as 2D).");
+      }
+    }
+  }
+}
+
+template <typename TFixedImage, typename TMovingImage, typename TMaskImage>
+auto
+BSplineIntensityRegistrationFilter<TFixedImage, TMovingImage, TMaskImage>::MakeMaskObject(const RealImageType * fixed,
+                                                                                      double & maskFraction) const
+  -> typename SpatialObject<ImageDimension>::Pointer
+{
+  // The fixed mask as a spatial object (voxels > 0 inside); it must hold
+  // voxels inside the fixed image, or no metric sample could be drawn.
+  using MaskSpatialObjectType = ImageMaskSpatialObject<ImageDimension>;
+  maskFraction = 1.0;
+  const MaskImageType * mask = this->GetFixedMask();
+  if (mask == nullptr)
+  {
+    return nullptr;
+  }
+  using BinaryImageType = typename MaskSpatialObjectType::ImageType;
+  auto binary = BinaryImageType::New();
+  binary->CopyInformation(mask);
+  binary->SetRegions(mask->GetLargestPossibleRegion());
+  binary->Allocate();
+  SizeValueType inside = 0;
+  SizeValueType insideFixed = 0;
+  using MaskIteratorType = ImageRegionConstIteratorWithIndex<MaskImageType>;
+  ImageRegionIterator<BinaryImageType> out(binary, binary->GetLargestPossibleRegion());
+  for (MaskIteratorType in(mask, mask->GetLargestPossibleRegion()); !in.IsAtEnd(); ++in, ++out)
+  {
+    const bool isInside = in.Get() > NumericTraits<typename MaskImageType::PixelType>::ZeroValue();
+    out.Set(isInside ? 1 : 0);
+    if (isInside)
+    {
+      ++inside;
+      typename RealImageType::PointType point;
+      mask->TransformIndexToPhysicalPoint(in.GetIndex(), point);
+      typename RealImageType::IndexType index;
+      insideFixed += fixed->TransformPhysicalPointToIndex(point, index) ? 1 : 0;
+    }
+  }
+  if (inside == 0)
+  {
+    itkExceptionMacro("BSplineIntensityRegistrationFilter: the fixed mask is empty (no voxel > 0); give a mask of "
+                      "the region to register (e.g. the brain) or no mask.");
+  }
+  if (insideFixed == 0)
+  {
+    itkExceptionMacro("BSplineIntensityRegistrationFilter: none of the fixed mask's "
+                      << inside
+                      << " voxels lies inside the fixed image; the mask must be in the fixed image's physical "
+                         "space (check its origin, spacing and direction).");
+  }
+  // Share of the fixed domain's volume inside the mask (for the sample bound).
+  double maskVoxelVolume = 1.0;
+  double fixedVolume = 1.0;
+  for (unsigned int d = 0; d < ImageDimension; ++d)
+  {
+    maskVoxelVolume *= mask->GetSpacing()[d];
+    fixedVolume *= fixed->GetSpacing()[d] * static_cast<double>(fixed->GetLargestPossibleRegion().GetSize()[d]);
+  }
+  maskFraction = std::min(1.0, static_cast<double>(insideFixed) * maskVoxelVolume / fixedVolume);
+  auto maskObject = MaskSpatialObjectType::New();
+  maskObject->SetImage(binary);
+  maskObject->Update();
+  return maskObject;
+}
+
+template <typename TFixedImage, typename TMovingImage, typename TMaskImage>
+void
+BSplineIntensityRegistrationFilter<TFixedImage, TMovingImage, TMaskImage>::InitializeTransform(const RealImageType * fixed, const RealImageType * moving,
+                                                                                const SpatialObject<ImageDimension> * mask,
+                                                                                double maskFraction)
+{
+  // The B-spline over the fixed domain, starting at the coarsest mesh.
+  m_MeshSizesPerLevel = this->MeshSizesFor(fixed);
+  m_Transform = BSplineTransformType::New();
+  {
+    using InitializerType = BSplineTransformInitializer<BSplineTransformType, RealImageType>;
+    auto initializer = InitializerType::New();
+    initializer->SetTransform(m_Transform);
+    initializer->SetImage(fixed);
+    initializer->SetTransformDomainMeshSize(m_MeshSizesPerLevel[0]);
+    initializer->InitializeTransform();
+    m_Transform->SetIdentity();
+  }
+
+  // Optional translation stage, folded into the B-spline: a cubic B-spline
+  // whose coefficients all equal t moves every point of its domain by t.
+  if (m_TranslationInitialization == TranslationInitializationType::Moments)
+  {
+    // Centres of mass of the whole images (not the mask: the moving image has none).
+    using MomentsType = ImageMomentsCalculator<RealImageType>;
+    auto fixedMoments = MomentsType::New();
+    fixedMoments->SetImage(fixed);
+    fixedMoments->Compute();
+    auto movingMoments = MomentsType::New();
+    movingMoments->SetImage(moving);
+    movingMoments->Compute();
+    m_InitialTranslation = movingMoments->GetCenterOfGravity() - fixedMoments->GetCenterOfGravity();
+  }
+  if (m_UseTranslationStage)
+  {
+    m_InitialTranslation = this->RegisterTranslation(fixed, moving, mask, maskFraction, m_InitialTranslation);
+  }
+  if (m_InitialTranslation.GetSquaredNorm() > 0.0)
+  {
+    typename BSplineTransformType::ParametersType parameters(m_Transform->GetNumberOfParameters());
+    const SizeValueType                           controlPoints = parameters.Size() / ImageDimension;
+    for (unsigned int d = 0; d < ImageDimension; ++d)
+    {
+      std::fill_n(parameters.data_block() + d * controlPoints, controlPoints, m_InitialTranslation[d]);
+    }
+    m_Transform->SetParameters(parameters);
+  }
 }
 
 template <typename TFixedImage, typename TMovingImage, typename TMaskImage>

@@ -212,43 +212,6 @@ EdgeHausdorffDistanceImageFilter<TImage, TMaskImage>::EvaluateSlices(const RealI
     const auto workers = static_cast<unsigned int>(
       std::max<SizeValueType>(1, std::min<SizeValueType>(this->GetNumberOfWorkUnits(), slices)));
     const ThreadIdType innerWorkUnits = workers > 1 ? 1 : 0;
-    const auto         forEachSlice = [&](const std::function<void(SizeValueType)> & work) {
-      std::atomic<SizeValueType> next{ 0 };
-      std::exception_ptr         failure;
-      std::mutex                 failureMutex;
-      const auto                 run = [&]() {
-        try
-        {
-          for (SizeValueType slice = next++; slice < slices; slice = next++)
-          {
-            work(slice);
-          }
-        }
-        catch (...)
-        {
-          const std::lock_guard<std::mutex> lock(failureMutex);
-          if (!failure)
-          {
-            failure = std::current_exception();
-          }
-          next = slices;
-        }
-      };
-      std::vector<std::thread> threads;
-      for (unsigned int worker = 1; worker < workers; ++worker)
-      {
-        threads.emplace_back(run);
-      }
-      run();
-      for (std::thread & thread : threads)
-      {
-        thread.join();
-      }
-      if (failure)
-      {
-        std::rethrow_exception(failure);
-      }
-    };
 
     // Pass 1: each image's gradient magnitudes pooled over all its slices, for its thresholds.
     std::vector<float> fixedMagnitudes;
@@ -257,7 +220,7 @@ EdgeHausdorffDistanceImageFilter<TImage, TMaskImage>::EvaluateSlices(const RealI
     {
       std::vector<std::vector<float>> fixedPerSlice(slices);
       std::vector<std::vector<float>> movingPerSlice(slices);
-      forEachSlice([&](SizeValueType slice) {
+      Detail::ForEachSlice(slices, workers, [&](SizeValueType slice) {
         const std::vector<unsigned char> sliceMask = Detail::ExtractMaskSlice(mask, size, axis, slice);
         for (const bool isFixed : { true, false })
         {
@@ -287,7 +250,7 @@ EdgeHausdorffDistanceImageFilter<TImage, TMaskImage>::EvaluateSlices(const RealI
     std::vector<std::size_t>         movingCounts(slices, 0);
     std::vector<std::vector<double>> fixedDistances(slices);
     std::vector<std::vector<double>> movingDistances(slices);
-    forEachSlice([&](SizeValueType slice) {
+    Detail::ForEachSlice(slices, workers, [&](SizeValueType slice) {
       const std::vector<unsigned char> sliceMask = Detail::ExtractMaskSlice(mask, size, axis, slice);
       const auto                       fixedEdges =
         Detail::DetectEdges<2>(Detail::ExtractSlice(fixed->GetBufferPointer(), size, spacing, axis, slice),

@@ -233,6 +233,49 @@ AppendDirectedDistances(const EdgeImage<VDimension> * fromImage, const EdgeImage
   }
 }
 
+/** Runs work(slice) for slices 0 .. slices - 1 on `workers` threads (this
+ * one included), each taking the next slice not yet taken; the first
+ * exception stops the rest and is rethrown. */
+inline void
+ForEachSlice(SizeValueType slices, unsigned int workers, const std::function<void(SizeValueType)> & work)
+{
+  std::atomic<SizeValueType> next{ 0 };
+  std::exception_ptr         failure;
+  std::mutex                 failureMutex;
+  const auto                 run = [&]() {
+    try
+    {
+      for (SizeValueType slice = next++; slice < slices; slice = next++)
+      {
+        work(slice);
+      }
+    }
+    catch (...)
+    {
+      const std::lock_guard<std::mutex> lock(failureMutex);
+      if (!failure)
+      {
+        failure = std::current_exception();
+      }
+      next = slices;
+    }
+  };
+  std::vector<std::thread> threads;
+  for (unsigned int worker = 1; worker < workers; ++worker)
+  {
+    threads.emplace_back(run);
+  }
+  run();
+  for (std::thread & thread : threads)
+  {
+    thread.join();
+  }
+  if (failure)
+  {
+    std::rethrow_exception(failure);
+  }
+}
+
 /** The two axes in a slice across `axis` of a 3D image, in increasing order. */
 inline std::array<unsigned int, 2>
 InPlaneAxes(unsigned int axis)

@@ -10,6 +10,8 @@
 // (d) Rigid frictionless contact: the deck's penalty contact against the
 //     solver's projection contact on a block indented between walls.
 // Skipped (GTEST_SKIP) only when ccx is not installed.
+// Over 800 lines: the four share the deck writer's helpers and the CalculiX
+// runs' set-up; split they would repeat them.
 #include "bmrCalculix.h"
 #include "bmrMeshless.h"
 #include "bmrSolver.h"
@@ -17,6 +19,8 @@
 #include "bmrUnits.h"
 
 #include <gtest/gtest.h>
+
+#include <functional>
 
 #include <algorithm>
 #include <array>
@@ -680,100 +684,18 @@ SpringForces(const CalculixResult & result)
   return text.str();
 }
 
-TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
+using AgainstColdStart = std::function<DisplacementComparison(const CalculixResult &)>;
+
+// The continuation bmrCalculixGroundTruth uses on Colin27, started from
+// dynamic relaxation's state `withWalls`, and its gradual release.
+void
+ExpectContinuationsEndAtTheColdStart(const Model & walled, const CalculixSettings & quadratic,
+                                     const std::vector<Vector3> & withWalls, const AgainstColdStart & againstCold,
+                                     const DisplacementComparison & agreement)
 {
-  // The block indentation with the block's sides against four frictionless
-  // rigid walls: the indented material would bulge out of the sides; the
-  // walls hold it and it slides along them. Dynamic relaxation with its
-  // projection contact and CalculiX (Newton, node-to-face penalty contact,
-  // C3D10 on the same tetrahedra) must agree as well as they do without the
-  // walls, and far better than either differs from the block without walls.
-  BMR_REQUIRE_CALCULIX();
-  IndentationProblem problem;
-  problem.patchHalfWidth = 5.0;
-  problem.depth = 2.0;
-  Model free = MakeIndentationModel(problem, { 8, 8, 4 }, GridCells::Tetrahedra);
-  Model walled = free;
-  std::vector<Index> & sides = walled.nodeSets["sides"];
-  for (const char * name : { "xmin", "xmax", "ymin", "ymax" })
-  {
-    for (const Index node : walled.NodeSet(name))
-    {
-      if (std::find(sides.begin(), sides.end(), node) == sides.end())
-      {
-        sides.push_back(node);
-      }
-    }
-  }
-  const double   gap = 0.2; // mm, as the skull stands off the brain (node-to-face contact diverged at 0 here)
-  ContactSurface walls = WallsAroundBlock(problem.size, gap);
-  walls.slaveNodeSet = "sides";
-  walled.contactSurfaces.push_back(walls);
-
-  SolverSettings settings;
-  settings.integrator = Integrator::DynamicRelaxation;
-  settings.tolerance = 1e-4; // mm
-  settings.threads = 1;
-  const auto relax = [&](const Model & model) {
-    Solver            solver(model, settings);
-    const SolveResult result = solver.Solve();
-    EXPECT_TRUE(result.converged) << result.message;
-    return result.displacements;
-  };
-  const std::vector<Vector3> withoutWalls = relax(free);
-  const std::vector<Vector3> withWalls = relax(walled);
-  CalculixSettings quadratic;
-  quadratic.threads = 1;             // CTest runs two tests at once
-  quadratic.initialIncrement = 1.0; // the end state does not depend on the path
-  // CalculiX's own Newton tolerances (as bmrCalculixGroundTruth): penalty
-  // contact's active set keeps the harness's tighter ones from being met.
-  quadratic.residualTolerance = 0.005;
-  quadratic.correctionTolerance = 0.01;
-  const CalculixResult reference = RunCalculix(walled, quadratic);
-  const CalculixResult freeReference = RunCalculix(free, quadratic);
-  ASSERT_EQ(reference.mesh.contactPairs.size(), 1u);
-  EXPECT_GT(reference.mesh.contactPairs[0].slaveFaces.size(), 0u);
-
-  const DisplacementComparison agreement = CompareDisplacements(walled.nodes, withWalls, walled.nodes, reference.displacements);
-  const DisplacementComparison elements = CompareDisplacements(free.nodes, withoutWalls, free.nodes, freeReference.displacements);
-  const DisplacementComparison wallEffect = CompareDisplacements(walled.nodes, withoutWalls, walled.nodes, withWalls);
-  // Each other way into the walled block's contact must end at the cold start's equilibrium.
-  const auto againstCold = [&](const CalculixResult & result) {
-    return CompareDisplacements(walled.nodes, result.displacements, walled.nodes, reference.displacements);
-  };
-  // How far each solution passes the walls (mm), and how far the free block would.
-  const auto outside = [&](const std::vector<Vector3> & u) {
-    double largest = 0.0;
-    for (const Index node : walled.NodeSet("sides"))
-    {
-      const Vector3 p = walled.nodes[node] + u[node];
-      largest = std::max({ largest, -gap - p.x(), p.x() - problem.size.x() - gap, -gap - p.y(), p.y() - problem.size.y() - gap });
-    }
-    return largest;
-  };
-  std::cout << "walls: dynamic relaxation against CalculiX C3D10, RMS / max " << agreement.rmsError << " / "
-            << agreement.maxError << " mm (without walls " << elements.rmsError << " / " << elements.maxError
-            << " mm); the walls change the solution by " << wallEffect.rmsError << " / " << wallEffect.maxError
-            << " mm; beyond the walls: free block " << outside(withoutWalls) << " mm, dynamic relaxation "
-            << outside(withWalls) << " mm, CalculiX " << outside(reference.displacements) << " mm ("
-            << reference.iterations << " Newton iterations, " << reference.wallSeconds << " s)" << std::endl;
-  // Measured 2026-11-28 (slave as element faces): RMS / max 0.086 / 0.315 mm
-  // with walls, 0.106 / 0.334 without; the walls move the block by 0.31 / 0.63
-  // mm; it would pass them by 0.60 mm, CalculiX's penalty leaves 0.053 mm
-  // (p / K: K = 0.0105 MPa/mm, the walls pressed by up to some 560 Pa).
-  EXPECT_GT(outside(withoutWalls), 0.2);
-  EXPECT_LT(outside(withWalls), 1e-3);
-  EXPECT_LT(outside(reference.displacements), 0.1); // the penalty's overlap
-  // The contact adds no disagreement beyond that of the elements (linear ANP
-  // against quadratic tetrahedra), which is a fraction of the walls' effect.
-  EXPECT_LT(agreement.rmsError, 1.1 * elements.rmsError);
-  EXPECT_LT(agreement.maxError, 1.2 * elements.maxError);
-  EXPECT_LT(agreement.rmsError, 0.5 * wallEffect.rmsError);
-
-  // The continuation bmrCalculixGroundTruth uses on Colin27: a first step
-  // holds the boundary's corner nodes at dynamic relaxation's state, a second
-  // releases them. CalculiX must end at its own equilibrium (the cold
-  // start's), not at the state it started from.
+  // A first step holds the boundary's corner nodes at dynamic relaxation's
+  // state, a second releases them. CalculiX must end at its own equilibrium
+  // (the cold start's), not at the state it started from.
   CalculixSettings warm = quadratic;
   warm.startDisplacements = withWalls;
   const CalculixResult         continued = RunCalculix(walled, warm);
@@ -804,9 +726,16 @@ TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
   EXPECT_LT(gradualAgainstCold.maxError, 0.2 * agreement.maxError);
   EXPECT_GT(gradual.holdRunSeconds, 0.0);
   EXPECT_GE(gradual.lastStepIterations, 1);
+}
 
-  // The proximal stabilisation bmrCalculixGroundTruth uses on Colin27: the
-  // boundary's nodes tied by springs to anchors, at the reference state in
+// The proximal stabilisation bmrCalculixGroundTruth uses on Colin27, its
+// restart from the extrapolated limit and its gradual hand-over.
+void
+ExpectProximalStabilisationEndsAtTheColdStart(const Model & walled, const CalculixSettings & quadratic,
+                                              const AgainstColdStart & againstCold,
+                                              const DisplacementComparison & agreement)
+{
+  // The boundary's nodes tied by springs to anchors, at the reference state in
   // the first step, then where each step before ended. It ends at the cold
   // start's equilibrium, and the springs carry less at every step.
   CalculixSettings stabilised = quadratic;
@@ -881,6 +810,100 @@ TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
   EXPECT_LT(gradualProximal.stabilisationForces.back(), 0.01 * gradualProximal.stabilisationForces.front());
   EXPECT_LT(gradualProximalAgainstCold.rmsError, 0.1 * agreement.rmsError);
   EXPECT_LT(gradualProximalAgainstCold.maxError, 0.2 * agreement.maxError);
+}
+
+TEST(CalculixContact, IndentedBlockBetweenRigidWallsMatchesDynamicRelaxation)
+{
+  // The block indentation with the block's sides against four frictionless
+  // rigid walls: the indented material would bulge out of the sides; the
+  // walls hold it and it slides along them. Dynamic relaxation with its
+  // projection contact and CalculiX (Newton, node-to-face penalty contact,
+  // C3D10 on the same tetrahedra) must agree as well as they do without the
+  // walls, and far better than either differs from the block without walls.
+  BMR_REQUIRE_CALCULIX();
+  IndentationProblem problem;
+  problem.patchHalfWidth = 5.0;
+  problem.depth = 2.0;
+  Model free = MakeIndentationModel(problem, { 8, 8, 4 }, GridCells::Tetrahedra);
+  Model walled = free;
+  std::vector<Index> & sides = walled.nodeSets["sides"];
+  for (const char * name : { "xmin", "xmax", "ymin", "ymax" })
+  {
+    for (const Index node : walled.NodeSet(name))
+    {
+      if (std::find(sides.begin(), sides.end(), node) == sides.end())
+      {
+        sides.push_back(node);
+      }
+    }
+  }
+  const double   gap = 0.2; // mm, as the skull stands off the brain (node-to-face contact diverged at 0 here)
+  ContactSurface walls = WallsAroundBlock(problem.size, gap);
+  walls.slaveNodeSet = "sides";
+  walled.contactSurfaces.push_back(walls);
+
+  SolverSettings settings;
+  settings.integrator = Integrator::DynamicRelaxation;
+  settings.tolerance = 1e-4; // mm
+  settings.threads = 1;
+  const auto relax = [&](const Model & model) {
+    Solver            solver(model, settings);
+    const SolveResult result = solver.Solve();
+    EXPECT_TRUE(result.converged) << result.message;
+    return result.displacements;
+  };
+  const std::vector<Vector3> withoutWalls = relax(free);
+  const std::vector<Vector3> withWalls = relax(walled);
+  CalculixSettings quadratic;
+  quadratic.threads = 1;             // CTest runs two tests at once
+  quadratic.initialIncrement = 1.0; // the end state does not depend on the path
+  // CalculiX's own Newton tolerances (as bmrCalculixGroundTruth): penalty
+  // contact's active set keeps the harness's tighter ones from being met.
+  quadratic.residualTolerance = 0.005;
+  quadratic.correctionTolerance = 0.01;
+  const CalculixResult reference = RunCalculix(walled, quadratic);
+  const CalculixResult freeReference = RunCalculix(free, quadratic);
+  ASSERT_EQ(reference.mesh.contactPairs.size(), 1u);
+  EXPECT_GT(reference.mesh.contactPairs[0].slaveFaces.size(), 0u);
+
+  const DisplacementComparison agreement = CompareDisplacements(walled.nodes, withWalls, walled.nodes, reference.displacements);
+  const DisplacementComparison elements = CompareDisplacements(free.nodes, withoutWalls, free.nodes, freeReference.displacements);
+  const DisplacementComparison wallEffect = CompareDisplacements(walled.nodes, withoutWalls, walled.nodes, withWalls);
+  // How far each solution passes the walls (mm), and how far the free block would.
+  const auto outside = [&](const std::vector<Vector3> & u) {
+    double largest = 0.0;
+    for (const Index node : walled.NodeSet("sides"))
+    {
+      const Vector3 p = walled.nodes[node] + u[node];
+      largest = std::max({ largest, -gap - p.x(), p.x() - problem.size.x() - gap, -gap - p.y(), p.y() - problem.size.y() - gap });
+    }
+    return largest;
+  };
+  std::cout << "walls: dynamic relaxation against CalculiX C3D10, RMS / max " << agreement.rmsError << " / "
+            << agreement.maxError << " mm (without walls " << elements.rmsError << " / " << elements.maxError
+            << " mm); the walls change the solution by " << wallEffect.rmsError << " / " << wallEffect.maxError
+            << " mm; beyond the walls: free block " << outside(withoutWalls) << " mm, dynamic relaxation "
+            << outside(withWalls) << " mm, CalculiX " << outside(reference.displacements) << " mm ("
+            << reference.iterations << " Newton iterations, " << reference.wallSeconds << " s)" << std::endl;
+  // Measured 2026-11-28 (slave as element faces): RMS / max 0.086 / 0.315 mm
+  // with walls, 0.106 / 0.334 without; the walls move the block by 0.31 / 0.63
+  // mm; it would pass them by 0.60 mm, CalculiX's penalty leaves 0.053 mm
+  // (p / K: K = 0.0105 MPa/mm, the walls pressed by up to some 560 Pa).
+  EXPECT_GT(outside(withoutWalls), 0.2);
+  EXPECT_LT(outside(withWalls), 1e-3);
+  EXPECT_LT(outside(reference.displacements), 0.1); // the penalty's overlap
+  // The contact adds no disagreement beyond that of the elements (linear ANP
+  // against quadratic tetrahedra), which is a fraction of the walls' effect.
+  EXPECT_LT(agreement.rmsError, 1.1 * elements.rmsError);
+  EXPECT_LT(agreement.maxError, 1.2 * elements.maxError);
+  EXPECT_LT(agreement.rmsError, 0.5 * wallEffect.rmsError);
+
+  // Other ways into the walled block's contact must end at the cold start's equilibrium.
+  const auto againstCold = [&](const CalculixResult & result) {
+    return CompareDisplacements(walled.nodes, result.displacements, walled.nodes, reference.displacements);
+  };
+  ExpectContinuationsEndAtTheColdStart(walled, quadratic, withWalls, againstCold, agreement);
+  ExpectProximalStabilisationEndsAtTheColdStart(walled, quadratic, againstCold, agreement);
 }
 
 TEST(CalculixContact, PenaltyHoldsABlockOnARigidFloorAsItsLawSays)

@@ -5,8 +5,8 @@
 // T2-weighted image whose CSF is the brightest class, and two real MRIs
 // besides Colin27 (test/data/real-brains, MIT licence) prepared and updated
 // on every grid kind.
-// One translation unit: these tests share Colin27 (read once) and the ITK
-// series reader and writer templates.
+// Over 800 lines, one translation unit: these tests share Colin27 (read
+// once) and the ITK series reader and writer templates.
 // The deformation filter first: ITK's bundled Eigen before the core's (its header says why).
 #include "itkBiomechanicalDeformationFilter.h"
 

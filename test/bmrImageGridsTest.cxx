@@ -347,7 +347,7 @@ TEST(ImageGridColin27, BrainMaskAtBrainSizes)
   EXPECT_EQ(NodesReachableFromNodeZero(tet.model), tet.model.nodes.size());
 }
 
-TEST(ImageGridItkFilter, MeshMatchesCoreModel)
+TEST(BiomechanicalGridImageFilter, MeshMatchesCoreModel)
 {
   using ImageType = itk::Image<unsigned char, 3>;
   const bmr::LabelVolume labels = MakeEllipsoidLabels(2, 5);

@@ -558,6 +558,25 @@ TEST_F(ModelCommandTest, DemoNamesAResectionWithoutTumourAndAMissingElastix)
   EXPECT_EQ(run.err.find('\n'), run.err.size() - 1) << run.err;
 }
 
+namespace
+{
+// The cached truth's own backward map sampled on Colin27's grid, written as a
+// peer's displacement field, and the peer's details.
+void
+WriteTruthAsPeer(const fs::path & truth, const fs::path & peerField, const fs::path & peerDetails)
+{
+  using FieldImage = itk::Image<itk::Vector<float, 3>, 3>;
+  auto sample = itk::TransformToDisplacementFieldFilter<FieldImage, double>::New();
+  const auto transform = itk::ReadBiomechanicalTransform((truth / "ground-truth-transform.h5").string());
+  sample->SetTransform(dynamic_cast<const itk::Transform<double, 3, 3> *>(transform.GetPointer()));
+  sample->SetReferenceImage(itk::ReadBiomechanicalImage<ImageType>((Colin27Folder / "ch2.nii.gz").string(), "Colin27"));
+  sample->UseReferenceImageOn();
+  sample->Update();
+  itk::WriteBiomechanicalImage(sample->GetOutput(), peerField);
+  std::ofstream(peerDetails) << R"({"tool": "the truth itself"})";
+}
+} // namespace
+
 // The validation workflow's cached truths: `demo --truth-only` writes a truth
 // that `demo --truth-from` registers exactly as one `demo` that solves it and
 // registers it in the same process (here with a resection: the planned
@@ -663,17 +682,7 @@ TEST_F(ModelCommandTest, DemoRegistersACachedTruthAsTheWholeDemoDoes)
   // backward map sampled on the preoperative grid, where the errors are measured, it scores no error (single
   // precision), its time and details as given.
   const fs::path peerField = m_Folder / "truth-field.nii.gz", peerDetails = m_Folder / "peer.json";
-  {
-    using FieldImage = itk::Image<itk::Vector<float, 3>, 3>;
-    auto sample = itk::TransformToDisplacementFieldFilter<FieldImage, double>::New();
-    const auto transform = itk::ReadBiomechanicalTransform((truth / "ground-truth-transform.h5").string());
-    sample->SetTransform(dynamic_cast<const itk::Transform<double, 3, 3> *>(transform.GetPointer()));
-    sample->SetReferenceImage(itk::ReadBiomechanicalImage<ImageType>((Colin27Folder / "ch2.nii.gz").string(), "Colin27"));
-    sample->UseReferenceImageOn();
-    sample->Update();
-    itk::WriteBiomechanicalImage(sample->GetOutput(), peerField);
-    std::ofstream(peerDetails) << R"({"tool": "the truth itself"})";
-  }
+  WriteTruthAsPeer(truth, peerField, peerDetails);
   const std::string peer = "demo --quiet --overlays 0 --variant none --no-baseline --truth-from " + Quoted(truth) +
                            " --peer-name exact --peer-seconds 1.5 --peer-details " + Quoted(peerDetails);
   run = Biomech(peer + " --peer-field " + Quoted(peerField) + " --peer-warped " + Quoted(truth / "intraoperative.nii.gz") +

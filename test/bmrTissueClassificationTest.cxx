@@ -356,7 +356,7 @@ protected:
   ProgressRecorder() = default;
 };
 
-TEST(FuzzyCMeansItkFilter, OutputsOnInputGridMatchCore)
+TEST(FuzzyCMeansClassifierImageFilter, OutputsOnInputGridMatchCore)
 {
   using FloatImage = itk::Image<float, 3>;
   using MaskImage = itk::Image<unsigned char, 3>;

@@ -99,11 +99,11 @@ Settings()
   return settings;
 }
 
-class DeformationFilterKinds : public testing::TestWithParam<std::string>
+class BiomechanicalDeformationFilterKinds : public testing::TestWithParam<std::string>
 {};
 
 // The filter's output is the solver's result, bit for bit, whatever the discretization.
-TEST_P(DeformationFilterKinds, MatchesTheSolverBitwise)
+TEST_P(BiomechanicalDeformationFilterKinds, MatchesTheSolverBitwise)
 {
   const Model                  model = PressedBlock(GetParam());
   const PrescribedDisplacement load = TopLoad(model);
@@ -165,11 +165,12 @@ TEST_P(DeformationFilterKinds, MatchesTheSolverBitwise)
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Grids, DeformationFilterKinds, testing::Values("hexahedra", "tetrahedra", "meshless"),
+INSTANTIATE_TEST_SUITE_P(Grids, BiomechanicalDeformationFilterKinds,
+                         testing::Values("hexahedra", "tetrahedra", "meshless"),
                          [](const testing::TestParamInfo<std::string> & info) { return info.param; });
 
 // Pipeline conventions: one solve per change, progress reported, abort honoured.
-TEST(DeformationFilter, SolvesOncePerChangeReportsProgressAndAborts)
+TEST(BiomechanicalDeformationFilter, SolvesOncePerChangeReportsProgressAndAborts)
 {
   const Model model = PressedBlock("hexahedra", { 15, 12, 9 }); // enough steps for several reports
   auto        filter = FilterType::New();
@@ -217,7 +218,7 @@ TEST(DeformationFilter, SolvesOncePerChangeReportsProgressAndAborts)
   EXPECT_EQ(aborting->GetOutput()->GetNumberOfPoints(), 0u);
 }
 
-TEST(DeformationFilter, FailuresThrowNonConvergenceIsReported)
+TEST(BiomechanicalDeformationFilter, FailuresThrowNonConvergenceIsReported)
 {
   const Model model = PressedBlock("tetrahedra");
 
@@ -274,7 +275,7 @@ TEST(DeformationFilter, FailuresThrowNonConvergenceIsReported)
 // The filters compose: label image -> grid -> (model) -> deformation, with the
 // skull from the surface source as contact -> B-spline fit. The filter's
 // result is the solver's on the model it assembles from its inputs.
-TEST(DeformationFilter, ComposesWithGridSurfaceAndFitterFilters)
+TEST(BiomechanicalDeformationFilter, ComposesWithGridSurfaceAndFitterFilters)
 {
   using LabelImageType = itk::Image<unsigned char, 3>;
   auto         image = LabelImageType::New();
@@ -397,7 +398,7 @@ TEST(DeformationFilter, ComposesWithGridSurfaceAndFitterFilters)
 // Image to displacements as one ITK pipeline: classifier -> grid (model) ->
 // material mapping -> deformation. The mapping equals the core's on the same
 // memberships, bitwise; the deformation sees the mapped materials.
-TEST(MaterialMappingFilter, ClassifierGridMappingAndDeformationCompose)
+TEST(BiomechanicalMaterialMappingFilter, ClassifierGridMappingAndDeformationCompose)
 {
   using ImageType = itk::Image<float, 3>;
   using MaskType = itk::Image<unsigned char, 3>;
@@ -558,7 +559,7 @@ MeshOf(const ContactSurface & surface)
 // An itk::Mesh as the core's surface: vertices in the points' order whether
 // the identifiers are dense (vector containers) or not (map containers), and
 // a cell that names a missing point is an error that says so.
-TEST(SurfaceMesh, ContactSurfaceFromMeshNumbersPointsInOrderAndNamesAMissingPoint)
+TEST(BiomechanicalModelObject, ContactSurfaceFromMeshNumbersPointsInOrderAndNamesAMissingPoint)
 {
   ContactSurface tetrahedron; // a tetrahedron's boundary, every face outward
   tetrahedron.vertices = { Vector3(0, 0, 0), Vector3(1, 0, 0), Vector3(0, 1, 0), Vector3(0, 0, 1) };
@@ -621,9 +622,68 @@ TEST(SurfaceMesh, ContactSurfaceFromMeshNumbersPointsInOrderAndNamesAMissingPoin
   }
 }
 
+// The model object carries the model and its precomputation down the
+// pipeline: SetModel marks it modified, Graft shares the precomputation (a
+// bundle's, made before surgery) instead of making another, Initialize
+// empties it.
+TEST(BiomechanicalModelObject, CarriesTheModelAndItsPrecomputationThroughGraftAndInitialize)
+{
+  const Model model = PressedBlock("hexahedra");
+  auto        object = itk::BiomechanicalModelObject::New();
+  const auto  created = object->GetMTime();
+  object->SetModel(model);
+  EXPECT_GT(object->GetMTime(), created);
+  EXPECT_EQ(object->GetModel().nodes, model.nodes);
+  EXPECT_EQ(object->GetPrecomputation(), nullptr);
+  const auto precomputation = std::make_shared<const SolverPrecomputation>(model, Settings());
+  const auto modelled = object->GetMTime();
+  object->SetPrecomputation(precomputation);
+  EXPECT_GT(object->GetMTime(), modelled);
+
+  auto copy = itk::BiomechanicalModelObject::New();
+  copy->Graft(object);
+  EXPECT_EQ(copy->GetPrecomputation(), precomputation);
+  EXPECT_EQ(copy->GetModel().nodes, model.nodes);
+  EXPECT_EQ(copy->GetModel().cells.size(), model.cells.size());
+  copy->Initialize();
+  EXPECT_TRUE(copy->GetModel().nodes.empty());
+  EXPECT_EQ(copy->GetPrecomputation(), nullptr);
+  EXPECT_EQ(object->GetPrecomputation(), precomputation); // the original keeps its own
+  EXPECT_EQ(object->GetModel().nodes.size(), model.nodes.size());
+}
+
+// A precomputation that does not fit the object's model (here a node moved
+// after it was made) fails the deformation filter's solve with the solver's
+// words, not a solve of the wrong reference configuration.
+TEST(BiomechanicalModelObject, APrecomputationOfAnotherModelFailsTheSolveNamingIt)
+{
+  const Model model = PressedBlock("hexahedra");
+  Model       moved = model;
+  moved.nodes[0].x() += 0.1;
+  auto object = itk::BiomechanicalModelObject::New();
+  object->SetModel(moved);
+  object->SetPrecomputation(std::make_shared<const SolverPrecomputation>(model, Settings()));
+  auto filter = FilterType::New();
+  filter->SetModelInput(object);
+  filter->SetPrescribedDisplacements(PointSetOf(moved, TopLoad(moved)));
+  filter->SetSolverSettings(Settings());
+  try
+  {
+    filter->Update();
+    FAIL() << "the solve ran with a precomputation of another model";
+  }
+  catch (const itk::ExceptionObject & error)
+  {
+    EXPECT_CONTAINS(std::string(error.GetDescription()), "another model");
+  }
+  object->SetPrecomputation(std::make_shared<const SolverPrecomputation>(moved, Settings()));
+  filter->Update();
+  EXPECT_TRUE(filter->GetConverged());
+}
+
 // Loads from measurements as a filter: the core's loads, bitwise, as a point
 // set the deformation filter takes.
-TEST(LoadsFilter, SparsePointsAndASurfaceLoadTheExposedNodes)
+TEST(BiomechanicalLoadsFilter, SparsePointsAndASurfaceLoadTheExposedNodes)
 {
   using LoadsType = itk::BiomechanicalLoadsFilter<>;
   Model model = PressedBlock("hexahedra");
@@ -709,7 +769,7 @@ TEST(LoadsFilter, SparsePointsAndASurfaceLoadTheExposedNodes)
 /** The regions filter on a 10 x 8 x 6 mm block: the bottom layer fixed, a
  *  sphere on the top exposed, every other surface node a contact slave; bad
  *  regions are named. */
-TEST(RegionsFilter, FixedExposedAndContactNodesPartitionTheSurface)
+TEST(BiomechanicalRegionsFilter, FixedExposedAndContactNodesPartitionTheSurface)
 {
   Model block = PressedBlock("hexahedra");
   block.fixedConstraints.clear();

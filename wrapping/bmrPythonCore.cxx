@@ -197,8 +197,9 @@ BindErrors(py::module_ & module)
   });
 }
 
+// The materials: the hyperelastic laws and the tools' Ogden material.
 void
-BindModel(py::module_ & module)
+BindMaterials(py::module_ & module)
 {
   py::class_<Material>(module, "Material",
                        "Hyperelastic material (Pa, -, kg/m^3): law 'neo-hookean' or 'mooney-rivlin' (bmr.material_laws()); "
@@ -242,6 +243,31 @@ BindModel(py::module_ & module)
     });
   module.def("material_laws", &MaterialLawNameList, "The names of the constitutive laws a Material can take.");
 
+  py::class_<OgdenViscoelasticMaterial>(module, "OgdenMaterial",
+                                        "Miller and Chinzei's Ogden-type hyperviscoelastic law for stresses near a tool "
+                                        "(Pa, s): shear relaxation mu(t) = mu0 (1 - sum g_k (1 - exp(-t / tau_k))).")
+    .def(py::init([](double mu0, double alpha, const std::vector<double> & g, const std::vector<double> & tau,
+                     double poissonRatio) {
+           OgdenViscoelasticMaterial material{ mu0, alpha, g, tau, poissonRatio };
+           material.Validate();
+           return material;
+         }),
+         py::arg("mu0") = OgdenViscoelasticMaterial{}.mu0, py::arg("alpha") = OgdenViscoelasticMaterial{}.alpha,
+         py::arg("g") = OgdenViscoelasticMaterial{}.g, py::arg("tau") = OgdenViscoelasticMaterial{}.tau,
+         py::arg("poisson_ratio") = OgdenViscoelasticMaterial{}.poissonRatio)
+    .def_readonly("mu0", &OgdenViscoelasticMaterial::mu0)
+    .def_readonly("alpha", &OgdenViscoelasticMaterial::alpha)
+    .def_readonly("g", &OgdenViscoelasticMaterial::g)
+    .def_readonly("tau", &OgdenViscoelasticMaterial::tau)
+    .def_readonly("poisson_ratio", &OgdenViscoelasticMaterial::poissonRatio)
+    .def("cauchy_stress", [](const OgdenViscoelasticMaterial & material, const Eigen::Matrix3d & F) {
+      return OgdenElasticCauchy(material, F);
+    }, py::arg("F"), "The instantaneous (t = 0) Cauchy stress (Pa) of a deformation gradient.");
+}
+
+void
+BindSurfacesAndLoads(py::module_ & module)
+{
   py::class_<ContactSurface>(module, "Surface",
                              "Triangulated surface (mm): a rigid contact surface, a brain or skull surface, an "
                              "intraoperative surface.")
@@ -301,28 +327,11 @@ BindModel(py::module_ & module)
     .def("__repr__", [](const PrescribedDisplacement & load) {
       return "PrescribedDisplacement(" + std::to_string(load.nodes.size()) + " nodes)";
     });
+}
 
-  py::class_<OgdenViscoelasticMaterial>(module, "OgdenMaterial",
-                                        "Miller and Chinzei's Ogden-type hyperviscoelastic law for stresses near a tool "
-                                        "(Pa, s): shear relaxation mu(t) = mu0 (1 - sum g_k (1 - exp(-t / tau_k))).")
-    .def(py::init([](double mu0, double alpha, const std::vector<double> & g, const std::vector<double> & tau,
-                     double poissonRatio) {
-           OgdenViscoelasticMaterial material{ mu0, alpha, g, tau, poissonRatio };
-           material.Validate();
-           return material;
-         }),
-         py::arg("mu0") = OgdenViscoelasticMaterial{}.mu0, py::arg("alpha") = OgdenViscoelasticMaterial{}.alpha,
-         py::arg("g") = OgdenViscoelasticMaterial{}.g, py::arg("tau") = OgdenViscoelasticMaterial{}.tau,
-         py::arg("poisson_ratio") = OgdenViscoelasticMaterial{}.poissonRatio)
-    .def_readonly("mu0", &OgdenViscoelasticMaterial::mu0)
-    .def_readonly("alpha", &OgdenViscoelasticMaterial::alpha)
-    .def_readonly("g", &OgdenViscoelasticMaterial::g)
-    .def_readonly("tau", &OgdenViscoelasticMaterial::tau)
-    .def_readonly("poisson_ratio", &OgdenViscoelasticMaterial::poissonRatio)
-    .def("cauchy_stress", [](const OgdenViscoelasticMaterial & material, const Eigen::Matrix3d & F) {
-      return OgdenElasticCauchy(material, F);
-    }, py::arg("F"), "The instantaneous (t = 0) Cauchy stress (Pa) of a deformation gradient.");
-
+void
+BindTools(py::module_ & module)
+{
   py::class_<RigidTool>(module, "Tool",
                         "A rigid surgical tool moved along a trajectory (explicit dynamics; dynamic relaxation ramps it "
                         "to its last pose). Tool frame: the tip at the origin, the tool along +z.")
@@ -400,10 +409,98 @@ BindModel(py::module_ & module)
     .def_property_readonly("stress_cells", [](const ToolHistory & h) { return ArrayFromIndices(h.stressCells); })
     .def_property_readonly("ogden_stress", [](const ToolHistory & h) { return h.ogdenStress; })
     .def_property_readonly("neo_hookean_stress", [](const ToolHistory & h) { return h.neoHookeanStress; });
+}
 
-  py::class_<Model>(module, "Model",
+// The model's loads and boundary conditions, and its queries and copies.
+void
+BindModelLoads(py::class_<Model> & model)
+{
+  model
+    .def_property(
+      "gravity", [](const Model & model) { return py::make_tuple(model.bodyAcceleration.x(), model.bodyAcceleration.y(), model.bodyAcceleration.z()); },
+      [](Model & model, const py::object & value) { model.bodyAcceleration = VectorFromObject(value, "gravity"); },
+      "Body acceleration (mm/s^2), e.g. (0, 0, -9810).")
+    .def_property(
+      "fluid_surface",
+      [](const Model & model) -> py::object {
+        return model.fluidSurface ? py::object(py::make_tuple(model.fluidSurface->x(), model.fluidSurface->y(),
+                                                              model.fluidSurface->z()))
+                                  : py::object(py::none());
+      },
+      [](Model & model, const py::object & value) {
+        model.fluidSurface = value.is_none() ? std::nullopt
+                                             : std::optional<Vector3>(VectorFromObject(value, "fluid_surface"));
+      },
+      "A point (mm) on the surface of the CSF left after drainage: nodes below its level plane carry no weight; "
+      "None: every node carries its weight.")
+    .def(
+      "fix",
+      [](Model & model, const std::string & nodeSet, const py::object & components) {
+        model.NodeSet(nodeSet);
+        model.fixedConstraints.push_back(FixedConstraint{ nodeSet, ComponentsFromObject(components, "components") });
+      },
+      py::arg("node_set"), py::arg("components") = py::make_tuple(true, true, true),
+      "Holds the nodes of a set at zero displacement in the chosen components.")
+    .def_property_readonly("fixed_constraints",
+                           [](const Model & model) {
+                             py::list constraints;
+                             for (const FixedConstraint & constraint : model.fixedConstraints)
+                             {
+                               constraints.append(py::make_tuple(
+                                 constraint.nodeSet,
+                                 py::make_tuple(constraint.components[0], constraint.components[1], constraint.components[2])));
+                             }
+                             return constraints;
+                           })
+    .def(
+      "add_prescribed_displacement",
+      [](Model & model, const PrescribedDisplacement & load) { model.prescribedDisplacements.push_back(load); },
+      py::arg("load"))
+    .def_readonly("prescribed_displacements", &Model::prescribedDisplacements)
+    .def(
+      "add_contact_surface", [](Model & model, const ContactSurface & surface) { model.contactSurfaces.push_back(surface); },
+      py::arg("surface"), "A rigid surface the body stays on one side of (frictionless, with separation).")
+    .def_readonly("contact_surfaces", &Model::contactSurfaces)
+    .def(
+      "add_tool", [](Model & model, const RigidTool & tool) { model.tools.push_back(tool); }, py::arg("tool"),
+      "A rigid tool moved along its trajectory (frictionless contact, the body outside the tool).")
+    .def_readonly("tools", &Model::tools)
+    .def("clear_loads",
+         [](Model & model) {
+           model.fixedConstraints.clear();
+           model.prescribedDisplacements.clear();
+           model.contactSurfaces.clear();
+           model.tools.clear();
+           model.bodyAcceleration = Vector3::Zero();
+         })
+    .def_property_readonly("is_meshless",
+                           [](const Model & model) { return model.discretization == Discretization::Meshless; })
+    .def_property_readonly("integration_points",
+                           [](const Model & model) { return ArrayFromPoints(model.meshless.integrationPoints); })
+    .def("boundary_nodes", [](const Model & model) { return ArrayFromIndices(model.BoundaryNodes()); })
+    .def("boundary_triangles", [](const Model & model) { return TriangleArray(model.BoundaryTriangles()); })
+    .def("validate", &Model::Validate, "Raises Error naming the first bad cell, material or node set.")
+    .def("__copy__", [](const Model & model) { return Model(model); })
+    .def("__deepcopy__", [](const Model & model, const py::dict &) { return Model(model); }, py::arg("memo"))
+    .def("copy", [](const Model & model) { return Model(model); })
+    .def("__repr__", [](const Model & model) {
+      const ModelCounts counts = CountModel(model);
+      return "Model(" + std::to_string(counts.nodes) + " nodes, " + std::to_string(counts.cells) + " cells, " +
+             std::to_string(counts.materials) + " materials" +
+             (model.discretization == Discretization::Meshless
+                ? ", meshless, " + std::to_string(counts.integrationPoints) + " integration points"
+                : std::string()) +
+             ")";
+    });
+}
+
+void
+BindModelClass(py::module_ & module)
+{
+  py::class_<Model> model(module, "Model",
                     "A mechanical model: nodes (mm), cells, materials, node sets, constraints, loads, contact "
-                    "surfaces. Arrays are copies: assign to change them.")
+                    "surfaces. Arrays are copies: assign to change them.");
+  model
     .def(py::init([](const py::object & nodes, const py::object & cells, const std::vector<Material> & materials,
                      const py::object & cellMaterials, const std::map<std::string, py::object> & nodeSets) {
            Model model;
@@ -493,83 +590,17 @@ BindModel(py::module_ & module)
       [](Model & model, const std::string & name, const py::object & nodes) {
         model.nodeSets[name] = IndicesFromArray(nodes, "node set '" + name + "'");
       },
-      py::arg("name"), py::arg("nodes"))
-    .def_property(
-      "gravity", [](const Model & model) { return py::make_tuple(model.bodyAcceleration.x(), model.bodyAcceleration.y(), model.bodyAcceleration.z()); },
-      [](Model & model, const py::object & value) { model.bodyAcceleration = VectorFromObject(value, "gravity"); },
-      "Body acceleration (mm/s^2), e.g. (0, 0, -9810).")
-    .def_property(
-      "fluid_surface",
-      [](const Model & model) -> py::object {
-        return model.fluidSurface ? py::object(py::make_tuple(model.fluidSurface->x(), model.fluidSurface->y(),
-                                                              model.fluidSurface->z()))
-                                  : py::object(py::none());
-      },
-      [](Model & model, const py::object & value) {
-        model.fluidSurface = value.is_none() ? std::nullopt
-                                             : std::optional<Vector3>(VectorFromObject(value, "fluid_surface"));
-      },
-      "A point (mm) on the surface of the CSF left after drainage: nodes below its level plane carry no weight; "
-      "None: every node carries its weight.")
-    .def(
-      "fix",
-      [](Model & model, const std::string & nodeSet, const py::object & components) {
-        model.NodeSet(nodeSet);
-        model.fixedConstraints.push_back(FixedConstraint{ nodeSet, ComponentsFromObject(components, "components") });
-      },
-      py::arg("node_set"), py::arg("components") = py::make_tuple(true, true, true),
-      "Holds the nodes of a set at zero displacement in the chosen components.")
-    .def_property_readonly("fixed_constraints",
-                           [](const Model & model) {
-                             py::list constraints;
-                             for (const FixedConstraint & constraint : model.fixedConstraints)
-                             {
-                               constraints.append(py::make_tuple(
-                                 constraint.nodeSet,
-                                 py::make_tuple(constraint.components[0], constraint.components[1], constraint.components[2])));
-                             }
-                             return constraints;
-                           })
-    .def(
-      "add_prescribed_displacement",
-      [](Model & model, const PrescribedDisplacement & load) { model.prescribedDisplacements.push_back(load); },
-      py::arg("load"))
-    .def_readonly("prescribed_displacements", &Model::prescribedDisplacements)
-    .def(
-      "add_contact_surface", [](Model & model, const ContactSurface & surface) { model.contactSurfaces.push_back(surface); },
-      py::arg("surface"), "A rigid surface the body stays on one side of (frictionless, with separation).")
-    .def_readonly("contact_surfaces", &Model::contactSurfaces)
-    .def(
-      "add_tool", [](Model & model, const RigidTool & tool) { model.tools.push_back(tool); }, py::arg("tool"),
-      "A rigid tool moved along its trajectory (frictionless contact, the body outside the tool).")
-    .def_readonly("tools", &Model::tools)
-    .def("clear_loads",
-         [](Model & model) {
-           model.fixedConstraints.clear();
-           model.prescribedDisplacements.clear();
-           model.contactSurfaces.clear();
-           model.tools.clear();
-           model.bodyAcceleration = Vector3::Zero();
-         })
-    .def_property_readonly("is_meshless",
-                           [](const Model & model) { return model.discretization == Discretization::Meshless; })
-    .def_property_readonly("integration_points",
-                           [](const Model & model) { return ArrayFromPoints(model.meshless.integrationPoints); })
-    .def("boundary_nodes", [](const Model & model) { return ArrayFromIndices(model.BoundaryNodes()); })
-    .def("boundary_triangles", [](const Model & model) { return TriangleArray(model.BoundaryTriangles()); })
-    .def("validate", &Model::Validate, "Raises Error naming the first bad cell, material or node set.")
-    .def("__copy__", [](const Model & model) { return Model(model); })
-    .def("__deepcopy__", [](const Model & model, const py::dict &) { return Model(model); }, py::arg("memo"))
-    .def("copy", [](const Model & model) { return Model(model); })
-    .def("__repr__", [](const Model & model) {
-      const ModelCounts counts = CountModel(model);
-      return "Model(" + std::to_string(counts.nodes) + " nodes, " + std::to_string(counts.cells) + " cells, " +
-             std::to_string(counts.materials) + " materials" +
-             (model.discretization == Discretization::Meshless
-                ? ", meshless, " + std::to_string(counts.integrationPoints) + " integration points"
-                : std::string()) +
-             ")";
-    });
+      py::arg("name"), py::arg("nodes"));
+  BindModelLoads(model);
+}
+
+void
+BindModel(py::module_ & module)
+{
+  BindMaterials(module);
+  BindSurfacesAndLoads(module);
+  BindTools(module);
+  BindModelClass(module);
 }
 
 void

@@ -4,6 +4,8 @@
 // one-call registration (the synthetic scenes: bmrPythonSynthetic.cxx). It calls the pipeline library
 // (bmrBrainShiftRegistration.h), which holds the filters compiled on float
 // images and unsigned char masks, so that this file instantiates few templates.
+// Over 800 lines: another translation unit would compile ITK's and pybind11's
+// headers once more in every build.
 
 // ITK before the core: ITK's bundled Eigen must be seen before the system
 // Eigen (the pipeline headers include ITK's first).
@@ -53,8 +55,9 @@ JsonToDict(const nlohmann::json & value)
 
 // ---------------------------------------------------------------------------
 
+// Image files: reading (DICOM series too) and writing.
 void
-BindFilesAndTransforms(py::module_ & module)
+BindImageFiles(py::module_ & module)
 {
   module.def(
     "imread",
@@ -140,7 +143,12 @@ BindFilesAndTransforms(py::module_ & module)
     },
     py::arg("image"), py::arg("path"),
     "Writes an image (uint8/bool arrays as uint8, others as float32), through a temporary file: never half-written.");
+}
 
+// Transforms: their files, composition and the points they map.
+void
+BindTransforms(py::module_ & module)
+{
   py::class_<PythonTransform>(module, "Transform",
                               "An ITK transform of 3-D points (mm). The registrations' transforms are backward maps: "
                               "intraoperative point -> preoperative point, what resampling needs.")
@@ -221,7 +229,15 @@ BindFilesAndTransforms(py::module_ & module)
 }
 
 void
-BindFilters(py::module_ & module)
+BindFilesAndTransforms(py::module_ & module)
+{
+  BindImageFiles(module);
+  BindTransforms(module);
+}
+
+// Skull stripping, brain surfaces and the transform fitter.
+void
+BindModelBuildingFilters(py::module_ & module)
 {
   module.def(
     "atlas_brain_mask",
@@ -309,7 +325,12 @@ BindFilters(py::module_ & module)
     py::arg("minimum_control_point_spacing") = 1.0, py::arg("extend_domain_to_points") = true,
     "Fits the backward B-spline map T(x + u) = x to displacements u at points (e.g. model nodes) over the grid of "
     "`reference` (itk::DisplacementPointSetToBSplineTransformFilter): (Transform, report).");
+}
 
+// Warping, the edge-based Hausdorff evaluation and the B-spline baseline.
+void
+BindWarpingAndEvaluation(py::module_ & module)
+{
   module.def(
     "warp_image",
     [](const py::object & image, const PythonTransform & transform, const py::object & reference,
@@ -443,6 +464,13 @@ BindFilters(py::module_ & module)
     "Intensity-based B-spline registration, the baseline (itk::BSplineIntensityRegistrationFilter: translation, then "
     "B-spline, Mattes mutual information, L-BFGS-B); iterations 0 and settings left None keep the filter's defaults "
     "(control points 20 mm at the finest level, 50 histogram bins, 20 % of the voxels sampled, seed 121212).");
+}
+
+void
+BindFilters(py::module_ & module)
+{
+  BindModelBuildingFilters(module);
+  BindWarpingAndEvaluation(module);
 }
 
 // ---------------------------------------------------------------------------
@@ -596,8 +624,9 @@ ResultWithEnsemble(BrainShiftRegistrationResult result, const BrainShiftRegistra
   return py::make_tuple(std::move(result), JsonToDict(report), spread);
 }
 
+// The patient model (PrepareBrainModel) and its uncertainty settings.
 void
-BindRegistration(py::module_ & module)
+BindBrainModel(py::module_ & module)
 {
   module.def("_default_registration_settings", &DefaultRegistrationSettings);
 
@@ -675,7 +704,12 @@ BindRegistration(py::module_ & module)
     .def_readwrite("exposed_radius_spread", &UncertaintySettings::exposedRadiusSpread)
     .def_readwrite("member_tolerance", &UncertaintySettings::memberTolerance)
     .def_readwrite("threads", &UncertaintySettings::threads);
+}
 
+// The one-call registration and its result.
+void
+BindRegistrationResult(py::module_ & module)
+{
   py::class_<BrainShiftRegistrationResult>(module, "RegistrationResult", py::dynamic_attr(),
                                            "Everything `biomech register` writes, in memory.")
     .def_readonly("brain_model", &BrainShiftRegistrationResult::model)
@@ -765,7 +799,12 @@ BindRegistration(py::module_ & module)
     py::arg("label_maps"), py::arg("intraoperative_surface"), py::arg("sparse_points"), py::arg("sparse_displacements"),
     py::arg("intraoperative_image"), py::arg("intraoperative_mask"), py::arg("settings"), py::arg("uncertainty"),
     py::arg("progress"));
+}
 
+// The clinical workflow: model bundles, prepare and update.
+void
+BindModelBundles(py::module_ & module)
+{
   py::class_<ModelBundle>(module, "ModelBundle",
                           "A brain model prepared before surgery (biomech prepare): the model, its surfaces, the "
                           "preoperative image and label maps and the settings; write() makes the bundle folder.")
@@ -857,6 +896,14 @@ BindRegistration(py::module_ & module)
     py::arg("bundle"), py::arg("intraoperative_surface"), py::arg("sparse_points"), py::arg("sparse_displacements"),
     py::arg("intraoperative_image"), py::arg("intraoperative_mask"), py::arg("previous"), py::arg("settings"),
     py::arg("uncertainty"), py::arg("progress"));
+}
+
+void
+BindRegistration(py::module_ & module)
+{
+  BindBrainModel(module);
+  BindRegistrationResult(module);
+  BindModelBundles(module);
 }
 
 } // namespace

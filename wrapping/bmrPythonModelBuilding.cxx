@@ -166,8 +166,9 @@ BindFiles(py::module_ & module)
     py::arg("semi_axes"), py::arg("subdivisions") = 3, py::arg("centre") = py::make_tuple(0.0, 0.0, 0.0));
 }
 
+// Tissue classification and grids.
 void
-BindModelBuilding(py::module_ & module)
+BindClassificationAndGrids(py::module_ & module)
 {
   py::class_<TissueClassification>(module, "TissueClassification")
     .def_property_readonly("centroids", [](const TissueClassification & result) { return result.fit.centroids; })
@@ -246,7 +247,12 @@ BindModelBuilding(py::module_ & module)
     py::arg("optimise") = ImageGridSettings{}.optimise, py::arg("seed") = ImageGridSettings{}.seed, py::arg("threads") = 0,
     "Computational grid of a mask or label image (itk::BiomechanicalGridImageFilter's method): 'hexahedra', "
     "'tetrahedra', 'mixed' or 'meshless'.");
+}
 
+// Regions of a grid (surface, exposed, skull base) and the material mapping.
+void
+BindRegionsAndMaterials(py::module_ & module)
+{
   module.def(
     "surface_nodes_in_sphere",
     [](const Model & model, const py::object & centre, double radius, const py::object & surfaceNodes) {
@@ -327,6 +333,13 @@ BindModelBuilding(py::module_ & module)
     "A copy of the model with materials mixed from tissue-class memberships (itk::BiomechanicalMaterialMappingFilter's "
     "method): memberships as classify_tissue gives them; class_materials one per class (empty: CSF for the darkest "
     "class, parenchyma for the others).");
+}
+
+void
+BindModelBuilding(py::module_ & module)
+{
+  BindClassificationAndGrids(module);
+  BindRegionsAndMaterials(module);
 }
 
 void

@@ -16,8 +16,9 @@ namespace
 // The synthetic brain shift of the demo (a known answer for notebooks and studies).
 // ---------------------------------------------------------------------------
 
+// The synthetic brain shift (the demo's ground truth).
 void
-BindSyntheticBrainShift(py::module_ & module)
+BindSyntheticScene(py::module_ & module)
 {
   py::class_<SyntheticBrainShift>(module, "SyntheticBrainShift",
                                   "A ground-truth brain shift (the README demo's): a finer model under a prescribed "
@@ -118,7 +119,12 @@ BindSyntheticBrainShift(py::module_ & module)
     "The README demo's ground truth on any brain: shift mm sag of the craniotomy, gravity in g, a noisy "
     "intraoperative image; realistic with another contrast ('t2', 'low-field-t1'), a bias field (largest deviation "
     "from 1), Rician noise, a partial field of view (mm) and a resection cavity (a tumour and resection_margin mm).");
+}
 
+// What the study measures against it: displacement errors and the ventricles.
+void
+BindSyntheticMeasures(py::module_ & module)
+{
   module.def(
     "measure_displacement_error",
     [](const py::object & transform, const PythonTransform & truth, const py::object & region, int stride) {
@@ -171,6 +177,13 @@ BindSyntheticBrainShift(py::module_ & module)
     py::arg("image"), py::arg("brain_mask"), py::kw_only(), py::arg("depth") = 10.0,
     "The lateral ventricles of a T1 image: its CSF class deeper than depth mm below the brain mask's surface, opened "
     "by 2 mm, the largest component (what biomech demo's ventricle surface distance measures).");
+}
+
+void
+BindSyntheticBrainShift(py::module_ & module)
+{
+  BindSyntheticScene(module);
+  BindSyntheticMeasures(module);
 }
 
 // ---------------------------------------------------------------------------

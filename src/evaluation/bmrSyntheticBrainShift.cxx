@@ -323,16 +323,11 @@ ParseIntraoperativeContrast(const std::string & name)
   throw Error("unknown intraoperative contrast '" + name + "'; choose preoperative, t2 or low-field-t1");
 }
 
-SyntheticBrainShift
-MakeSyntheticBrainShiftModel(const RegistrationImage *           preoperativeImage,
-                             const RegistrationLabelImage *      brainMask,
-                             const SyntheticBrainShiftSettings & settings,
-                             const StageCallback &               stageCallback)
+namespace
 {
-  if (preoperativeImage == nullptr || brainMask == nullptr)
-  {
-    throw Error("MakeSyntheticBrainShift: give the preoperative image and its brain mask");
-  }
+void
+CheckSyntheticSettings(const SyntheticBrainShiftSettings & settings)
+{
   if (!(settings.targetShift > 0.0))
   {
     throw Error("MakeSyntheticBrainShift: the target shift must be > 0 mm");
@@ -367,25 +362,31 @@ MakeSyntheticBrainShiftModel(const RegistrationImage *           preoperativeIma
     throw Error("MakeSyntheticBrainShift: the Mooney-Rivlin share is " + std::to_string(settings.mooneyRivlinShare) +
                 "; give C01 / (C10 + C01) in (0, 1], or 0 for the registration's neo-Hookean law");
   }
-  SyntheticBrainShift truth;
-  truth.timer = StageTimer(stageCallback);
-  StageTimer & timer = truth.timer;
+}
 
-  if (settings.tumourRadius > 0.0)
-  {
-    truth.tumourMask = SphereMask(brainMask, settings.tumourCentre, settings.tumourRadius);
-  }
+Material
+TruthCsfMaterial(const SyntheticBrainShiftSettings & settings)
+{
+  Material csf = CsfMaterial();
+  csf.youngsModulus = settings.csfYoungsModulus;
+  csf.poissonRatio = settings.csfPoissonRatio;
+  csf.density = settings.csfDensity;
+  return csf;
+}
 
+// The truth's model: the registration's pipeline on the same images with the
+// truth's grid, classes and materials (grey and white matter apart, a
+// Mooney-Rivlin parenchyma, when asked).
+BrainModelSettings
+TruthModelSettings(const SyntheticBrainShiftSettings & settings, const Material & csf)
+{
+  const bool heterogeneous = settings.greyMatterYoungsModulus != 0.0 || settings.whiteMatterYoungsModulus != 0.0;
   BrainModelSettings modelSettings;
   modelSettings.grid = settings.grid;
   modelSettings.craniotomyCentre = settings.craniotomyCentre;
   modelSettings.craniotomyRadius = settings.craniotomyRadius;
   modelSettings.threads = settings.threads;
   modelSettings.skullClosing = settings.skullClosing;
-  Material csf = CsfMaterial();
-  csf.youngsModulus = settings.csfYoungsModulus;
-  csf.poissonRatio = settings.csfPoissonRatio;
-  csf.density = settings.csfDensity;
   Material parenchyma = ParenchymaMaterial();
   parenchyma.poissonRatio = settings.poissonRatio;
   if (heterogeneous)
@@ -413,38 +414,98 @@ MakeSyntheticBrainShiftModel(const RegistrationImage *           preoperativeIma
     modelSettings.materials.tumour.law = MaterialLaw::MooneyRivlin;
     modelSettings.materials.tumour.secondInvariantShare = settings.mooneyRivlinShare;
   }
+  return modelSettings;
+}
+
+// The cavity's cells hold drained fluid: the CSF's material, weightless.
+void
+CarveResectionCavity(SyntheticBrainShift & truth, const RegistrationLabelImage * brainMask,
+                     const SyntheticBrainShiftSettings & settings, const Material & csf)
+{
+  Model & model = truth.model.model;
+  truth.resectionCavityRadius = settings.tumourRadius + settings.resectionMargin;
+  truth.resectionMask = SphereMask(brainMask, settings.tumourCentre, truth.resectionCavityRadius);
+  Material cavity = csf;
+  cavity.name = "resection cavity";
+  model.materials.push_back(cavity);
+  std::size_t cavityCells = 0;
+  for (Cell & cell : model.cells)
+  {
+    Vector3 centre = Vector3::Zero();
+    const int corners = NodesPerCell(cell.type);
+    for (int k = 0; k < corners; ++k)
+    {
+      centre += model.nodes[cell.nodes[k]];
+    }
+    if ((centre / corners - settings.tumourCentre).norm() <= truth.resectionCavityRadius)
+    {
+      cell.material = static_cast<Index>(model.materials.size() - 1);
+      ++cavityCells;
+    }
+  }
+  if (cavityCells == 0)
+  {
+    throw Error("the resection cavity (radius " + std::to_string(truth.resectionCavityRadius) +
+                " mm around the tumour) holds no cell of the ground truth's " + ImageGridKindName(settings.grid.kind) +
+                "; give a finite-element ground truth and a larger tumour or margin");
+  }
+}
+
+// Skull-contact nodes deeper than settings.bondedDepth below the
+// craniotomy's centre held fixed instead of sliding.
+void
+BondSkullContact(Model & model, const SyntheticBrainShiftSettings & settings, const Vector3 & down)
+{
+  std::vector<Index> & contact = model.nodeSets["contact"];
+  std::vector<Index> & bonded = model.nodeSets["bonded to the skull"];
+  for (const Index node : contact)
+  {
+    if ((model.nodes[node] - settings.craniotomyCentre).dot(down) > settings.bondedDepth)
+    {
+      bonded.push_back(node);
+    }
+  }
+  if (bonded.empty())
+  {
+    throw Error("MakeSyntheticBrainShift: no skull-contact node lies deeper than the bonded depth of " +
+                std::to_string(settings.bondedDepth) + " mm below the craniotomy's centre; give a smaller depth");
+  }
+  const std::set<Index> held(bonded.begin(), bonded.end());
+  contact.erase(std::remove_if(contact.begin(), contact.end(), [&](Index node) { return held.count(node) > 0; }),
+                contact.end());
+  model.fixedConstraints.push_back(FixedConstraint{ "bonded to the skull" });
+}
+
+} // namespace
+
+SyntheticBrainShift
+MakeSyntheticBrainShiftModel(const RegistrationImage *           preoperativeImage,
+                             const RegistrationLabelImage *      brainMask,
+                             const SyntheticBrainShiftSettings & settings,
+                             const StageCallback &               stageCallback)
+{
+  if (preoperativeImage == nullptr || brainMask == nullptr)
+  {
+    throw Error("MakeSyntheticBrainShift: give the preoperative image and its brain mask");
+  }
+  CheckSyntheticSettings(settings);
+  SyntheticBrainShift truth;
+  truth.timer = StageTimer(stageCallback);
+  StageTimer & timer = truth.timer;
+
+  if (settings.tumourRadius > 0.0)
+  {
+    truth.tumourMask = SphereMask(brainMask, settings.tumourCentre, settings.tumourRadius);
+  }
+
+  const Material           csf = TruthCsfMaterial(settings);
+  const BrainModelSettings modelSettings = TruthModelSettings(settings, csf);
   truth.model = BuildBrainModel(preoperativeImage, brainMask, truth.tumourMask, ContactSurface{}, nullptr,
                                 modelSettings, timer);
   Model & model = truth.model.model;
   if (settings.resectionMargin >= 0.0)
   {
-    // The cavity's cells hold drained fluid: the CSF's material, weightless.
-    truth.resectionCavityRadius = settings.tumourRadius + settings.resectionMargin;
-    truth.resectionMask = SphereMask(brainMask, settings.tumourCentre, truth.resectionCavityRadius);
-    Material cavity = csf;
-    cavity.name = "resection cavity";
-    model.materials.push_back(cavity);
-    std::size_t cavityCells = 0;
-    for (Cell & cell : model.cells)
-    {
-      Vector3 centre = Vector3::Zero();
-      const int corners = NodesPerCell(cell.type);
-      for (int k = 0; k < corners; ++k)
-      {
-        centre += model.nodes[cell.nodes[k]];
-      }
-      if ((centre / corners - settings.tumourCentre).norm() <= truth.resectionCavityRadius)
-      {
-        cell.material = static_cast<Index>(model.materials.size() - 1);
-        ++cavityCells;
-      }
-    }
-    if (cavityCells == 0)
-    {
-      throw Error("the resection cavity (radius " + std::to_string(truth.resectionCavityRadius) +
-                  " mm around the tumour) holds no cell of the ground truth's " + ImageGridKindName(settings.grid.kind) +
-                  "; give a finite-element ground truth and a larger tumour or margin");
-    }
+    CarveResectionCavity(truth, brainMask, settings, csf);
   }
   const Vector3 down = (NodeCentroid(model) - settings.craniotomyCentre).normalized();
   truth.down = down;
@@ -485,27 +546,135 @@ MakeSyntheticBrainShiftModel(const RegistrationImage *           preoperativeIma
   }
   if (settings.bondedDepth >= 0.0)
   {
-    std::vector<Index> & contact = model.nodeSets["contact"];
-    std::vector<Index> & bonded = model.nodeSets["bonded to the skull"];
-    for (const Index node : contact)
-    {
-      if ((model.nodes[node] - settings.craniotomyCentre).dot(down) > settings.bondedDepth)
-      {
-        bonded.push_back(node);
-      }
-    }
-    if (bonded.empty())
-    {
-      throw Error("MakeSyntheticBrainShift: no skull-contact node lies deeper than the bonded depth of " +
-                  std::to_string(settings.bondedDepth) + " mm below the craniotomy's centre; give a smaller depth");
-    }
-    const std::set<Index> held(bonded.begin(), bonded.end());
-    contact.erase(std::remove_if(contact.begin(), contact.end(), [&](Index node) { return held.count(node) > 0; }),
-                  contact.end());
-    model.fixedConstraints.push_back(FixedConstraint{ "bonded to the skull" });
+    BondSkullContact(model, settings, down);
   }
   return truth;
 }
+
+namespace
+{
+// The exposed surface as a surface scanner would see it: the cortex (the
+// smooth surface of the brain mask, not that of the ground truth's cells)
+// inside the craniotomy, moved by the ground truth; and the tracked points.
+void
+ScanExposedSurface(SyntheticBrainShift & truth, const RegistrationLabelImage * brainMask,
+                   const SyntheticBrainShiftSettings & settings, const RegistrationTransform & forward)
+{
+// A little wider than the opening, as a scanner sees it: the registration's
+// exposed nodes at the rim then find their partners on the surface, not on its edge.
+const double             patchRadius = settings.craniotomyRadius + settings.scanMargin;
+std::vector<std::string> surfaceWarnings; // the truth's model reports the same mask's
+const ContactSurface     cortex = CortexSurfaceOfMask(brainMask, surfaceWarnings);
+std::vector<Index>       newIndex(cortex.vertices.size(), -1);
+ContactSurface &         exposed = truth.exposedSurface;
+exposed.name = "displaced exposed surface";
+for (const auto & triangle : cortex.triangles)
+{
+  bool inside = true;
+  for (const Index vertex : triangle)
+  {
+    inside = inside && (cortex.vertices[vertex] - settings.craniotomyCentre).norm() <= patchRadius;
+  }
+  if (!inside)
+  {
+    continue;
+  }
+  std::array<Index, 3> copy{};
+  for (int k = 0; k < 3; ++k)
+  {
+    Index & mapped = newIndex[triangle[k]];
+    if (mapped < 0)
+    {
+      const Vector3 & v = cortex.vertices[triangle[k]];
+      const auto      moved = forward.TransformPoint(RegistrationTransform::InputPointType(v.data()));
+      mapped = static_cast<Index>(exposed.vertices.size());
+      exposed.vertices.emplace_back(moved[0], moved[1], moved[2]);
+    }
+    copy[k] = mapped;
+  }
+  exposed.triangles.push_back(copy);
+}
+// Tracked points: the first vertex of the ground truth's surface met in
+// each cube of trackedPointSpacing within the opening (they sample the
+// truth's motion; the validation study's results rest on them).
+std::set<std::array<long, 3>> taken;
+for (const Vector3 & v : truth.model.surfaces.brain.vertices)
+{
+  if ((v - settings.craniotomyCentre).norm() > settings.craniotomyRadius)
+  {
+    continue;
+  }
+  const std::array<long, 3> cube{ std::lround(std::floor(v.x() / settings.trackedPointSpacing)),
+                                  std::lround(std::floor(v.y() / settings.trackedPointSpacing)),
+                                  std::lround(std::floor(v.z() / settings.trackedPointSpacing)) };
+  if (!taken.insert(cube).second)
+  {
+    continue;
+  }
+  const auto moved = forward.TransformPoint(RegistrationTransform::InputPointType(v.data()));
+  truth.trackedPoints.points.push_back(v);
+  truth.trackedPoints.displacements.emplace_back(moved[0] - v.x(), moved[1] - v.y(), moved[2] - v.z());
+}
+if (exposed.triangles.empty())
+{
+  throw Error("the craniotomy (centre " + FormatPoint(settings.craniotomyCentre) + ", radius " +
+              std::to_string(settings.craniotomyRadius) + " mm) contains no triangle of the brain surface");
+}
+}
+
+// The intraoperative image: the preoperative image in the intraoperative
+// contrast, warped by the ground truth onto the intraoperative grid (its
+// field of view), the resection cavity filled with fluid, bias field, noise;
+// and its brain mask.
+void
+MakeIntraoperativeImages(SyntheticBrainShift & truth, const RegistrationImage * preoperativeImage,
+                         const RegistrationLabelImage * brainMask, const SyntheticBrainShiftSettings & settings,
+                         const Vector3 & centroid, const Vector3 & down)
+{
+const RegistrationImage::ConstPointer source =
+  settings.contrast == IntraoperativeContrast::Preoperative
+    ? RegistrationImage::ConstPointer(preoperativeImage)
+    : RegistrationImage::ConstPointer(MakeImageInContrast(preoperativeImage, brainMask, settings.contrast));
+const double fieldDepth = std::min(std::max(0.0, 0.5 * settings.fieldOfView - settings.scanMargin),
+                                   (centroid - settings.craniotomyCentre).norm());
+const auto   grid = IntraoperativeGrid(preoperativeImage, settings.intraoperativeSpacing, settings.fieldOfView,
+                                       settings.craniotomyCentre + fieldDepth * down);
+truth.intraoperativeImage = WarpImage(source, truth.truthTransform, grid);
+truth.intraoperativeBrainMask = WarpLabelImage(brainMask, truth.truthTransform, grid);
+truth.intraoperativeBrainOnPreoperativeGrid = WarpLabelImage(brainMask, truth.truthTransform);
+if (truth.resectionCavityRadius > 0.0)
+{
+  // Fluid: as dark as the darkest 2 % of the brain (as bright as the brightest 2 % in T2), i.e. CSF.
+  std::vector<float> brain;
+  for (itk::ImageRegionConstIteratorWithIndex<RegistrationLabelImage> it(truth.intraoperativeBrainMask,
+                                                                         truth.intraoperativeBrainMask->GetBufferedRegion());
+       !it.IsAtEnd(); ++it)
+  {
+    if (it.Get() > 0)
+    {
+      brain.push_back(truth.intraoperativeImage->GetPixel(it.GetIndex()));
+    }
+  }
+  const bool  bright = settings.contrast == IntraoperativeContrast::T2Like;
+  const auto  fluid = brain.begin() + static_cast<std::ptrdiff_t>((bright ? 0.98 : 0.02) * static_cast<double>(brain.size()));
+  std::nth_element(brain.begin(), fluid, brain.end());
+  FillResectionCavity(truth.intraoperativeImage, truth.intraoperativeBrainMask, truth.truthTransform,
+                      settings.tumourCentre, truth.resectionCavityRadius, *fluid);
+  FillResectionCavity(nullptr, truth.intraoperativeBrainOnPreoperativeGrid, truth.truthTransform,
+                      settings.tumourCentre, truth.resectionCavityRadius, 0.0F);
+}
+if (settings.biasField > 0.0)
+{
+  ApplyBiasField(truth.intraoperativeImage, settings.biasField, settings.seed + 1);
+}
+if (settings.noise > 0.0)
+{
+  AddImageNoise(truth.intraoperativeImage, settings.noise * OverlayGreyRange(preoperativeImage).second,
+                settings.noiseModel, settings.seed);
+}
+}
+
+} // namespace
 
 SyntheticBrainShift
 MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
@@ -559,119 +728,10 @@ MakeSyntheticBrainShift(const RegistrationImage *           preoperativeImage,
     truth.forwardTransform = forward;
   });
 
-  // The exposed surface as a surface scanner would see it: the cortex (the
-  // smooth surface of the brain mask, not that of the ground truth's cells)
-  // inside the craniotomy, moved by the ground truth.
-  timer.Run("exposed-surface", [&] {
-    // A little wider than the opening, as a scanner sees it: the registration's
-    // exposed nodes at the rim then find their partners on the surface, not on its edge.
-    const double             patchRadius = settings.craniotomyRadius + settings.scanMargin;
-    std::vector<std::string> surfaceWarnings; // the truth's model reports the same mask's
-    const ContactSurface     cortex = CortexSurfaceOfMask(brainMask, surfaceWarnings);
-    std::vector<Index>       newIndex(cortex.vertices.size(), -1);
-    ContactSurface &         exposed = truth.exposedSurface;
-    exposed.name = "displaced exposed surface";
-    for (const auto & triangle : cortex.triangles)
-    {
-      bool inside = true;
-      for (const Index vertex : triangle)
-      {
-        inside = inside && (cortex.vertices[vertex] - settings.craniotomyCentre).norm() <= patchRadius;
-      }
-      if (!inside)
-      {
-        continue;
-      }
-      std::array<Index, 3> copy{};
-      for (int k = 0; k < 3; ++k)
-      {
-        Index & mapped = newIndex[triangle[k]];
-        if (mapped < 0)
-        {
-          const Vector3 & v = cortex.vertices[triangle[k]];
-          const auto      moved = forward->TransformPoint(RegistrationTransform::InputPointType(v.data()));
-          mapped = static_cast<Index>(exposed.vertices.size());
-          exposed.vertices.emplace_back(moved[0], moved[1], moved[2]);
-        }
-        copy[k] = mapped;
-      }
-      exposed.triangles.push_back(copy);
-    }
-    // Tracked points: the first vertex of the ground truth's surface met in
-    // each cube of trackedPointSpacing within the opening (they sample the
-    // truth's motion; the validation study's results rest on them).
-    std::set<std::array<long, 3>> taken;
-    for (const Vector3 & v : truth.model.surfaces.brain.vertices)
-    {
-      if ((v - settings.craniotomyCentre).norm() > settings.craniotomyRadius)
-      {
-        continue;
-      }
-      const std::array<long, 3> cube{ std::lround(std::floor(v.x() / settings.trackedPointSpacing)),
-                                      std::lround(std::floor(v.y() / settings.trackedPointSpacing)),
-                                      std::lround(std::floor(v.z() / settings.trackedPointSpacing)) };
-      if (!taken.insert(cube).second)
-      {
-        continue;
-      }
-      const auto moved = forward->TransformPoint(RegistrationTransform::InputPointType(v.data()));
-      truth.trackedPoints.points.push_back(v);
-      truth.trackedPoints.displacements.emplace_back(moved[0] - v.x(), moved[1] - v.y(), moved[2] - v.z());
-    }
-    if (exposed.triangles.empty())
-    {
-      throw Error("the craniotomy (centre " + FormatPoint(settings.craniotomyCentre) + ", radius " +
-                  std::to_string(settings.craniotomyRadius) + " mm) contains no triangle of the brain surface");
-    }
-  });
+  timer.Run("exposed-surface", [&] { ScanExposedSurface(truth, brainMask, settings, *forward); });
 
-  // The intraoperative image: the preoperative image in the intraoperative
-  // contrast, warped by the ground truth onto the intraoperative grid (its
-  // field of view), the resection cavity filled with fluid, bias field, noise;
-  // and its brain mask.
-  timer.Run("intraop-image", [&] {
-    const RegistrationImage::ConstPointer source =
-      settings.contrast == IntraoperativeContrast::Preoperative
-        ? RegistrationImage::ConstPointer(preoperativeImage)
-        : RegistrationImage::ConstPointer(MakeImageInContrast(preoperativeImage, brainMask, settings.contrast));
-    const double fieldDepth = std::min(std::max(0.0, 0.5 * settings.fieldOfView - settings.scanMargin),
-                                       (centroid - settings.craniotomyCentre).norm());
-    const auto   grid = IntraoperativeGrid(preoperativeImage, settings.intraoperativeSpacing, settings.fieldOfView,
-                                           settings.craniotomyCentre + fieldDepth * down);
-    truth.intraoperativeImage = WarpImage(source, truth.truthTransform, grid);
-    truth.intraoperativeBrainMask = WarpLabelImage(brainMask, truth.truthTransform, grid);
-    truth.intraoperativeBrainOnPreoperativeGrid = WarpLabelImage(brainMask, truth.truthTransform);
-    if (truth.resectionCavityRadius > 0.0)
-    {
-      // Fluid: as dark as the darkest 2 % of the brain (as bright as the brightest 2 % in T2), i.e. CSF.
-      std::vector<float> brain;
-      for (itk::ImageRegionConstIteratorWithIndex<RegistrationLabelImage> it(truth.intraoperativeBrainMask,
-                                                                             truth.intraoperativeBrainMask->GetBufferedRegion());
-           !it.IsAtEnd(); ++it)
-      {
-        if (it.Get() > 0)
-        {
-          brain.push_back(truth.intraoperativeImage->GetPixel(it.GetIndex()));
-        }
-      }
-      const bool  bright = settings.contrast == IntraoperativeContrast::T2Like;
-      const auto  fluid = brain.begin() + static_cast<std::ptrdiff_t>((bright ? 0.98 : 0.02) * static_cast<double>(brain.size()));
-      std::nth_element(brain.begin(), fluid, brain.end());
-      FillResectionCavity(truth.intraoperativeImage, truth.intraoperativeBrainMask, truth.truthTransform,
-                          settings.tumourCentre, truth.resectionCavityRadius, *fluid);
-      FillResectionCavity(nullptr, truth.intraoperativeBrainOnPreoperativeGrid, truth.truthTransform,
-                          settings.tumourCentre, truth.resectionCavityRadius, 0.0F);
-    }
-    if (settings.biasField > 0.0)
-    {
-      ApplyBiasField(truth.intraoperativeImage, settings.biasField, settings.seed + 1);
-    }
-    if (settings.noise > 0.0)
-    {
-      AddImageNoise(truth.intraoperativeImage, settings.noise * OverlayGreyRange(preoperativeImage).second,
-                    settings.noiseModel, settings.seed);
-    }
-  });
+  timer.Run("intraop-image",
+            [&] { MakeIntraoperativeImages(truth, preoperativeImage, brainMask, settings, centroid, down); });
   return truth;
 }
 

@@ -157,6 +157,64 @@ CubicBSplineLattice::Evaluate(const Vector3 & point) const
   return EvaluateStencil(Stencil(u, spans, geometry.size), coefficients, geometry.size);
 }
 
+namespace
+{
+// Lee, Wolberg and Shin's B-spline approximation of `residual` at the points
+// (`fraction` of the extent along each axis) on a lattice of `spans` (`size`
+// control points per axis); the points' stencils into `stencils`.
+std::vector<Vector3>
+ApproximateResidual(const std::vector<Vector3> & fraction, const std::vector<Vector3> & residual,
+                    const std::array<int, 3> & spans, const std::array<int, 3> & size,
+                    std::vector<PointStencil> & stencils)
+{
+  const std::size_t count = fraction.size();
+  const std::size_t controls = static_cast<std::size_t>(size[0]) * size[1] * size[2];
+  const std::size_t row = size[0];
+  const std::size_t slice = row * size[1];
+  std::vector<Vector3> delta(controls, Vector3::Zero());
+  std::vector<double>  omega(controls, 0.0);
+  for (std::size_t n = 0; n < count; ++n)
+  {
+    const Vector3 u = fraction[n].cwiseProduct(Vector3(spans[0], spans[1], spans[2]));
+    stencils[n] = Stencil(u, spans, size);
+    const PointStencil & s = stencils[n];
+    double               squares[3] = { 0.0, 0.0, 0.0 };
+    for (int d = 0; d < 3; ++d)
+    {
+      for (int a = 0; a < 4; ++a)
+      {
+        squares[d] += s.w[d][a] * s.w[d][a];
+      }
+    }
+    const double sumOfSquares = squares[0] * squares[1] * squares[2];
+    for (int c = 0; c < 4; ++c)
+    {
+      for (int b = 0; b < 4; ++b)
+      {
+        const double      wyz = s.w[1][b] * s.w[2][c];
+        const std::size_t base = s.first + c * slice + b * row;
+        for (int a = 0; a < 4; ++a)
+        {
+          const double w = s.w[0][a] * wyz;
+          delta[base + a] += (w * w * w / sumOfSquares) * residual[n];
+          omega[base + a] += w * w;
+        }
+      }
+    }
+  }
+  std::vector<Vector3> phi(controls, Vector3::Zero());
+  for (std::size_t c = 0; c < controls; ++c)
+  {
+    if (omega[c] != 0.0)
+    {
+      phi[c] = delta[c] / omega[c];
+    }
+  }
+  return phi;
+}
+
+} // namespace
+
 BSplineFitResult
 FitMultilevelBSpline(const std::vector<Vector3> & points,
                      const std::vector<Vector3> & values,
@@ -233,49 +291,7 @@ FitMultilevelBSpline(const std::vector<Vector3> & points,
     }
     const std::array<int, 3> size{ spans[0] + 3, spans[1] + 3, spans[2] + 3 };
     const std::size_t        controls = static_cast<std::size_t>(size[0]) * size[1] * size[2];
-    const std::size_t        row = size[0];
-    const std::size_t        slice = row * size[1];
-
-    // Lee, Wolberg and Shin's B-spline approximation of the residual.
-    std::vector<Vector3> delta(controls, Vector3::Zero());
-    std::vector<double>  omega(controls, 0.0);
-    for (std::size_t n = 0; n < count; ++n)
-    {
-      const Vector3 u = fraction[n].cwiseProduct(Vector3(spans[0], spans[1], spans[2]));
-      stencils[n] = Stencil(u, spans, size);
-      const PointStencil & s = stencils[n];
-      double               squares[3] = { 0.0, 0.0, 0.0 };
-      for (int d = 0; d < 3; ++d)
-      {
-        for (int a = 0; a < 4; ++a)
-        {
-          squares[d] += s.w[d][a] * s.w[d][a];
-        }
-      }
-      const double sumOfSquares = squares[0] * squares[1] * squares[2];
-      for (int c = 0; c < 4; ++c)
-      {
-        for (int b = 0; b < 4; ++b)
-        {
-          const double      wyz = s.w[1][b] * s.w[2][c];
-          const std::size_t base = s.first + c * slice + b * row;
-          for (int a = 0; a < 4; ++a)
-          {
-            const double w = s.w[0][a] * wyz;
-            delta[base + a] += (w * w * w / sumOfSquares) * residual[n];
-            omega[base + a] += w * w;
-          }
-        }
-      }
-    }
-    std::vector<Vector3> phi(controls, Vector3::Zero());
-    for (std::size_t c = 0; c < controls; ++c)
-    {
-      if (omega[c] != 0.0)
-      {
-        phi[c] = delta[c] / omega[c];
-      }
-    }
+      std::vector<Vector3> phi = ApproximateResidual(fraction, residual, spans, size, stencils);
 
     // What is left for the next level, and the sum of the levels as one lattice.
     double largest = 0.0;

@@ -1,3 +1,8 @@
+// Brain and skull surfaces from a mask (VTK's flying edges, decimation and
+// orientation checks), and the regions of a model's surface they define:
+// exposed (craniotomy sphere or mask), skull base, contact. Over 800 lines:
+// the regions are chosen on these surfaces, and one translation unit keeps
+// VTK's headers compiled once.
 #include "bmrBrainSurfaces.h"
 #include "bmrClosestPoint.h"
 

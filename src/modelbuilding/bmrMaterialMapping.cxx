@@ -463,6 +463,284 @@ ThrowOutsideImage(const Sites & sites, std::size_t site, const ImageGeometry & g
               geometry.Describe() + "); the model and the image must share physical space (mm, LPS)");
 }
 
+// The membership image, the masks and the class materials checked against each other.
+void
+CheckMembershipInputs(const ScalarVolume & memberships, const std::vector<Material> & materials, int csfClass,
+                      const LabelVolume * tumourMask, const LabelVolume * resectionMask, const char * who)
+{
+  const ImageGeometry & geometry = memberships.geometry;
+  const std::size_t     voxels = geometry.VoxelCount();
+  const int             classes = memberships.components;
+  if (voxels == 0 || classes < 1 || memberships.values.size() != voxels * static_cast<std::size_t>(classes))
+  {
+    throw Error(std::string(who) + ": the membership image (" + geometry.Describe() + ", " +
+                std::to_string(classes) + " components) holds " + std::to_string(memberships.values.size()) +
+                " values; give the memberships of a tissue classification");
+  }
+  for (std::size_t n = 0; n < memberships.values.size(); ++n)
+  {
+    const float u = memberships.values[n];
+    if (!std::isfinite(u) || u < 0.0f)
+    {
+      std::ostringstream text;
+      text << who << ": membership " << u << " of class " << n % classes << " at voxel offset " << n / classes
+           << " is not a finite non-negative number; give the memberships of a tissue classification";
+      throw Error(text.str());
+    }
+  }
+  if (static_cast<int>(materials.size()) != classes)
+  {
+    throw Error(std::string(who) + ": " + std::to_string(materials.size()) + " class materials for a membership image of " +
+                std::to_string(classes) + " classes; give one material per class (ascending centroid) or none for the defaults");
+  }
+  if (csfClass < 0 || csfClass >= classes)
+  {
+    throw Error(std::string(who) + ": the CSF class " + std::to_string(csfClass) + " is not one of the " +
+                std::to_string(classes) + " classes; give 0 .. " + std::to_string(classes - 1));
+  }
+  for (const auto & [mask, name] : { std::pair{ tumourMask, "tumour mask" }, std::pair{ resectionMask, "resection mask" } })
+  {
+    if (mask && (!mask->geometry.SameGridAs(geometry) || mask->values.size() != voxels))
+    {
+      throw Error(std::string(who) + ": the " + name + " is not on the membership image's grid: " + name + " " +
+                  mask->geometry.Describe() + ", memberships " + geometry.Describe() + "; resample the " + name +
+                  " onto the image grid");
+    }
+  }
+}
+
+// Class weights are gathered per distinct material (grey and white matter
+// with equal values form one group).
+struct MaterialGroups
+{
+  explicit MaterialGroups(const std::vector<Material> & materials)
+    : groupOf(materials.size(), -1)
+  {
+    for (std::size_t k = 0; k < materials.size(); ++k)
+    {
+      for (std::size_t g = 0; g < first.size(); ++g)
+      {
+        const Material & other = materials[first[g]];
+        if (other.youngsModulus == materials[k].youngsModulus && other.poissonRatio == materials[k].poissonRatio &&
+            other.density == materials[k].density && other.law == materials[k].law &&
+            other.secondInvariantShare == materials[k].secondInvariantShare)
+        {
+          groupOf[k] = static_cast<int>(g);
+        }
+      }
+      if (groupOf[k] < 0)
+      {
+        groupOf[k] = static_cast<int>(first.size());
+        first.push_back(static_cast<int>(k));
+      }
+    }
+  }
+
+  std::size_t Count() const { return first.size(); }
+
+  /** The material of groups mixed by weight: one group's values exactly, else
+   *  the weighted mean (neo-Hookean unless a Mooney-Rivlin group takes part). */
+  Material Mixture(const std::vector<Material> & materials, const std::vector<double> & groupWeight) const
+  {
+    int used = 0, last = 0;
+    for (std::size_t g = 0; g < first.size(); ++g)
+    {
+      if (groupWeight[g] > 0.0)
+      {
+        ++used;
+        last = static_cast<int>(g);
+      }
+    }
+    if (used == 1)
+    {
+      return materials[first[last]]; // exactly the class values
+    }
+    Material material;
+    material.youngsModulus = material.poissonRatio = material.density = material.secondInvariantShare = 0.0;
+    material.law = MaterialLaw::NeoHookean;
+    for (std::size_t g = 0; g < first.size(); ++g)
+    {
+      const Material & pure = materials[first[g]];
+      material.youngsModulus += groupWeight[g] * pure.youngsModulus;
+      material.poissonRatio += groupWeight[g] * pure.poissonRatio;
+      material.density += groupWeight[g] * pure.density;
+      // A neo-Hookean class is Mooney-Rivlin with no second invariant: mixed with one, it adds a share of 0.
+      material.secondInvariantShare += groupWeight[g] * pure.secondInvariantShare;
+      if (pure.law == MaterialLaw::MooneyRivlin)
+      {
+        material.law = MaterialLaw::MooneyRivlin;
+      }
+    }
+    material.youngsModulus = RoundSignificant(material.youngsModulus);
+    material.poissonRatio = RoundSignificant(material.poissonRatio);
+    material.density = RoundSignificant(material.density);
+    material.secondInvariantShare = RoundSignificant(material.secondInvariantShare);
+    material.name = MixtureName(material.youngsModulus, material.poissonRatio);
+    return material;
+  }
+
+  std::vector<int> groupOf; // per class (the tumour last)
+  std::vector<int> first;   // per group, its first class
+};
+
+// Memberships of a voxel with the tumour as an extra class; removed tissue
+// (inside the brain: where the memberships or the tumour are) is the CSF
+// class's fluid.
+struct MembershipVoxels
+{
+  const ScalarVolume & memberships;
+  const LabelVolume *  tumourMask;
+  const LabelVolume *  resectionMask;
+  int                  csfClass;
+
+  int  Classes() const { return memberships.components; }
+  bool IsTumour(std::size_t offset) const { return tumourMask && tumourMask->values[offset] != 0; }
+  bool IsResected(std::size_t offset) const { return resectionMask && resectionMask->values[offset] != 0; }
+  bool Inside(std::size_t offset) const
+  {
+    double sum = 0.0;
+    for (int k = 0; k < Classes(); ++k)
+    {
+      sum += memberships.values[offset * Classes() + k];
+    }
+    return sum > 0.0 || IsTumour(offset);
+  }
+
+  /** Adds `weight` times the voxel's memberships (Classes() + 1 values) to `sum`. */
+  void Add(std::size_t offset, double weight, double * sum) const
+  {
+    const int     classes = Classes();
+    const float * u = &memberships.values[offset * classes];
+    if (IsResected(offset))
+    {
+      if (IsTumour(offset) || std::accumulate(u, u + classes, 0.0) > 0.0)
+      {
+        sum[csfClass] += weight;
+      }
+      return;
+    }
+    if (IsTumour(offset))
+    {
+      sum[classes] += weight;
+      return;
+    }
+    for (int k = 0; k < classes; ++k)
+    {
+      sum[k] += weight * u[k];
+    }
+  }
+};
+
+// Per site the memberships averaged over its samples (Classes() + 1 values
+// each) and its status: 0 done, 1 no sample inside the image, 2 no sample
+// inside the mask.
+void
+AverageMemberships(const Sites & sites, const MembershipVoxels & voxels, int threads, std::vector<double> & average,
+                   std::vector<std::uint8_t> & status)
+{
+  const ImageGeometry & geometry = voxels.memberships.geometry;
+  const int             extended = voxels.Classes() + 1;
+  const std::size_t     count = sites.Count();
+#pragma omp parallel num_threads(threads)
+  {
+    std::vector<Sample> samples;
+    std::vector<double> sum(extended);
+#pragma omp for schedule(dynamic, 64)
+    for (std::ptrdiff_t s = 0; s < static_cast<std::ptrdiff_t>(count); ++s)
+    {
+      sites.Samples(static_cast<std::size_t>(s), samples);
+      std::fill(sum.begin(), sum.end(), 0.0);
+      bool inImage = false;
+      for (const Sample & sample : samples)
+      {
+        Vector3 index;
+        if (!ContinuousIndex(geometry, sample.x, index))
+        {
+          continue;
+        }
+        inImage = true;
+        std::size_t offsets[8];
+        double      weights[8];
+        TrilinearStencil(geometry, index, offsets, weights);
+        for (int c = 0; c < 8; ++c)
+        {
+          if (weights[c] != 0.0)
+          {
+            voxels.Add(offsets[c], sample.weight * weights[c], sum.data());
+          }
+        }
+      }
+      double total = 0.0;
+      for (double value : sum)
+      {
+        total += value;
+      }
+      if (!inImage)
+      {
+        status[s] = 1;
+      }
+      else if (!(total > 0.0))
+      {
+        status[s] = 2;
+      }
+      else
+      {
+        for (int k = 0; k < extended; ++k)
+        {
+          average[s * extended + k] = sum[k] / total;
+        }
+      }
+    }
+  }
+}
+
+// Sites with no sample inside the mask take the memberships of the nearest
+// mask voxel; a site outside the image is an error. Returns how many took them.
+std::size_t
+AverageOfNearestVoxel(const Sites & sites, const MembershipVoxels & voxels, const std::vector<std::uint8_t> & status,
+                      std::vector<double> & average, const char * who)
+{
+  const ImageGeometry &         geometry = voxels.memberships.geometry;
+  const int                     extended = voxels.Classes() + 1;
+  std::size_t                   fallbacks = 0;
+  std::unique_ptr<NearestVoxel> nearest;
+  for (std::size_t s = 0; s < sites.Count(); ++s)
+  {
+    if (status[s] == 1)
+    {
+      ThrowOutsideImage(sites, s, geometry, who);
+    }
+    if (status[s] != 2)
+    {
+      continue;
+    }
+    if (!nearest)
+    {
+      const std::vector<std::size_t> inside =
+        BoundaryVoxels(geometry, [&](std::size_t n) { return voxels.Inside(n); });
+      if (inside.empty())
+      {
+        throw Error(std::string(who) + ": the membership image (" + geometry.Describe() +
+                    ") has no voxel inside the mask (all memberships are 0); classify the tissue first");
+      }
+      nearest = std::make_unique<NearestVoxel>(geometry, inside);
+    }
+    std::vector<double> sum(extended, 0.0);
+    voxels.Add(nearest->Find(sites.Centre(s)), 1.0, sum.data());
+    double total = 0.0;
+    for (double value : sum)
+    {
+      total += value;
+    }
+    for (int k = 0; k < extended; ++k)
+    {
+      average[s * extended + k] = sum[k] / total;
+    }
+    ++fallbacks;
+  }
+  return fallbacks;
+}
+
 } // namespace
 
 Material
@@ -511,199 +789,23 @@ MapMaterialsFromMemberships(Model &                         model,
 {
   const char *          who = "material mapping";
   const ImageGeometry & geometry = memberships.geometry;
-  const std::size_t     voxels = geometry.VoxelCount();
   const int             classes = memberships.components;
-  if (voxels == 0 || classes < 1 || memberships.values.size() != voxels * static_cast<std::size_t>(classes))
-  {
-    throw Error(std::string(who) + ": the membership image (" + geometry.Describe() + ", " +
-                std::to_string(classes) + " components) holds " + std::to_string(memberships.values.size()) +
-                " values; give the memberships of a tissue classification");
-  }
-  for (std::size_t n = 0; n < memberships.values.size(); ++n)
-  {
-    const float u = memberships.values[n];
-    if (!std::isfinite(u) || u < 0.0f)
-    {
-      std::ostringstream text;
-      text << who << ": membership " << u << " of class " << n % classes << " at voxel offset " << n / classes
-           << " is not a finite non-negative number; give the memberships of a tissue classification";
-      throw Error(text.str());
-    }
-  }
   std::vector<Material> materials =
-    settings.classMaterials.empty() ? DefaultClassMaterials(classes) : settings.classMaterials;
-  if (static_cast<int>(materials.size()) != classes)
-  {
-    throw Error(std::string(who) + ": " + std::to_string(materials.size()) + " class materials for a membership image of " +
-                std::to_string(classes) + " classes; give one material per class (ascending centroid) or none for the defaults");
-  }
-  if (settings.csfClass < 0 || settings.csfClass >= classes)
-  {
-    throw Error(std::string(who) + ": the CSF class " + std::to_string(settings.csfClass) + " is not one of the " +
-                std::to_string(classes) + " classes; give 0 .. " + std::to_string(classes - 1));
-  }
-  for (const auto & [mask, name] : { std::pair{ tumourMask, "tumour mask" }, std::pair{ resectionMask, "resection mask" } })
-  {
-    if (mask && (!mask->geometry.SameGridAs(geometry) || mask->values.size() != voxels))
-    {
-      throw Error(std::string(who) + ": the " + name + " is not on the membership image's grid: " + name + " " +
-                  mask->geometry.Describe() + ", memberships " + geometry.Describe() + "; resample the " + name +
-                  " onto the image grid");
-    }
-  }
+    settings.classMaterials.empty() && classes >= 1 ? DefaultClassMaterials(classes) : settings.classMaterials;
+  CheckMembershipInputs(memberships, materials, settings.csfClass, tumourMask, resectionMask, who);
   CheckNodes(model, who);
   const Sites sites(model, settings.sampling, geometry, who);
 
-  // Class weights are gathered per distinct material (grey and white matter
-  // with equal values form one group), the tumour being the last class.
+  // The tumour is the last class.
   materials.push_back(settings.tumour);
-  const int          extended = classes + 1;
-  std::vector<int>   groupOf(extended);
-  std::vector<int>   groupFirst;
-  for (int k = 0; k < extended; ++k)
-  {
-    groupOf[k] = -1;
-    for (std::size_t g = 0; g < groupFirst.size(); ++g)
-    {
-      const Material & other = materials[groupFirst[g]];
-      if (other.youngsModulus == materials[k].youngsModulus && other.poissonRatio == materials[k].poissonRatio &&
-          other.density == materials[k].density && other.law == materials[k].law &&
-          other.secondInvariantShare == materials[k].secondInvariantShare)
-      {
-        groupOf[k] = static_cast<int>(g);
-      }
-    }
-    if (groupOf[k] < 0)
-    {
-      groupOf[k] = static_cast<int>(groupFirst.size());
-      groupFirst.push_back(k);
-    }
-  }
-  const int groups = static_cast<int>(groupFirst.size());
-
-  auto isTumour = [&](std::size_t offset) { return tumourMask && tumourMask->values[offset] != 0; };
-  auto isResected = [&](std::size_t offset) { return resectionMask && resectionMask->values[offset] != 0; };
-  // Memberships of a voxel with the tumour as an extra class; removed tissue
-  // (inside the brain: where the memberships or the tumour are) is the CSF class's fluid.
-  auto addVoxel = [&](std::size_t offset, double weight, double * sum) {
-    const float * u = &memberships.values[offset * classes];
-    if (isResected(offset))
-    {
-      if (isTumour(offset) || std::accumulate(u, u + classes, 0.0) > 0.0)
-      {
-        sum[settings.csfClass] += weight;
-      }
-      return;
-    }
-    if (isTumour(offset))
-    {
-      sum[classes] += weight;
-      return;
-    }
-    for (int k = 0; k < classes; ++k)
-    {
-      sum[k] += weight * u[k];
-    }
-  };
-
-  const std::size_t   count = sites.Count();
-  std::vector<double> average(count * extended, 0.0);
-  // 0: done; 1: no sample inside the image; 2: no sample inside the mask.
-  std::vector<std::uint8_t> status(count, 0);
-#pragma omp parallel num_threads(ThreadCount(settings.sampling.threads))
-  {
-    std::vector<Sample> samples;
-    std::vector<double> sum(extended);
-#pragma omp for schedule(dynamic, 64)
-    for (std::ptrdiff_t s = 0; s < static_cast<std::ptrdiff_t>(count); ++s)
-    {
-      sites.Samples(static_cast<std::size_t>(s), samples);
-      std::fill(sum.begin(), sum.end(), 0.0);
-      bool inImage = false;
-      for (const Sample & sample : samples)
-      {
-        Vector3 index;
-        if (!ContinuousIndex(geometry, sample.x, index))
-        {
-          continue;
-        }
-        inImage = true;
-        std::size_t offsets[8];
-        double      weights[8];
-        TrilinearStencil(geometry, index, offsets, weights);
-        for (int c = 0; c < 8; ++c)
-        {
-          if (weights[c] != 0.0)
-          {
-            addVoxel(offsets[c], sample.weight * weights[c], sum.data());
-          }
-        }
-      }
-      double total = 0.0;
-      for (double value : sum)
-      {
-        total += value;
-      }
-      if (!inImage)
-      {
-        status[s] = 1;
-      }
-      else if (!(total > 0.0))
-      {
-        status[s] = 2;
-      }
-      else
-      {
-        for (int k = 0; k < extended; ++k)
-        {
-          average[s * extended + k] = sum[k] / total;
-        }
-      }
-    }
-  }
-
-  std::size_t fallbacks = 0;
-  std::unique_ptr<NearestVoxel> nearest;
-  for (std::size_t s = 0; s < count; ++s)
-  {
-    if (status[s] == 1)
-    {
-      ThrowOutsideImage(sites, s, geometry, who);
-    }
-    if (status[s] != 2)
-    {
-      continue;
-    }
-    if (!nearest)
-    {
-      const std::vector<std::size_t> inside = BoundaryVoxels(geometry, [&](std::size_t n) {
-        double sum = 0.0;
-        for (int k = 0; k < classes; ++k)
-        {
-          sum += memberships.values[n * classes + k];
-        }
-        return sum > 0.0 || isTumour(n);
-      });
-      if (inside.empty())
-      {
-        throw Error(std::string(who) + ": the membership image (" + geometry.Describe() +
-                    ") has no voxel inside the mask (all memberships are 0); classify the tissue first");
-      }
-      nearest = std::make_unique<NearestVoxel>(geometry, inside);
-    }
-    std::vector<double> sum(extended, 0.0);
-    addVoxel(nearest->Find(sites.Centre(s)), 1.0, sum.data());
-    double total = 0.0;
-    for (double value : sum)
-    {
-      total += value;
-    }
-    for (int k = 0; k < extended; ++k)
-    {
-      average[s * extended + k] = sum[k] / total;
-    }
-    ++fallbacks;
-  }
+  const int                  extended = classes + 1;
+  const MaterialGroups       groups(materials);
+  const MembershipVoxels     voxels{ memberships, tumourMask, resectionMask, settings.csfClass };
+  const std::size_t          count = sites.Count();
+  std::vector<double>        average(count * extended, 0.0);
+  std::vector<std::uint8_t>  status(count, 0);
+  AverageMemberships(sites, voxels, ThreadCount(settings.sampling.threads), average, status);
+  const std::size_t fallbacks = AverageOfNearestVoxel(sites, voxels, status, average, who);
   if (fallbacks > 0 && warnings)
   {
     warnings->push_back(std::string(who) + ": " + std::to_string(fallbacks) +
@@ -714,50 +816,16 @@ MapMaterialsFromMemberships(Model &                         model,
   std::vector<Material> siteMaterial(count);
 #pragma omp parallel num_threads(ThreadCount(settings.sampling.threads))
   {
-    std::vector<double> groupWeight(groups);
+    std::vector<double> groupWeight(groups.Count());
 #pragma omp for schedule(static)
     for (std::ptrdiff_t s = 0; s < static_cast<std::ptrdiff_t>(count); ++s)
     {
       std::fill(groupWeight.begin(), groupWeight.end(), 0.0);
       for (int k = 0; k < extended; ++k)
       {
-        groupWeight[groupOf[k]] += average[s * extended + k];
+        groupWeight[groups.groupOf[k]] += average[s * extended + k];
       }
-      int used = 0, last = 0;
-      for (int g = 0; g < groups; ++g)
-      {
-        if (groupWeight[g] > 0.0)
-        {
-          ++used;
-          last = g;
-        }
-      }
-      Material & material = siteMaterial[s];
-      if (used == 1)
-      {
-        material = materials[groupFirst[last]]; // exactly the class values
-        continue;
-      }
-      material.youngsModulus = material.poissonRatio = material.density = material.secondInvariantShare = 0.0;
-      material.law = MaterialLaw::NeoHookean;
-      for (int g = 0; g < groups; ++g)
-      {
-        const Material & pure = materials[groupFirst[g]];
-        material.youngsModulus += groupWeight[g] * pure.youngsModulus;
-        material.poissonRatio += groupWeight[g] * pure.poissonRatio;
-        material.density += groupWeight[g] * pure.density;
-        // A neo-Hookean class is Mooney-Rivlin with no second invariant: mixed with one, it adds a share of 0.
-        material.secondInvariantShare += groupWeight[g] * pure.secondInvariantShare;
-        if (pure.law == MaterialLaw::MooneyRivlin)
-        {
-          material.law = MaterialLaw::MooneyRivlin;
-        }
-      }
-      material.youngsModulus = RoundSignificant(material.youngsModulus);
-      material.poissonRatio = RoundSignificant(material.poissonRatio);
-      material.density = RoundSignificant(material.density);
-      material.secondInvariantShare = RoundSignificant(material.secondInvariantShare);
-      material.name = MixtureName(material.youngsModulus, material.poissonRatio);
+      siteMaterial[s] = groups.Mixture(materials, groupWeight);
     }
   }
   AssignMaterials(model, sites, siteMaterial);

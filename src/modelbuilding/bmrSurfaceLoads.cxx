@@ -1,3 +1,8 @@
+// The exposed surface's prescribed displacements from intraoperative data:
+// sparse points (a polyharmonic spline), a displaced surface (its visible
+// vertices matched and refined from their neighbours) and their reports.
+// Over 800 lines: the three share the exposed nodes' checks, the distance
+// report and the rejection of far matches.
 #include "bmrSurfaceLoads.h"
 #include "bmrClosestPoint.h"
 #include "bmrMeshIO.h"
@@ -160,6 +165,138 @@ DisplacementsFromSurface(const Model &               model,
   return load;
 }
 
+namespace
+{
+// The measurement points within maxDistance of the model's surface (its
+// boundary, or `modelSurface`), with their displacements; the rest counted,
+// listed and warned about in `out`.
+void
+KeepPointsNearSurface(const Model & model, const std::vector<Vector3> & points,
+                      const std::vector<Vector3> & displacements, double maxDistance,
+                      const ContactSurface * modelSurface, LoadReport & out, std::vector<Vector3> & keptPoints,
+                      std::vector<Vector3> & keptDisplacements, const char * function)
+{
+  const auto boundary = modelSurface ? modelSurface->triangles : model.BoundaryTriangles();
+  if (boundary.empty())
+  {
+    throw Error(std::string(function) + ": the model has no boundary faces (a point cloud has no cells): give the "
+                                        "model's surface (e.g. the brain surface) to measure the points' distance to");
+  }
+  const TriangleSurfaceTree surface(modelSurface ? modelSurface->vertices : model.nodes, boundary,
+                                    "model boundary surface");
+
+  std::vector<double>  usedDistances;
+  std::ostringstream   rejected;
+  rejected.precision(4);
+  for (std::size_t i = 0; i < points.size(); ++i)
+  {
+    const double distance = (surface.Closest(points[i]).point - points[i]).norm();
+    if (distance > maxDistance)
+    {
+      if (out.rejectedPoints < kListedInWarning)
+      {
+        rejected << (out.rejectedPoints > 0 ? ", " : "") << "point " << i << " at " << FormatPoint(points[i]) << " mm ("
+                 << distance << " mm)";
+      }
+      ++out.rejectedPoints;
+      continue;
+    }
+    keptPoints.push_back(points[i]);
+    keptDisplacements.push_back(displacements[i]);
+    usedDistances.push_back(distance);
+  }
+  out.usedPoints = keptPoints.size();
+  FillDistanceStatistics(usedDistances, out);
+  if (out.rejectedPoints > 0)
+  {
+    std::ostringstream warning;
+    warning << out.rejectedPoints << " of " << points.size() << " measurement points are farther than "
+            << maxDistance << " mm from the model surface and are rejected: " << rejected.str();
+    if (out.rejectedPoints > kListedInWarning)
+    {
+      warning << ", ... and " << out.rejectedPoints - kListedInWarning << " more";
+    }
+    out.warnings.push_back(warning.str());
+  }
+  if (keptPoints.empty())
+  {
+    throw Error(std::string(function) + ": every measurement point is farther than " +
+                std::to_string(maxDistance) + " mm from the model surface (" + rejected.str() +
+                "). Check that the points are in the preoperative image's physical space (mm), or raise maxDistance");
+  }
+}
+
+// Polyharmonic spline phi(r) = r with an affine part through the kept
+// points, evaluated at load.nodes, in coordinates centred at the points'
+// centroid and scaled by their extent (conditioning only: phi is homogeneous
+// of degree 1, so the interpolant is unchanged). ITK's
+// ThinPlateSplineKernelTransform is not used because the core does not
+// include ITK; the dense solve below is a few lines of Eigen.
+void
+InterpolatePolyharmonic(const std::vector<Vector3> & nodes, const std::vector<Vector3> & keptPoints,
+                        const std::vector<Vector3> & keptDisplacements, const Vector3 & centroid, double scale,
+                        double smoothing, PrescribedDisplacement & load, LoadReport & out, const char * function)
+{
+  const std::vector<Index> & exposedNodes = load.nodes;
+  const std::size_t          n = keptPoints.size();
+  auto scaled = [&](const Vector3 & x) -> Vector3 { return (x - centroid) / scale; };
+  const Eigen::Index size = static_cast<Eigen::Index>(n) + 4;
+  Eigen::MatrixXd    system = Eigen::MatrixXd::Zero(size, size);
+  Eigen::MatrixXd    rhs = Eigen::MatrixXd::Zero(size, 3);
+  std::vector<Vector3> q(n);
+  for (std::size_t i = 0; i < n; ++i)
+  {
+    q[i] = scaled(keptPoints[i]);
+  }
+  for (std::size_t i = 0; i < n; ++i)
+  {
+    const auto ii = static_cast<Eigen::Index>(i);
+    for (std::size_t j = 0; j < n; ++j)
+    {
+      system(ii, static_cast<Eigen::Index>(j)) = (q[i] - q[j]).norm();
+    }
+    system(ii, ii) += smoothing / scale;
+    system(ii, n) = system(n, ii) = 1.0;
+    for (int d = 0; d < 3; ++d)
+    {
+      system(ii, n + 1 + d) = system(n + 1 + d, ii) = q[i][d];
+    }
+    rhs.row(ii) = keptDisplacements[i].transpose();
+  }
+  const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> decomposition(system);
+  const Eigen::MatrixXd coefficients = decomposition.solve(rhs);
+  if (!coefficients.allFinite())
+  {
+    throw Error(std::string(function) + ": the interpolation system of " + std::to_string(n) +
+                " points could not be solved; remove duplicate points");
+  }
+  if (decomposition.rank() < size && decomposition.rank() >= static_cast<Eigen::Index>(n) + 3)
+  {
+    out.warnings.push_back(std::string(function) + ": the " + std::to_string(n) +
+                           " measurement points are coplanar; the displacement gradient across their plane is "
+                           "taken as zero (minimum-norm affine part)");
+  }
+
+  const auto count = static_cast<std::int64_t>(exposedNodes.size());
+#pragma omp parallel for schedule(static)
+  for (std::int64_t e = 0; e < count; ++e)
+  {
+    const Vector3 x = scaled(nodes[exposedNodes[e]]);
+    Vector3       u = coefficients.row(static_cast<Eigen::Index>(n)).transpose();
+    for (int d = 0; d < 3; ++d)
+    {
+      u += x[d] * coefficients.row(static_cast<Eigen::Index>(n) + 1 + d).transpose();
+    }
+    for (std::size_t i = 0; i < n; ++i)
+    {
+      u += (x - q[i]).norm() * coefficients.row(static_cast<Eigen::Index>(i)).transpose();
+    }
+    load.displacements[e] = u;
+  }
+}
+
+} // namespace
+
 PrescribedDisplacement
 DisplacementsFromSparsePoints(const Model &                model,
                               const std::vector<Index> &   exposedNodes,
@@ -190,58 +327,12 @@ DisplacementsFromSparsePoints(const Model &                model,
                   " mm has a NaN or infinite value; remove or fix it");
     }
   }
-  const auto boundary = modelSurface ? modelSurface->triangles : model.BoundaryTriangles();
-  if (boundary.empty())
-  {
-    throw Error(std::string(function) + ": the model has no boundary faces (a point cloud has no cells): give the "
-                                        "model's surface (e.g. the brain surface) to measure the points' distance to");
-  }
-  const TriangleSurfaceTree surface(modelSurface ? modelSurface->vertices : model.nodes, boundary,
-                                    "model boundary surface");
-
   LoadReport   local;
   LoadReport & out = report ? *report : local;
   out = LoadReport{};
   std::vector<Vector3> keptPoints, keptDisplacements;
-  std::vector<double>  usedDistances;
-  std::ostringstream   rejected;
-  rejected.precision(4);
-  for (std::size_t i = 0; i < points.size(); ++i)
-  {
-    const double distance = (surface.Closest(points[i]).point - points[i]).norm();
-    if (distance > settings.maxDistance)
-    {
-      if (out.rejectedPoints < kListedInWarning)
-      {
-        rejected << (out.rejectedPoints > 0 ? ", " : "") << "point " << i << " at " << FormatPoint(points[i]) << " mm ("
-                 << distance << " mm)";
-      }
-      ++out.rejectedPoints;
-      continue;
-    }
-    keptPoints.push_back(points[i]);
-    keptDisplacements.push_back(displacements[i]);
-    usedDistances.push_back(distance);
-  }
-  out.usedPoints = keptPoints.size();
-  FillDistanceStatistics(usedDistances, out);
-  if (out.rejectedPoints > 0)
-  {
-    std::ostringstream warning;
-    warning << out.rejectedPoints << " of " << points.size() << " measurement points are farther than "
-            << settings.maxDistance << " mm from the model surface and are rejected: " << rejected.str();
-    if (out.rejectedPoints > kListedInWarning)
-    {
-      warning << ", ... and " << out.rejectedPoints - kListedInWarning << " more";
-    }
-    out.warnings.push_back(warning.str());
-  }
-  if (keptPoints.empty())
-  {
-    throw Error(std::string(function) + ": every measurement point is farther than " +
-                std::to_string(settings.maxDistance) + " mm from the model surface (" + rejected.str() +
-                "). Check that the points are in the preoperative image's physical space (mm), or raise maxDistance");
-  }
+  KeepPointsNearSurface(model, points, displacements, settings.maxDistance, modelSurface, out, keptPoints,
+                        keptDisplacements, function);
 
   PrescribedDisplacement load;
   load.nodes = exposedNodes;
@@ -277,65 +368,8 @@ DisplacementsFromSparsePoints(const Model &                model,
     return load;
   }
 
-  // Polyharmonic spline phi(r) = r with an affine part, in coordinates centred
-  // at the points' centroid and scaled by their extent (conditioning only:
-  // phi is homogeneous of degree 1, so the interpolant is unchanged). ITK's
-  // ThinPlateSplineKernelTransform is not used because the core does not
-  // include ITK; the dense solve below is a few lines of Eigen.
-  auto scaled = [&](const Vector3 & x) -> Vector3 { return (x - centroid) / scale; };
-  const Eigen::Index size = static_cast<Eigen::Index>(n) + 4;
-  Eigen::MatrixXd    system = Eigen::MatrixXd::Zero(size, size);
-  Eigen::MatrixXd    rhs = Eigen::MatrixXd::Zero(size, 3);
-  std::vector<Vector3> q(n);
-  for (std::size_t i = 0; i < n; ++i)
-  {
-    q[i] = scaled(keptPoints[i]);
-  }
-  for (std::size_t i = 0; i < n; ++i)
-  {
-    const auto ii = static_cast<Eigen::Index>(i);
-    for (std::size_t j = 0; j < n; ++j)
-    {
-      system(ii, static_cast<Eigen::Index>(j)) = (q[i] - q[j]).norm();
-    }
-    system(ii, ii) += settings.smoothing / scale;
-    system(ii, n) = system(n, ii) = 1.0;
-    for (int d = 0; d < 3; ++d)
-    {
-      system(ii, n + 1 + d) = system(n + 1 + d, ii) = q[i][d];
-    }
-    rhs.row(ii) = keptDisplacements[i].transpose();
-  }
-  const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> decomposition(system);
-  const Eigen::MatrixXd coefficients = decomposition.solve(rhs);
-  if (!coefficients.allFinite())
-  {
-    throw Error(std::string(function) + ": the interpolation system of " + std::to_string(n) +
-                " points could not be solved; remove duplicate points");
-  }
-  if (decomposition.rank() < size && decomposition.rank() >= static_cast<Eigen::Index>(n) + 3)
-  {
-    out.warnings.push_back(std::string(function) + ": the " + std::to_string(n) +
-                           " measurement points are coplanar; the displacement gradient across their plane is "
-                           "taken as zero (minimum-norm affine part)");
-  }
-
-  const auto count = static_cast<std::int64_t>(exposedNodes.size());
-#pragma omp parallel for schedule(static)
-  for (std::int64_t e = 0; e < count; ++e)
-  {
-    const Vector3 x = scaled(model.nodes[exposedNodes[e]]);
-    Vector3       u = coefficients.row(static_cast<Eigen::Index>(n)).transpose();
-    for (int d = 0; d < 3; ++d)
-    {
-      u += x[d] * coefficients.row(static_cast<Eigen::Index>(n) + 1 + d).transpose();
-    }
-    for (std::size_t i = 0; i < n; ++i)
-    {
-      u += (x - q[i]).norm() * coefficients.row(static_cast<Eigen::Index>(i)).transpose();
-    }
-    load.displacements[e] = u;
-  }
+  InterpolatePolyharmonic(model.nodes, keptPoints, keptDisplacements, centroid, scale, settings.smoothing, load, out,
+                          function);
   return load;
 }
 
@@ -375,6 +409,175 @@ FirstRayHit(const ContactSurface & surface, const Vector3 & point, const Vector3
   }
   return first;
 }
+// What a scanner looking into the opening sees: per lateral cell of
+// `spacing` (across the direction the opening faces, the mean area-weighted
+// normal of the preoperative surface's vertices within `reach` of the exposed
+// nodes), the vertex facing it that lies highest along it. Deeper vertices
+// (sulci, the fissure) are hidden, and their closest intraoperative points
+// would belong to the displaced crowns above them.
+struct VisibleSurface
+{
+  VisibleSurface(const Model & model, const std::vector<Index> & exposedNodes, const ContactSurface & preoperativeSurface,
+                 double reach, double spacing, const char * function)
+  {
+    // Area-weighted vertex normals of the preoperative surface.
+    const std::vector<Vector3> & points = preoperativeSurface.vertices;
+    std::vector<Vector3>         normals(points.size(), Vector3::Zero());
+    for (const auto & triangle : preoperativeSurface.triangles)
+    {
+      const Vector3 normal =
+        (points[triangle[1]] - points[triangle[0]]).cross(points[triangle[2]] - points[triangle[0]]);
+      for (const Index vertex : triangle)
+      {
+        normals[vertex] += normal;
+      }
+    }
+    // The vertices near the exposed nodes, and the direction the opening faces.
+    std::vector<Index> near;
+    Vector3            facing = Vector3::Zero();
+    for (std::size_t v = 0; v < points.size(); ++v)
+    {
+      for (const Index node : exposedNodes)
+      {
+        if ((points[v] - model.nodes[node]).squaredNorm() <= reach * reach)
+        {
+          near.push_back(static_cast<Index>(v));
+          facing += normals[v];
+          break;
+        }
+      }
+    }
+    if (near.empty() || facing.norm() == 0.0)
+    {
+      throw Error(std::string(function) + ": no vertex of the preoperative surface '" + preoperativeSurface.name +
+                  "' lies within " + std::to_string(reach) + " mm of the exposed nodes; give the surface the model was "
+                  "made from");
+    }
+    facing.normalize();
+    across1 = facing.unitOrthogonal();
+    across2 = facing.cross(across1);
+    std::map<std::pair<long, long>, Index> highest;
+    for (const Index v : near)
+    {
+      const double length = normals[v].norm();
+      if (length == 0.0 || normals[v].dot(facing) < 0.5 * length)
+      {
+        continue; // a sulcus wall or the far side
+      }
+      const Vector3 &             x = points[v];
+      const std::pair<long, long> cell{ std::lround(std::floor(x.dot(across1) / spacing)),
+                                        std::lround(std::floor(x.dot(across2) / spacing)) };
+      const auto [entry, inserted] = highest.emplace(cell, v);
+      if (!inserted && x.dot(facing) > points[entry->second].dot(facing))
+      {
+        entry->second = v;
+      }
+    }
+    for (const auto & entry : highest)
+    {
+      vertices.push_back(entry.second);
+    }
+  }
+
+  std::vector<Index> vertices; // in the lateral cells' order
+  Vector3            across1, across2;
+};
+
+// A robust local linear fit of the neighbours' values (over the lateral
+// coordinates, so that the prediction is unbiased where the motion varies and
+// at the patch's edge) predicts each scanned vertex's value.
+class NeighbourFit
+{
+public:
+  // The scanned vertices stay put, so their neighbourhoods are found once.
+  NeighbourFit(const std::vector<Vector3> & scanned, double spacing, const Vector3 & across1, const Vector3 & across2)
+    : m_Scanned(scanned)
+    , m_Across1(across1)
+    , m_Across2(across2)
+    , m_Neighbourhoods(scanned.size())
+  {
+    for (std::size_t k = 0; k < scanned.size(); ++k)
+    {
+      for (std::size_t j = 0; j < scanned.size(); ++j)
+      {
+        if ((scanned[j] - scanned[k]).norm() <= 2.5 * spacing)
+        {
+          m_Neighbourhoods[k].push_back(j);
+        }
+      }
+    }
+  }
+
+  /** Within `slack` times the outlier bound max(1 mm, 20 %) of the prediction. */
+  static bool Acceptable(const Vector3 & value, const Vector3 & predicted, double slack)
+  {
+    return (value - predicted).norm() <= slack * std::max(1.0, 0.2 * predicted.norm());
+  }
+
+  std::vector<Vector3> Predict(const std::vector<Vector3> & values) const
+  {
+    std::vector<Vector3> predictions(values.size());
+    for (std::size_t k = 0; k < m_Scanned.size(); ++k)
+    {
+      predictions[k] = PredictOne(k, values);
+    }
+    return predictions;
+  }
+
+private:
+  Vector3 PredictOne(std::size_t k, const std::vector<Vector3> & values) const
+  {
+    const std::vector<std::size_t> &   neighbours = m_Neighbourhoods[k];
+    std::array<std::vector<double>, 3> components;
+    for (const std::size_t j : neighbours)
+    {
+      for (int axis = 0; axis < 3; ++axis)
+      {
+        components[axis].push_back(values[j][axis]);
+      }
+    }
+    Vector3 median;
+    for (int axis = 0; axis < 3; ++axis)
+    {
+      auto & component = components[axis];
+      std::nth_element(component.begin(), component.begin() + component.size() / 2, component.end());
+      median[axis] = component[component.size() / 2];
+    }
+    // Least squares of value = a + B (lateral offset), first over the
+    // neighbours within 3 times the outlier bound of their median, then over
+    // those within the bound of that fit.
+    Vector3 predicted = median;
+    for (const double slack : { 3.0, 1.0 })
+    {
+      Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();
+      Eigen::Matrix3d right = Eigen::Matrix3d::Zero(); // column axis: sum of basis * value
+      int             used = 0;
+      for (const std::size_t j : neighbours)
+      {
+        if (!Acceptable(values[j], predicted, slack))
+        {
+          continue;
+        }
+        const Vector3 offset = m_Scanned[j] - m_Scanned[k];
+        const Vector3 basis(1.0, offset.dot(m_Across1), offset.dot(m_Across2));
+        normal += basis * basis.transpose();
+        right += basis * values[j].transpose();
+        ++used;
+      }
+      const Eigen::FullPivLU<Eigen::Matrix3d> lu(normal);
+      if (used < 6 || lu.rank() < 3)
+      {
+        break; // too few for a plane: keep the median
+      }
+      predicted = lu.solve(right).row(0).transpose();
+    }
+    return predicted;
+  }
+
+  const std::vector<Vector3> &          m_Scanned;
+  Vector3                               m_Across1, m_Across2;
+  std::vector<std::vector<std::size_t>> m_Neighbourhoods;
+};
 } // namespace
 
 PrescribedDisplacement
@@ -403,66 +606,11 @@ DisplacementsBetweenSurfaces(const Model &               model,
   const std::string surfaceName = "intraoperative surface '" + intraoperativeSurface.name + "'";
   const TriangleSurfaceTree surface(intraoperativeSurface.vertices, intraoperativeSurface.triangles, surfaceName);
 
-  // Area-weighted vertex normals of the preoperative surface.
+  const VisibleSurface visible(model, exposedNodes, preoperativeSurface, reach, spacing, function);
   const std::vector<Vector3> & vertices = preoperativeSurface.vertices;
-  std::vector<Vector3>         normals(vertices.size(), Vector3::Zero());
-  for (const auto & triangle : preoperativeSurface.triangles)
-  {
-    const Vector3 normal =
-      (vertices[triangle[1]] - vertices[triangle[0]]).cross(vertices[triangle[2]] - vertices[triangle[0]]);
-    for (const Index vertex : triangle)
-    {
-      normals[vertex] += normal;
-    }
-  }
-  // The vertices near the exposed nodes, and the direction the opening faces.
-  std::vector<Index> near;
-  Vector3            facing = Vector3::Zero();
-  for (std::size_t v = 0; v < vertices.size(); ++v)
-  {
-    for (const Index node : exposedNodes)
-    {
-      if ((vertices[v] - model.nodes[node]).squaredNorm() <= reach * reach)
-      {
-        near.push_back(static_cast<Index>(v));
-        facing += normals[v];
-        break;
-      }
-    }
-  }
-  if (near.empty() || facing.norm() == 0.0)
-  {
-    throw Error(std::string(function) + ": no vertex of the preoperative surface '" + preoperativeSurface.name +
-                "' lies within " + std::to_string(reach) + " mm of the exposed nodes; give the surface the model was "
-                "made from");
-  }
-  facing.normalize();
-  // What a scanner looking into the opening sees: per lateral cell of `spacing`
-  // (across `facing`), the vertex facing it that lies highest along it.
-  // Deeper vertices (sulci, the fissure) are hidden, and their closest
-  // intraoperative points would belong to the displaced crowns above them.
-  const Vector3 across1 = facing.unitOrthogonal();
-  const Vector3 across2 = facing.cross(across1);
-  std::map<std::pair<long, long>, Index> highest;
-  for (const Index v : near)
-  {
-    const double length = normals[v].norm();
-    if (length == 0.0 || normals[v].dot(facing) < 0.5 * length)
-    {
-      continue; // a sulcus wall or the far side
-    }
-    const Vector3 &            x = vertices[v];
-    const std::pair<long, long> cell{ std::lround(std::floor(x.dot(across1) / spacing)),
-                                      std::lround(std::floor(x.dot(across2) / spacing)) };
-    const auto [entry, inserted] = highest.emplace(cell, v);
-    if (!inserted && x.dot(facing) > vertices[entry->second].dot(facing))
-    {
-      entry->second = v;
-    }
-  }
   std::vector<Vector3> scanned, matched;
   std::size_t          missed = 0;
-  for (const auto & [cell, v] : highest)
+  for (const Index v : visible.vertices)
   {
     if (settings.matchDirection)
     {
@@ -487,95 +635,27 @@ DisplacementsBetweenSurfaces(const Model &               model,
   }
   // Closest points (and rays) jump where the motion is larger than the
   // features: at the rim of a sulcus or of the fissure the match lands on the
-  // other side. Each match is therefore refined from its neighbours: a robust
-  // local linear fit of their matches (over the lateral coordinates, so that
-  // the prediction is unbiased where the motion varies and at the patch's
-  // edge) predicts where the vertex went, and the closest point of the
-  // displaced surface to that prediction is its match (the prediction's error
-  // is mostly normal to the surface, so the snap removes it while the
-  // neighbours' tangential motion stays). A match that still differs from the
-  // prediction by more than max(1 mm, 20 %) is an outlier.
-  auto acceptable = [](const Vector3 & value, const Vector3 & predicted, double slack) {
-    return (value - predicted).norm() <= slack * std::max(1.0, 0.2 * predicted.norm());
-  };
-  // The scanned vertices stay put, so their neighbourhoods are found once.
-  std::vector<std::vector<std::size_t>> neighbourhoods(scanned.size());
-  for (std::size_t k = 0; k < scanned.size(); ++k)
-  {
-    for (std::size_t j = 0; j < scanned.size(); ++j)
-    {
-      if ((scanned[j] - scanned[k]).norm() <= 2.5 * spacing)
-      {
-        neighbourhoods[k].push_back(j);
-      }
-    }
-  }
-  auto neighbourPredictions = [&](const std::vector<Vector3> & values) {
-    std::vector<Vector3> predictions(values.size());
-    for (std::size_t k = 0; k < scanned.size(); ++k)
-    {
-      const std::vector<std::size_t> &   neighbours = neighbourhoods[k];
-      std::array<std::vector<double>, 3> components;
-      for (const std::size_t j : neighbours)
-      {
-        for (int axis = 0; axis < 3; ++axis)
-        {
-          components[axis].push_back(values[j][axis]);
-        }
-      }
-      Vector3 median;
-      for (int axis = 0; axis < 3; ++axis)
-      {
-        auto & component = components[axis];
-        std::nth_element(component.begin(), component.begin() + component.size() / 2, component.end());
-        median[axis] = component[component.size() / 2];
-      }
-      // Least squares of value = a + B (lateral offset), first over the
-      // neighbours within 3 times the outlier bound of their median, then
-      // over those within the bound of that fit.
-      Vector3 predicted = median;
-      for (const double slack : { 3.0, 1.0 })
-      {
-        Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();
-        Eigen::Matrix3d right = Eigen::Matrix3d::Zero(); // column axis: sum of basis * value
-        int             used = 0;
-        for (const std::size_t j : neighbours)
-        {
-          if (!acceptable(values[j], predicted, slack))
-          {
-            continue;
-          }
-          const Vector3 offset = scanned[j] - scanned[k];
-          const Vector3 basis(1.0, offset.dot(across1), offset.dot(across2));
-          normal += basis * basis.transpose();
-          right += basis * values[j].transpose();
-          ++used;
-        }
-        const Eigen::FullPivLU<Eigen::Matrix3d> lu(normal);
-        if (used < 6 || lu.rank() < 3)
-        {
-          break; // too few for a plane: keep the median
-        }
-        predicted = lu.solve(right).row(0).transpose();
-      }
-      predictions[k] = predicted;
-    }
-    return predictions;
-  };
+  // other side. Each match is therefore refined from its neighbours
+  // (NeighbourFit), and the closest point of the displaced surface to the
+  // prediction is its match (the prediction's error is mostly normal to the
+  // surface, so the snap removes it while the neighbours' tangential motion
+  // stays). A match that still differs from the prediction by more than
+  // max(1 mm, 20 %) is an outlier.
+  const NeighbourFit fit(scanned, spacing, visible.across1, visible.across2);
   for (int pass = 0; pass < kMatchRefinements; ++pass)
   {
-    const std::vector<Vector3> predictions = neighbourPredictions(matched);
+    const std::vector<Vector3> predictions = fit.Predict(matched);
     for (std::size_t k = 0; k < scanned.size(); ++k)
     {
       matched[k] = surface.Closest(scanned[k] + predictions[k]).point - scanned[k];
     }
   }
-  const std::vector<Vector3> predictions = neighbourPredictions(matched);
+  const std::vector<Vector3> predictions = fit.Predict(matched);
   std::vector<Vector3>       points, displacements;
   std::size_t                outliers = 0;
   for (std::size_t k = 0; k < scanned.size(); ++k)
   {
-    if (!acceptable(matched[k], predictions[k], 1.0))
+    if (!NeighbourFit::Acceptable(matched[k], predictions[k], 1.0))
     {
       ++outliers;
       continue;

@@ -238,6 +238,91 @@ CortexSurfaceOfMask(const RegistrationLabelImage * brainMask, std::vector<std::s
 // The model.
 // ---------------------------------------------------------------------------
 
+namespace
+{
+
+using TissueClassifier = itk::FuzzyCMeansClassifierImageFilter<RegistrationImage, RegistrationLabelImage>;
+
+// The fuzzy c-means classification inside the brain mask, its fit and
+// warnings recorded in `result`.
+TissueClassifier::Pointer
+ClassifyTissue(const RegistrationImage * image, const RegistrationLabelImage * mask,
+               const FuzzyCMeansSettings & settings, StageTimer & timer, BrainModel & result)
+{
+  auto classifier = TissueClassifier::New();
+  classifier->SetInput(image);
+  classifier->SetMaskImage(mask);
+  classifier->SetNumberOfClasses(static_cast<unsigned int>(std::max(settings.classes, 0)));
+  classifier->SetFuzziness(settings.fuzziness);
+  classifier->SetTolerance(settings.tolerance);
+  classifier->SetMaximumNumberOfIterations(static_cast<unsigned int>(std::max(settings.maxIterations, 0)));
+  timer.Run("classify", [&] { UpdateStage(classifier.GetPointer(), "tissue classification"); });
+  result.warnings.insert(result.warnings.end(), classifier->GetWarnings().begin(), classifier->GetWarnings().end());
+  result.classificationFit.centroids = classifier->GetCentroids();
+  result.classificationFit.iterations = static_cast<int>(classifier->GetNumberOfIterations());
+  result.classificationFit.converged = classifier->GetConverged();
+  result.membershipImage = classifier->GetOutput();
+  result.tissueLabelImage = classifier->GetLabelOutput();
+  return classifier;
+}
+
+// Which class is the CSF (into `result`) and the class materials in the
+// classes' order: the classes are in ascending centroid order, the settings'
+// materials in T1 order (the CSF first).
+MaterialMappingSettings
+ClassMaterials(BrainModel & result, const BrainModelSettings & settings)
+{
+  MaterialMappingSettings   classMapping = settings.materials;
+  const int                 classes = static_cast<int>(result.classificationFit.centroids.size());
+  const std::vector<double> volumes =
+    ClassVolumes(itk::MakeBiomechanicalVolume<std::uint8_t>(result.tissueLabelImage.GetPointer()), classes);
+  result.csfClass = ChooseCsfClass(result.classificationFit.centroids, volumes, settings.contrast);
+  result.csfVolume = volumes[static_cast<std::size_t>(result.csfClass.csfClass)];
+  if (classMapping.classMaterials.empty())
+  {
+    classMapping.classMaterials = DefaultClassMaterials(classes);
+  }
+  if (result.csfClass.contrast == TissueContrast::T2)
+  {
+    std::reverse(classMapping.classMaterials.begin(), classMapping.classMaterials.end());
+  }
+  classMapping.csfClass = result.csfClass.csfClass;
+  return classMapping;
+}
+
+// The brain and skull surfaces. The skull is the boundary of the body dilated
+// by the gap, and the body is the model's cells (for a point cloud, the
+// tetrahedra its integration points cover), not the mask: the corners of a
+// staircase hexahedral grid stick out of the mask by up to half a cell. A
+// user's skull (`skullSurface`, e.g. segmented from CT) replaces the dilated
+// body as the contact master.
+BrainSurfaces
+MakeBrainSurfaces(const itk::BiomechanicalGridImageFilter<RegistrationLabelImage> & grid, const ImageGeometry & maskGeometry,
+                  const BrainModelSettings & settings, const ContactSurface & skullSurface, StageTimer & timer,
+                  std::vector<std::string> & warnings)
+{
+  auto surfaces = itk::BrainSurfaceMeshSource<RegistrationLabelImage>::New();
+  timer.Run("surfaces", [&] {
+    const Model & body = grid.GetModel().cells.empty() ? grid.GetMeshlessBody() : grid.GetModel();
+    surfaces->SetInput(
+      itk::MakeImageFromBiomechanicalVolume<RegistrationLabelImage>(RasterizeCells(body, maskGeometry)));
+    surfaces->SetSkullGap(settings.skullGap);
+    surfaces->SetSkullClosing(settings.skullClosing);
+    UpdateStage(surfaces.GetPointer(), "brain surfaces");
+  });
+  warnings.insert(warnings.end(), surfaces->GetWarnings().begin(), surfaces->GetWarnings().end());
+  BrainSurfaces result{ surfaces->GetBrainSurface(), surfaces->GetSkullSurface() };
+  if (!skullSurface.triangles.empty())
+  {
+    result.skull = skullSurface;
+    result.skull.bodySide = ContactSurface::Side::Inside;
+  }
+  result.skull.name = "skull";
+  return result;
+}
+
+} // namespace
+
 BrainModel
 PrepareBrainModel(const RegistrationImage *      image,
                   const RegistrationLabelImage * brainMask,
@@ -305,40 +390,8 @@ PrepareBrainModel(const RegistrationImage *      image,
                                            result.brainMask);
   }
 
-  using ClassifierType = itk::FuzzyCMeansClassifierImageFilter<RegistrationImage, RegistrationLabelImage>;
-  auto classifier = ClassifierType::New();
-  classifier->SetInput(image);
-  classifier->SetMaskImage(mask);
-  classifier->SetNumberOfClasses(static_cast<unsigned int>(std::max(settings.classifier.classes, 0)));
-  classifier->SetFuzziness(settings.classifier.fuzziness);
-  classifier->SetTolerance(settings.classifier.tolerance);
-  classifier->SetMaximumNumberOfIterations(static_cast<unsigned int>(std::max(settings.classifier.maxIterations, 0)));
-  timer.Run("classify", [&] { UpdateStage(classifier.GetPointer(), "tissue classification"); });
-  warnings.insert(warnings.end(), classifier->GetWarnings().begin(), classifier->GetWarnings().end());
-  result.classificationFit.centroids = classifier->GetCentroids();
-  result.classificationFit.iterations = static_cast<int>(classifier->GetNumberOfIterations());
-  result.classificationFit.converged = classifier->GetConverged();
-  result.membershipImage = classifier->GetOutput();
-  result.tissueLabelImage = classifier->GetLabelOutput();
-  // Which class is the CSF: the classes are in ascending centroid order, the
-  // settings' materials in T1 order (the CSF first).
-  MaterialMappingSettings classMapping = settings.materials;
-  {
-    const int                 classes = static_cast<int>(result.classificationFit.centroids.size());
-    const std::vector<double> volumes =
-      ClassVolumes(itk::MakeBiomechanicalVolume<std::uint8_t>(result.tissueLabelImage.GetPointer()), classes);
-    result.csfClass = ChooseCsfClass(result.classificationFit.centroids, volumes, settings.contrast);
-    result.csfVolume = volumes[static_cast<std::size_t>(result.csfClass.csfClass)];
-    if (classMapping.classMaterials.empty())
-    {
-      classMapping.classMaterials = DefaultClassMaterials(classes);
-    }
-    if (result.csfClass.contrast == TissueContrast::T2)
-    {
-      std::reverse(classMapping.classMaterials.begin(), classMapping.classMaterials.end());
-    }
-    classMapping.csfClass = result.csfClass.csfClass;
-  }
+  const auto                    classifier = ClassifyTissue(image, mask, settings.classifier, timer, result);
+  const MaterialMappingSettings classMapping = ClassMaterials(result, settings);
 
   // The tumour is a second label, so that tetrahedral meshes conform to its boundary.
   LabelVolume labels = result.brainMask;
@@ -377,28 +430,7 @@ PrepareBrainModel(const RegistrationImage *      image,
   timer.Run("materials", [&] { UpdateStage(materials.GetPointer(), "material mapping"); });
   warnings.insert(warnings.end(), materials->GetWarnings().begin(), materials->GetWarnings().end());
 
-  // The skull is the boundary of the body dilated by the gap, and the body is
-  // the model's cells (for a point cloud, the tetrahedra its integration
-  // points cover), not the mask: the corners of a staircase hexahedral grid
-  // stick out of the mask by up to half a cell.
-  auto surfaces = itk::BrainSurfaceMeshSource<RegistrationLabelImage>::New();
-  timer.Run("surfaces", [&] {
-    const Model & body = grid->GetModel().cells.empty() ? grid->GetMeshlessBody() : grid->GetModel();
-    surfaces->SetInput(
-      itk::MakeImageFromBiomechanicalVolume<RegistrationLabelImage>(RasterizeCells(body, result.brainMask.geometry)));
-    surfaces->SetSkullGap(settings.skullGap);
-    surfaces->SetSkullClosing(settings.skullClosing);
-    UpdateStage(surfaces.GetPointer(), "brain surfaces");
-  });
-  warnings.insert(warnings.end(), surfaces->GetWarnings().begin(), surfaces->GetWarnings().end());
-  result.surfaces = BrainSurfaces{ surfaces->GetBrainSurface(), surfaces->GetSkullSurface() };
-  if (!skullSurface.triangles.empty())
-  {
-    // The user's skull (e.g. segmented from CT) replaces the dilated body as the contact master.
-    result.surfaces.skull = skullSurface;
-    result.surfaces.skull.bodySide = ContactSurface::Side::Inside;
-  }
-  result.surfaces.skull.name = "skull";
+  result.surfaces = MakeBrainSurfaces(*grid, result.brainMask.geometry, settings, skullSurface, timer, warnings);
 
   const auto regions = BrainRegionsFilter(materials->GetOutput(), settings, image, settings.craniotomyRadius);
   UpdateStage(regions.GetPointer(), "model regions");
