@@ -197,51 +197,95 @@ BindErrors(py::module_ & module)
   });
 }
 
+std::string
+JoinedParameterNames()
+{
+  std::string names;
+  for (const MaterialParameter & parameter : MaterialParameters())
+  {
+    names += (names.empty() ? "" : ", ") + std::string(parameter.name);
+  }
+  return names;
+}
+
 // The materials: the hyperelastic laws and the tools' Ogden material.
 void
 BindMaterials(py::module_ & module)
 {
-  py::class_<Material>(module, "Material",
-                       "Hyperelastic material (Pa, -, kg/m^3): law 'neo-hookean' or 'mooney-rivlin' (bmr.material_laws()); "
-                       "E and nu give the small-strain moduli of every law, second_invariant_share = C01 / (C10 + C01).")
+  py::class_<Material> material(
+    module, "Material",
+    "Hyperelastic material (Pa, -, kg/m^3): law 'neo-hookean' or 'mooney-rivlin' (bmr.material_laws()); E and nu give "
+    "the small-strain moduli of every law; a law's parameters (bmr.material_parameters(), e.g. second_invariant_share "
+    "= C01 / (C10 + C01)) are keywords and attributes.");
+  material
     .def(py::init([](const std::string & name, double youngsModulus, double poissonRatio, double density,
-                     const std::string & law, double secondInvariantShare) {
-           Material material{ name, youngsModulus, poissonRatio, density };
-           material.law = MaterialLawNamed(law);
-           material.secondInvariantShare = secondInvariantShare;
-           if (const std::string problem = MaterialLawProblem(material); !problem.empty())
+                     const std::string & law, const py::kwargs & parameters) {
+           Material made{ name, youngsModulus, poissonRatio, density };
+           made.law = MaterialLawNamed(law);
+           for (const auto & [key, value] : parameters)
+           {
+             const std::string keyword = py::str(key);
+             const auto        known = std::find_if(MaterialParameters().begin(), MaterialParameters().end(),
+                                                    [&](const MaterialParameter & p) { return keyword == p.name; });
+             if (known == MaterialParameters().end())
+             {
+               throw py::type_error("Material() got an unexpected keyword '" + keyword +
+                                    "'; the laws' parameters are: " + JoinedParameterNames());
+             }
+             made.*known->value = value.cast<double>();
+           }
+           if (const std::string problem = MaterialLawProblem(made); !problem.empty())
            {
              throw Error("Material '" + name + "' " + problem + ".");
            }
-           return material;
+           return made;
          }),
          py::arg("name") = "material", py::arg("youngs_modulus") = Material{}.youngsModulus,
          py::arg("poisson_ratio") = Material{}.poissonRatio, py::arg("density") = Material{}.density,
-         py::arg("law") = DescribeMaterialLaw(Material{}.law).name,
-         py::arg("second_invariant_share") = Material{}.secondInvariantShare)
+         py::arg("law") = DescribeMaterialLaw(Material{}.law).name)
     .def_readwrite("name", &Material::name)
     .def_readwrite("youngs_modulus", &Material::youngsModulus)
     .def_readwrite("poisson_ratio", &Material::poissonRatio)
     .def_readwrite("density", &Material::density)
     .def_property(
-      "law", [](const Material & material) { return std::string(DescribeMaterialLaw(material.law).name); },
-      [](Material & material, const std::string & name) { material.law = MaterialLawNamed(name); })
-    .def_readwrite("second_invariant_share", &Material::secondInvariantShare)
+      "law", [](const Material & m) { return std::string(DescribeMaterialLaw(m.law).name); },
+      [](Material & m, const std::string & name) { m.law = MaterialLawNamed(name); })
     .def_property_readonly("shear_modulus", &Material::ShearModulus)
     .def_property_readonly("bulk_modulus", &Material::BulkModulus)
-    .def("__repr__", [](const Material & material) {
+    .def("__repr__", [](const Material & m) {
       std::ostringstream text;
-      text << "Material(name='" << material.name << "', youngs_modulus=" << material.youngsModulus
-           << ", poisson_ratio=" << material.poissonRatio << ", density=" << material.density;
-      if (material.law != MaterialLaw::NeoHookean)
+      text << "Material(name='" << m.name << "', youngs_modulus=" << m.youngsModulus
+           << ", poisson_ratio=" << m.poissonRatio << ", density=" << m.density;
+      if (m.law != MaterialLaw::NeoHookean)
       {
-        text << ", law='" << DescribeMaterialLaw(material.law).name
-             << "', second_invariant_share=" << material.secondInvariantShare;
+        text << ", law='" << DescribeMaterialLaw(m.law).name << "'";
+        for (const MaterialParameter & parameter : MaterialParameters())
+        {
+          text << ", " << parameter.name << "=" << m.*parameter.value;
+        }
       }
       text << ")";
       return text.str();
     });
+  for (const MaterialParameter & parameter : MaterialParameters())
+  {
+    const auto value = parameter.value;
+    material.def_property(
+      parameter.name, [value](const Material & m) { return m.*value; }, [value](Material & m, double v) { m.*value = v; },
+      parameter.meaning);
+  }
   module.def("material_laws", &MaterialLawNameList, "The names of the constitutive laws a Material can take.");
+  module.def(
+    "material_parameters",
+    [] {
+      std::vector<std::string> names;
+      for (const MaterialParameter & parameter : MaterialParameters())
+      {
+        names.emplace_back(parameter.name);
+      }
+      return names;
+    },
+    "The names of the laws' parameters, Material's keywords and attributes beside E, nu and the density.");
 
   py::class_<OgdenViscoelasticMaterial>(module, "OgdenMaterial",
                                         "Miller and Chinzei's Ogden-type hyperviscoelastic law for stresses near a tool "

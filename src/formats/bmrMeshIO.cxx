@@ -307,19 +307,29 @@ ConvertUnstructuredGrid(vtkUnstructuredGrid * grid, const std::string & path, co
 /** Cell or point data "youngs_modulus", "poisson_ratio", "density" of the
  *  material index that materialOf(i) gives for each of `count` items, and
  *  where any material is not neo-Hookean also "material_law" (the law's code,
- *  bmrMaterialLaw.h) and "second_invariant_share": files of neo-Hookean
- *  models stay as they were, and a reader takes missing laws as neo-Hookean. */
+ *  bmrMaterialLaw.h) and every law parameter (MaterialParameters(), e.g.
+ *  "second_invariant_share"): files of neo-Hookean models stay as they were,
+ *  and a reader takes missing laws as neo-Hookean. The values are MaterialKey's. */
 template <typename MaterialOf>
 void
 AddMaterialProperties(vtkDataSetAttributes * attributes, const Model & model, MaterialOf && materialOf, std::size_t count)
 {
   const bool laws = std::any_of(model.materials.begin(), model.materials.end(),
                                 [](const Material & material) { return material.law != MaterialLaw::NeoHookean; });
-  const char * names[5] = { "youngs_modulus", "poisson_ratio", "density", "material_law", "second_invariant_share" };
-  for (int property = 0; property < (laws ? 5 : 3); ++property)
+  std::vector<std::string> names{ "youngs_modulus", "poisson_ratio", "density", "material_law" };
+  for (const MaterialParameter & parameter : MaterialParameters())
+  {
+    names.emplace_back(parameter.name);
+  }
+  std::vector<std::vector<double>> keys;
+  for (const Material & material : model.materials)
+  {
+    keys.push_back(MaterialKey(material));
+  }
+  for (std::size_t property = 0; property < (laws ? names.size() : 3); ++property)
   {
     vtkNew<vtkDoubleArray> values;
-    values->SetName(names[property]);
+    values->SetName(names[property].c_str());
     values->SetNumberOfTuples(static_cast<vtkIdType>(count));
     for (std::size_t item = 0; item < count; ++item)
     {
@@ -329,10 +339,7 @@ AddMaterialProperties(vtkDataSetAttributes * attributes, const Model & model, Ma
         throw Error("cannot write material properties: item " + std::to_string(item) + " refers to material " +
                     std::to_string(material) + ", which does not exist");
       }
-      const Material & m = model.materials[material];
-      const double     value[5] = { m.youngsModulus, m.poissonRatio, m.density, static_cast<double>(m.law),
-                                    m.secondInvariantShare };
-      values->SetValue(static_cast<vtkIdType>(item), value[property]);
+      values->SetValue(static_cast<vtkIdType>(item), keys[material][property]);
     }
     attributes->AddArray(values);
   }
@@ -807,14 +814,21 @@ ReadIntegrationPoints(const std::string & path)
   vtkDataArray *       poisson = requireArray("poisson_ratio");
   vtkDataArray *       density = requireArray("density");
   // Written only for models with a law other than neo-Hookean (AddMaterialProperties).
-  vtkDataArray * law = grid->GetPointData()->GetArray("material_law");
-  vtkDataArray * share = grid->GetPointData()->GetArray("second_invariant_share");
-  if ((law == nullptr) != (share == nullptr) ||
-      (law != nullptr && (law->GetNumberOfTuples() != count || share->GetNumberOfTuples() != count)))
+  vtkDataArray *              law = grid->GetPointData()->GetArray("material_law");
+  std::vector<vtkDataArray *> parameters;
+  std::string                 lawArrays = "'material_law'";
+  bool                        consistent = law == nullptr || law->GetNumberOfTuples() == count;
+  for (const MaterialParameter & parameter : MaterialParameters())
   {
-    throw Error("integration points '" + path +
-                "' needs both point-data arrays 'material_law' and 'second_invariant_share' with one value per "
-                "point, or neither (neo-Hookean)");
+    parameters.push_back(grid->GetPointData()->GetArray(parameter.name));
+    lawArrays += std::string(", '") + parameter.name + "'";
+    consistent = consistent && (law == nullptr) == (parameters.back() == nullptr) &&
+                 (parameters.back() == nullptr || parameters.back()->GetNumberOfTuples() == count);
+  }
+  if (!consistent)
+  {
+    throw Error("integration points '" + path + "' needs all the point-data arrays " + lawArrays +
+                " with one value per point, or none (neo-Hookean)");
   }
   IntegrationPointData data;
   data.positions.resize(count);
@@ -838,7 +852,10 @@ ReadIntegrationPoints(const std::string & path)
       {
         throw Error("integration points '" + path + "': point " + std::to_string(point) + ": " + error.what());
       }
-      material.secondInvariantShare = share->GetTuple1(point);
+      for (std::size_t k = 0; k < parameters.size(); ++k)
+      {
+        material.*MaterialParameters()[k].value = parameters[k]->GetTuple1(point);
+      }
       if (const std::string problem = MaterialLawProblem(material); !problem.empty())
       {
         throw Error("integration points '" + path + "': point " + std::to_string(point) + " " + problem);

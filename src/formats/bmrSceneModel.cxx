@@ -159,16 +159,19 @@ SceneParser::MaterialsComeWithIntegrationPoints() const
 Index
 SceneParser::MaterialIndex(Material material)
 {
-  const auto key = std::make_tuple(material.youngsModulus, material.poissonRatio, material.density, material.law,
-                                   material.secondInvariantShare);
-  const auto [position, inserted] = m_MaterialIndexOfProperties.emplace(key, static_cast<Index>(TheModel().materials.size()));
+  const auto [position, inserted] =
+    m_MaterialIndexOfProperties.emplace(MaterialKey(material), static_cast<Index>(TheModel().materials.size()));
   if (inserted)
   {
     std::ostringstream name;
     name << "E" << material.youngsModulus << "_nu" << material.poissonRatio;
     if (material.law != MaterialLaw::NeoHookean)
     {
-      name << "_" << DescribeMaterialLaw(material.law).name << material.secondInvariantShare;
+      name << "_" << DescribeMaterialLaw(material.law).name;
+      for (const MaterialParameter & parameter : MaterialParameters())
+      {
+        name << material.*parameter.value;
+      }
     }
     material.name = name.str();
     TheModel().materials.push_back(material);
@@ -177,13 +180,13 @@ SceneParser::MaterialIndex(Material material)
 }
 
 /** "material_fields": each cell's properties from cell-data arrays of the
- *  mesh file; "law" (one for every cell) and its "second_invariant_share"
- *  (an array) as a material's. */
+ *  mesh file; "law" (one for every cell) and its parameters (arrays, e.g.
+ *  "second_invariant_share") as a material's. */
 void
 SceneParser::AssignMaterialFields()
 {
   const SceneValue fields = m_Root.Child("material_fields");
-  fields.AllowOnly({ "youngs_modulus", "poisson_ratio", "density", "law", "second_invariant_share" });
+  fields.AllowOnly(MaterialKeys({}));
   Model &           model = TheModel();
   const std::size_t cellCount = model.cells.size();
   auto              arrayOf = [&](const std::string & key) -> const std::vector<double> * {
@@ -209,7 +212,11 @@ SceneParser::AssignMaterialFields()
   const std::vector<double> * youngs = arrayOf("youngs_modulus");
   const std::vector<double> * poisson = arrayOf("poisson_ratio");
   const std::vector<double> * density = arrayOf("density");
-  const std::vector<double> * share = arrayOf("second_invariant_share");
+  std::vector<const std::vector<double> *> parameters;
+  for (const MaterialParameter & parameter : MaterialParameters())
+  {
+    parameters.push_back(arrayOf(parameter.name));
+  }
   Material                    lawOfEveryCell;
   if (fields.Has("law"))
   {
@@ -231,7 +238,11 @@ SceneParser::AssignMaterialFields()
       material.density = (*density)[cellId];
     }
     material.law = lawOfEveryCell.law;
-    material.secondInvariantShare = share != nullptr ? (*share)[cellId] : 0.0;
+    for (std::size_t k = 0; k < parameters.size(); ++k)
+    {
+      const MaterialParameter & parameter = MaterialParameters()[k];
+      material.*parameter.value = parameters[k] != nullptr ? (*parameters[k])[cellId] : parameter.neutral;
+    }
     if (const std::string problem = MaterialLawProblem(material); !problem.empty())
     {
       fields.Fail("cell " + std::to_string(cellId) + " " + problem);

@@ -335,8 +335,21 @@ ParseMaterialLawName(const SceneValue & value)
   return MaterialLawNamed(value.Choice(MaterialLawNameList()));
 }
 
-/** "law" (bmrMaterialLaw.h's names; default neo-hookean) and its parameter
- *  "second_invariant_share" (Mooney-Rivlin: C01 / (C10 + C01)). */
+/** The keys of a scene material, or of "material_fields": the three
+ *  moduli's, "law" and every law parameter's (MaterialParameters()). */
+inline std::vector<std::string>
+MaterialKeys(std::vector<std::string> keys)
+{
+  keys.insert(keys.end(), { "youngs_modulus", "poisson_ratio", "density", "law" });
+  for (const MaterialParameter & parameter : MaterialParameters())
+  {
+    keys.emplace_back(parameter.name);
+  }
+  return keys;
+}
+
+/** "law" (bmrMaterialLaw.h's names; default neo-hookean) and its parameters
+ *  (MaterialParameters(): Mooney-Rivlin's "second_invariant_share"). */
 inline void
 ParseMaterialLaw(const SceneValue & value, Material & material)
 {
@@ -344,9 +357,12 @@ ParseMaterialLaw(const SceneValue & value, Material & material)
   {
     material.law = ParseMaterialLawName(*law);
   }
-  if (const auto share = value.Optional("second_invariant_share"))
+  for (const MaterialParameter & parameter : MaterialParameters())
   {
-    material.secondInvariantShare = share->Number();
+    if (const auto number = value.Optional(parameter.name))
+    {
+      material.*parameter.value = number->Number();
+    }
   }
   if (const std::string problem = MaterialLawProblem(material); !problem.empty())
   {
@@ -357,7 +373,7 @@ ParseMaterialLaw(const SceneValue & value, Material & material)
 inline Material
 ParseMaterial(const SceneValue & value, std::size_t index, std::optional<int> & label)
 {
-  value.AllowOnly({ "name", "label", "youngs_modulus", "poisson_ratio", "density", "law", "second_invariant_share" });
+  value.AllowOnly(MaterialKeys({ "name", "label" }));
   Material material;
   material.name = value.Has("name") ? value.Child("name").NonEmptyString() : "material" + std::to_string(index);
   if (const auto labelValue = value.Optional("label"))
@@ -468,7 +484,7 @@ private:
   Scene                            m_Scene;
   MeshData                         m_MeshData;
   bool                             m_MeshFromFile = false;
-  std::map<std::tuple<double, double, double, MaterialLaw, double>, Index> m_MaterialIndexOfProperties;
+  std::map<std::vector<double>, Index> m_MaterialIndexOfProperties; // by MaterialKey
   std::vector<std::optional<int>>  m_MaterialLabels;
 };
 

@@ -138,7 +138,10 @@ ReferenceConfigurationKey(const Model & model)
     if (material.law != MaterialLaw::NeoHookean) // neo-Hookean models keep the keys of format version 1
     {
       key.Add(material.law);
-      key.Add(material.secondInvariantShare);
+      for (const MaterialParameter & parameter : MaterialParameters())
+      {
+        key.Add(material.*parameter.value);
+      }
     }
   }
   if (model.discretization == Discretization::Meshless)

@@ -411,29 +411,28 @@ MixtureName(double youngsModulus, double poissonRatio)
   return buffer;
 }
 
-/** Collects materials, one entry per distinct (E, nu, rho, law), in order of first use. */
+/** Collects materials, one entry per distinct MaterialKey (E, nu, rho, law, its parameters), in order of first use. */
 class MaterialTable
 {
 public:
   Index Add(const Material & material)
   {
-    const auto key = std::make_tuple(material.youngsModulus, material.poissonRatio, material.density, material.law,
-                                     material.secondInvariantShare);
-    const auto found = m_Index.find(key);
+    std::vector<double> key = MaterialKey(material);
+    const auto          found = m_Index.find(key);
     if (found != m_Index.end())
     {
       return found->second;
     }
     const Index index = static_cast<Index>(m_Materials.size());
     m_Materials.push_back(material);
-    m_Index.emplace(key, index);
+    m_Index.emplace(std::move(key), index);
     return index;
   }
   std::vector<Material> Take() { return std::move(m_Materials); }
 
 private:
   std::vector<Material>                                  m_Materials;
-  std::map<std::tuple<double, double, double, MaterialLaw, double>, Index> m_Index;
+  std::map<std::vector<double>, Index> m_Index;
 };
 
 void
@@ -521,9 +520,7 @@ struct MaterialGroups
       for (std::size_t g = 0; g < first.size(); ++g)
       {
         const Material & other = materials[first[g]];
-        if (other.youngsModulus == materials[k].youngsModulus && other.poissonRatio == materials[k].poissonRatio &&
-            other.density == materials[k].density && other.law == materials[k].law &&
-            other.secondInvariantShare == materials[k].secondInvariantShare)
+        if (MaterialKey(other) == MaterialKey(materials[k]))
         {
           groupOf[k] = static_cast<int>(g);
         }
@@ -539,7 +536,9 @@ struct MaterialGroups
   std::size_t Count() const { return first.size(); }
 
   /** The material of groups mixed by weight: one group's values exactly, else
-   *  the weighted mean (neo-Hookean unless a Mooney-Rivlin group takes part). */
+   *  the weighted mean of the moduli, the density and every law parameter,
+   *  with the law of the groups that are not neo-Hookean (a neo-Hookean
+   *  class is such a law at its parameters' neutral values). */
   Material Mixture(const std::vector<Material> & materials, const std::vector<double> & groupWeight) const
   {
     int used = 0, last = 0;
@@ -556,7 +555,11 @@ struct MaterialGroups
       return materials[first[last]]; // exactly the class values
     }
     Material material;
-    material.youngsModulus = material.poissonRatio = material.density = material.secondInvariantShare = 0.0;
+    material.youngsModulus = material.poissonRatio = material.density = 0.0;
+    for (const MaterialParameter & parameter : MaterialParameters())
+    {
+      material.*parameter.value = 0.0;
+    }
     material.law = MaterialLaw::NeoHookean;
     for (std::size_t g = 0; g < first.size(); ++g)
     {
@@ -564,17 +567,22 @@ struct MaterialGroups
       material.youngsModulus += groupWeight[g] * pure.youngsModulus;
       material.poissonRatio += groupWeight[g] * pure.poissonRatio;
       material.density += groupWeight[g] * pure.density;
-      // A neo-Hookean class is Mooney-Rivlin with no second invariant: mixed with one, it adds a share of 0.
-      material.secondInvariantShare += groupWeight[g] * pure.secondInvariantShare;
-      if (pure.law == MaterialLaw::MooneyRivlin)
+      for (const MaterialParameter & parameter : MaterialParameters())
       {
-        material.law = MaterialLaw::MooneyRivlin;
+        material.*parameter.value += groupWeight[g] * pure.*parameter.value;
+      }
+      if (pure.law != MaterialLaw::NeoHookean)
+      {
+        material.law = pure.law;
       }
     }
     material.youngsModulus = RoundSignificant(material.youngsModulus);
     material.poissonRatio = RoundSignificant(material.poissonRatio);
     material.density = RoundSignificant(material.density);
-    material.secondInvariantShare = RoundSignificant(material.secondInvariantShare);
+    for (const MaterialParameter & parameter : MaterialParameters())
+    {
+      material.*parameter.value = RoundSignificant(material.*parameter.value);
+    }
     material.name = MixtureName(material.youngsModulus, material.poissonRatio);
     return material;
   }

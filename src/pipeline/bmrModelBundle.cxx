@@ -98,7 +98,10 @@ ModelBytes(const BrainModel & brain)
     out.Value(material.poissonRatio);
     out.Value(material.density);
     out.Value(material.law);
-    out.Value(material.secondInvariantShare);
+    for (const MaterialParameter & parameter : MaterialParameters()) // a new one changes the format: a new version
+    {
+      out.Value(material.*parameter.value);
+    }
   }
   out.Value<std::uint64_t>(model.nodeSets.size());
   for (const auto & [name, nodes] : model.nodeSets)
@@ -154,7 +157,8 @@ ReadModelBytes(BinaryReader & in, BrainModel & brain)
     cell.nodes = in.Value<decltype(cell.nodes)>();
     cell.material = in.Value<Index>();
   }
-  model.materials.resize(in.Count(8 + 3 * sizeof(double) + (laws ? sizeof(MaterialLaw) + sizeof(double) : 0)));
+  model.materials.resize(
+    in.Count(8 + 3 * sizeof(double) + (laws ? sizeof(MaterialLaw) + MaterialParameters().size() * sizeof(double) : 0)));
   for (Material & material : model.materials)
   {
     material.name = in.Text();
@@ -171,7 +175,10 @@ ReadModelBytes(BinaryReader & in, BrainModel & brain)
       {
         in.Fail("material '" + material.name + "': " + error.what());
       }
-      material.secondInvariantShare = in.Value<double>();
+      for (const MaterialParameter & parameter : MaterialParameters())
+      {
+        material.*parameter.value = in.Value<double>();
+      }
     }
   }
   const std::size_t sets = in.Count(16);

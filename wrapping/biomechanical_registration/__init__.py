@@ -75,6 +75,7 @@ from ._bmr import (
     make_synthetic_brain_shift,
     make_synthetic_electrode_ct,
     material_laws,
+    material_parameters,
     map_materials,
     locate_electrodes,
     measure_displacement_error,

@@ -63,6 +63,12 @@ def test_a_mooney_rivlin_material_solves_its_own_law_and_bad_laws_are_named():
         bmr.Material("brain", E, NU, 1000, law="ogden")
     with pytest.raises(Exception, match="must lie in"):
         bmr.Material("brain", E, NU, 1000, law="mooney-rivlin", second_invariant_share=2.0)
+    # The laws' parameters are keywords and attributes, named by one list.
+    assert bmr.material_parameters() == ["second_invariant_share"]
+    material.second_invariant_share = 0.25
+    assert material.second_invariant_share == 0.25
+    with pytest.raises(TypeError, match="unexpected keyword 'share'; the laws' parameters are: second_invariant_share"):
+        bmr.Material("brain", E, NU, 1000, law="mooney-rivlin", share=0.5)
 
 
 @pytest.mark.parametrize("cells", ["hexahedra", "tetrahedra"])

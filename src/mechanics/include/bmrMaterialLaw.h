@@ -35,8 +35,31 @@ struct MaterialLawDescription
   const char * name;            // in scenes, mesh files, Python and reports
   const char * formula;         // the isochoric strain energy, for messages and docs
   const char * calculixKeyword; // the CalculiX (and Abaqus) card of the same law
-  bool         secondInvariant; // takes Material::secondInvariantShare
+  bool         secondInvariant; // has the second invariant's term (takes Material::secondInvariantShare)
 };
+
+/** A parameter a law takes beside E, nu and the density: a member of
+ *  Material, named once here for every carrier (a scene material's key and
+ *  "material_fields" array, the mesh files' array beside "material_law",
+ *  Python's Material keyword and attribute, model bundles, the
+ *  precomputation's key, the material mapping's mixture). A law that does
+ *  not take it has its neutral value. */
+struct MaterialParameter
+{
+  const char * name;
+  double Material::*value;
+  double       neutral;
+  const char * meaning; // for messages and help
+};
+
+/** Every law's parameters, each once, in the order files store them. */
+const std::vector<MaterialParameter> &
+MaterialParameters();
+
+/** E, nu, the density, the law's code and every parameter, in that order:
+ *  two materials with equal keys behave the same (the name aside). */
+std::vector<double>
+MaterialKey(const Material & material);
 
 /** Every law, in the order of its numeric code (the mesh files' "material_law"). */
 const std::vector<MaterialLawDescription> &

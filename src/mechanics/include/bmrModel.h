@@ -60,17 +60,16 @@ struct Material
   double      density = 1000.0; // kg/m^3
   MaterialLaw law = MaterialLaw::NeoHookean;
   /** Mooney-Rivlin only: C01 / (C10 + C01), the share of the small-strain
-   *  shear modulus carried by the second invariant, in [0, 1]. */
+   *  shear modulus carried by the second invariant, in [0, 1]. A law's
+   *  parameter: listed in MaterialParameters() (bmrMaterialLaw.cxx). */
   double secondInvariantShare = 0.0;
 
   /** The small-strain shear modulus mu = 2 (C10 + C01) (Pa). */
   double ShearModulus() const { return youngsModulus / (2.0 * (1.0 + poissonRatio)); }
   double BulkModulus() const { return youngsModulus / (3.0 * (1.0 - 2.0 * poissonRatio)); }
-  /** 2 C01 (Pa): the second invariant's part of mu; 0 for the neo-Hookean law. */
-  double SecondInvariantModulus() const
-  {
-    return law == MaterialLaw::MooneyRivlin ? secondInvariantShare * ShearModulus() : 0.0;
-  }
+  /** 2 C01 (Pa): the second invariant's part of mu; 0 for a law without
+   *  the second invariant's term (MaterialLawDescription::secondInvariant). */
+  double SecondInvariantModulus() const;
 };
 
 /** Smooth (zero velocity and acceleration at both ends) or linear ramp from 0 to 1. */

@@ -11,6 +11,35 @@
 namespace bmr
 {
 
+const std::vector<MaterialParameter> &
+MaterialParameters()
+{
+  static const std::vector<MaterialParameter> parameters{
+    { "second_invariant_share", &Material::secondInvariantShare, 0.0,
+      "Mooney-Rivlin's C01 / (C10 + C01), the share of the small-strain shear modulus carried by the second "
+      "invariant, in [0, 1]" },
+  };
+  return parameters;
+}
+
+std::vector<double>
+MaterialKey(const Material & material)
+{
+  std::vector<double> key{ material.youngsModulus, material.poissonRatio, material.density,
+                           static_cast<double>(material.law) };
+  for (const MaterialParameter & parameter : MaterialParameters())
+  {
+    key.push_back(material.*parameter.value);
+  }
+  return key;
+}
+
+double
+Material::SecondInvariantModulus() const
+{
+  return DescribeMaterialLaw(law).secondInvariant ? secondInvariantShare * ShearModulus() : 0.0;
+}
+
 const std::vector<MaterialLawDescription> &
 MaterialLaws()
 {
