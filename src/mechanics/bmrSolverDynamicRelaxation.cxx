@@ -478,7 +478,7 @@ Solver::Impl::SolveDynamicRelaxation(const ProgressCallback & progress)
   constexpr double    h = kPseudoTimeStep;
   const double        omegaMax = 2.0 * settings.timeStepSafetyFactor / h;
   const Index         dofCount = static_cast<Index>(3 * model.nodes.size());
-  std::vector<double> mass = RelaxationMasses(); // scaled at restarts
+  std::vector<double> mass = RelaxationMasses(omegaMax); // scaled at restarts
 
   std::vector<double> u(dofCount, 0.0), uPrevious(dofCount, 0.0), uNext(dofCount, 0.0);
   std::vector<double> f(dofCount, 0.0), fPrevious(dofCount, 0.0), inverseMass(dofCount);
@@ -650,7 +650,7 @@ Solver::Impl::RelaxationStep(bool fused, const std::vector<double> & u, const st
 }
 
 std::vector<double>
-Solver::Impl::RelaxationMasses()
+Solver::Impl::RelaxationMasses(double omegaMax)
 {
   constexpr double h = kPseudoTimeStep;
   // Masses scaled cell by cell to the cells' stiffness, which preconditions
@@ -660,7 +660,6 @@ Solver::Impl::RelaxationMasses()
   // then scaled globally to a power-iteration estimate of it: fewer steps for
   // the same stability margin (safety_factor).
   const double safety = settings.timeStepSafetyFactor;
-  const double omegaMax = 2.0 * safety / h;
   // The global scale comes from the reference state's masses; it is then
   // applied to the masses made for the collapse barrier's stiffness, which
   // the reference state does not show (in a body of soft cells alone the

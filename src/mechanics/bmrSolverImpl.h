@@ -191,8 +191,9 @@ struct Solver::Impl
   SolveResult Finish(const std::vector<double> & u, const std::vector<char> & inContact, double gravityFactor, int steps);
   double      LargestEigenvalueEstimate(const std::vector<double> & mass);
   /** Dynamic relaxation's masses for its pseudo-time step: scaled to the
-   *  cells' stiffness, then to the largest eigenvalue's estimate. */
-  std::vector<double> RelaxationMasses();
+   *  cells' stiffness, then to the largest eigenvalue's estimate, which they
+   *  bring to omegaMax^2 (with a margin). */
+  std::vector<double> RelaxationMasses(double omegaMax);
   /** u and uPrevious at the warm state (if any), with the loads it balances
    *  (startForces, startTargets); clears those from rest. */
   /** One step of dynamic relaxation, u -> uNext with the constraints,

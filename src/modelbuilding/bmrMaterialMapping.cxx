@@ -513,23 +513,17 @@ CheckMembershipInputs(const ScalarVolume & memberships, const std::vector<Materi
 struct MaterialGroups
 {
   explicit MaterialGroups(const std::vector<Material> & materials)
-    : groupOf(materials.size(), -1)
+    : groupOf(materials.size())
   {
+    std::map<std::vector<double>, int> groupOfKey;
     for (std::size_t k = 0; k < materials.size(); ++k)
     {
-      for (std::size_t g = 0; g < first.size(); ++g)
+      const auto [group, added] = groupOfKey.emplace(MaterialKey(materials[k]), static_cast<int>(first.size()));
+      if (added)
       {
-        const Material & other = materials[first[g]];
-        if (MaterialKey(other) == MaterialKey(materials[k]))
-        {
-          groupOf[k] = static_cast<int>(g);
-        }
-      }
-      if (groupOf[k] < 0)
-      {
-        groupOf[k] = static_cast<int>(first.size());
         first.push_back(static_cast<int>(k));
       }
+      groupOf[k] = group->second;
     }
   }
 
