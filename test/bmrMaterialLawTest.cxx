@@ -18,10 +18,10 @@
 
 #include <gtest/gtest.h>
 
-#include <set>
-
 #include <algorithm>
 #include <cmath>
+#include <fstream>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -264,6 +264,25 @@ TEST(MaterialLaw, ScenesCarryTheLawAndNameItsMistakes)
 
 class MaterialLawFiles : public test::TemporaryFolderTest
 {};
+
+// Integration points that carry a law's code but not its parameters' arrays
+// (here Mooney-Rivlin's share renamed away) are a named error, not materials
+// at the parameters' neutral values.
+TEST_F(MaterialLawFiles, IntegrationPointsWithALawButNotItsParametersAreANamedError)
+{
+  Model model = MakeBlockMesh(Vector3::Constant(10.0), { 2, 2, 2 }, GridCells::Hexahedra, MooneyRivlinMaterial(0.3));
+  MakeMeshlessFromCells(model, {}, {}, 1);
+  const std::filesystem::path written = m_Folder / "points.vtu", crafted = m_Folder / "crafted.vtu";
+  WriteIntegrationPoints(written.string(), model);
+  std::string       text = test::ReadText(written);
+  const std::string name = "Name=\"second_invariant_share\"";
+  ASSERT_NE(text.find(name), std::string::npos);
+  text.replace(text.find(name), name.size(), "Name=\"second_invariant_shareX\"");
+  std::ofstream(crafted, std::ios::binary) << text;
+  const std::string message = test::ErrorMessage([&] { ReadIntegrationPoints(crafted.string()); });
+  EXPECT_CONTAINS(message, "needs all the point-data arrays 'material_law', 'second_invariant_share' with one value "
+                           "per point, or none (neo-Hookean)");
+}
 
 TEST_F(MaterialLawFiles, IntegrationPointsAndPrecomputationsKeepTheLaw)
 {
