@@ -710,6 +710,56 @@ TEST(MeshlessContact, UniaxialCompressionAgainstAPlaneBesideEbciemConstraints)
   EXPECT_EQ(result.contactNodes, static_cast<int>(model.NodeSet("xmin").size()));
 }
 
+TEST(MeshlessContact, ABlockUnderItsWeightOnAPlaneRestsAsOnRollers)
+{
+  // The block on a frictionless plane under 10 g (a fifth of its height
+  // squeezed at the base), held only by symmetry planes at x = 0 and y = 0:
+  // its whole base presses on the plane, so the steady state is that of the
+  // same block on rollers (u_z = 0 at the base, imposed by EBCIEM instead of
+  // contact). Every slave presses on neighbours whose supports overlap, the
+  // case where Kaczmarz sweeps alone took hundreds of passes a step; the
+  // direct solve of the slaves' system closes the gaps at once, so the sweeps
+  // after it stop after their first pass.
+  const auto solve = [](bool onRollers) {
+    Model model = MeshlessBlock(MakeMaterial(3000.0, 0.45));
+    model.bodyAcceleration = Vector3(0.0, 0.0, -98100.0);
+    model.fixedConstraints.push_back({ "xmin", { true, false, false } });
+    model.fixedConstraints.push_back({ "ymin", { false, true, false } });
+    if (onRollers)
+    {
+      model.fixedConstraints.push_back({ "zmin", { false, false, true } });
+    }
+    else
+    {
+      AddRigidPlane(model, Vector3(5.0, 4.0, 0.0), Vector3(0.0, 0.0, 1.0), "zmin");
+    }
+    Solver solver(model, TightRelaxation(1e-7, 50000));
+    return std::make_pair(model, solver.Solve());
+  };
+  const auto [model, onPlane] = solve(false);
+  const auto [rollerModel, onRollers] = solve(true);
+  ASSERT_TRUE(onPlane.converged) << onPlane.message;
+  ASSERT_TRUE(onRollers.converged) << onRollers.message;
+  EXPECT_EQ(onPlane.contactNodes, static_cast<int>(model.NodeSet("zmin").size()));
+  EXPECT_LT(onPlane.maxPenetration, 1e-6);
+  double sag = 0.0;
+  for (const Vector3 & u : onRollers.displacements)
+  {
+    sag = std::max(sag, -u.z());
+  }
+  const double difference = MaxDifference(onPlane.displacements, onRollers.displacements);
+  RecordProperty("sagMm", Sci(sag));
+  RecordProperty("maxDifferenceMm", Sci(difference));
+  RecordProperty("sweepsPerStep", Sci(double(onPlane.parts.contactSweeps) / onPlane.steps));
+  EXPECT_GT(sag, 0.3);
+  EXPECT_LT(difference, 1e-4 * sag);
+  // The plane carries the weight, rho g V (1000 kg/m^3, 98.1 m/s^2, 480 mm^3).
+  const double  weight = 1000.0 * 98.1 * 480e-9;
+  const Vector3 support = SumOver(onPlane.reactionForces, model.NodeSet("zmin"));
+  EXPECT_NEAR(support.z(), weight, 0.01 * weight);
+  EXPECT_LE(onPlane.parts.contactSweeps, 2 * onPlane.steps);
+}
+
 TEST(MeshlessSolveParts, TimedByPartAndTheForcePassStreamsTheMlsTable)
 {
   // The contact-and-EBCIEM block above: every part of the step runs.

@@ -1,8 +1,8 @@
 // Frictionless rigid contact for the meshless discretization: the rigid
 // surfaces' projections (RigidContact) act on the MLS-interpolated positions
 // of the slave nodes, and the parameters change by the mass-weighted least
-// amount that closes the gaps (Kaczmarz sweeps, as EBCIEM does for prescribed
-// displacements). Private to the core; the solver holds one per meshless
+// amount that closes the gaps (a sparse direct solve of the slaves' coupled
+// system, then Kaczmarz sweeps to the tolerance). Private to the core; the solver holds one per meshless
 // model with contact surfaces.
 #ifndef bmrMeshlessContact_h
 #define bmrMeshlessContact_h
@@ -25,6 +25,7 @@ public:
    *  solver's and must outlive this; the slaves are every contact's, once. */
   MeshlessContact(const std::vector<std::unique_ptr<RigidContact>> & contacts, const ShapeFunctionTable & nodeShapes,
                   Index nodeCount);
+  ~MeshlessContact();
 
   /** EBCIEM's constrained dofs (null, empty: none): a slave whose support
    *  touches their support moves so as to keep every prescribed value. */
@@ -37,6 +38,10 @@ public:
   void Enforce(double * u, std::vector<char> & inContact, const std::vector<double> & inverseMass,
                const std::vector<char> & dofConstrained, double lengthScale, int threads, long long & sweeps);
 
+  /** Forgets what the last solve left (the slaves' tracked motion, the last
+   *  factorisation), so that each solve of a solver gives the same result. */
+  void StartSolve();
+
   /** Every contact's slave nodes, ascending, once each. */
   const std::vector<Index> & SlaveNodes() const { return m_Slaves; }
 
@@ -47,6 +52,25 @@ private:
   bool DetectPenetrations(std::vector<char> & inContact, const std::vector<char> & dofConstrained, int threads);
   template <typename Weight>
   void PrepareRows(const Weight & weight);
+  /** Closes the active slaves' gaps by the least mass-weighted change at
+   *  once (a sparse LDL^T of their coupled system); false if that system is
+   *  singular, when the sweeps alone must do it. */
+  template <typename Weight>
+  bool SolveActiveGaps(double * u, const Weight & weight, const std::vector<double> & inverseMass, double tolerance);
+  /** Factorises the active system; false if it is singular. */
+  bool Factorise();
+  /** Conjugate gradients on the active system preconditioned by the last
+   *  factorisation; false if they do not reach `tolerance` soon. */
+  bool SolveWithEarlierFactorisation(Eigen::VectorXd & multipliers, double tolerance);
+  /** The lower triangle of the active rows' system A P^T (m_System). */
+  template <typename Weight>
+  void AssembleActiveSystem(const Weight & weight);
+  /** a_t . P_s per axis for every slave t whose support meets P_s's, s = m_Slaves[slave]. */
+  template <typename Weight>
+  void ComputeOverlaps(Index slave, const std::array<EssentialBoundary::Coupling, 3> * coupling, const Weight & weight);
+  /** Adds sum_r multipliers_r P_r to u, P_r the sweeps' direction of row r. */
+  template <typename Weight>
+  void AddDirections(double * u, const Weight & weight, const double * multipliers) const;
   template <typename Weight>
   void Sweep(double * u, const Weight & weight, double tolerance, long long & sweeps) const;
 
@@ -69,6 +93,8 @@ private:
   std::vector<Index>                                              m_Active;
   std::vector<double>                                             m_RowNorms;
   std::vector<const std::array<EssentialBoundary::Coupling, 3> *> m_Couplings;
+  struct ActiveSystem;
+  std::unique_ptr<ActiveSystem> m_System; // the direct solve's matrix, factorisation and work arrays
   // Which slaves to interpolate: the parameters at the last detection, the
   // sum of their largest changes since the first step, per slave that sum
   // when it was last interpolated and sum_K |phi_K|, and per node its

@@ -574,6 +574,10 @@ Solver::Solve(const ProgressCallback & progress, const FrameCallback & frames)
 {
   const auto  start = std::chrono::steady_clock::now();
   m_Impl->parts = SolvePartSeconds{};
+  if (m_Impl->meshlessContact)
+  {
+    m_Impl->meshlessContact->StartSolve();
+  }
   SolveResult result = m_Impl->settings.integrator == Integrator::DynamicRelaxation
                          ? m_Impl->SolveDynamicRelaxation(progress)
                          : m_Impl->SolveExplicitDynamics(progress, frames);
