@@ -78,7 +78,7 @@ struct MeshlessContact::ActiveSystem
   Eigen::SparseMatrix<double> matrix; // lower triangle of A P^T
   Eigen::VectorXd             gaps;
   // The last factorisation, of an earlier system, and per slave its row
-  // there (-1: none); the preconditioner's work vector.
+  // there (-1: none); the preconditioner's work vectors.
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> factorisation;
   bool                                               factorised = false;
   std::vector<Index>                                 factorisedRowOfSlave;
@@ -331,7 +331,7 @@ MeshlessContact::PrepareRows(const Weight & weight)
 }
 
 template <typename Weight>
-bool
+void
 MeshlessContact::SolveActiveGaps(double * u, const Weight & weight, const std::vector<double> & inverseMass,
                                  double tolerance)
 {
@@ -341,7 +341,7 @@ MeshlessContact::SolveActiveGaps(double * u, const Weight & weight, const std::v
   // is symmetric positive semi-definite. Where many neighbouring slaves press
   // on the skull (gravity) the sweeps need hundreds of passes; the system,
   // some hundred rows of a few dozen neighbours each, factorises in about a
-  // millisecond. Its pattern depends only on which slaves are active.
+  // millisecond.
   if (!m_System)
   {
     m_System = std::make_unique<ActiveSystem>(m_Slaves, m_NodeShapes, static_cast<Index>(m_Normals.size()));
@@ -364,7 +364,7 @@ MeshlessContact::SolveActiveGaps(double * u, const Weight & weight, const std::v
   const auto rowCount = static_cast<Eigen::Index>(system.rows.size());
   if (rowCount == 0)
   {
-    return true;
+    return;
   }
   AssembleActiveSystem(weight);
   system.gaps.resize(rowCount);
@@ -378,12 +378,11 @@ MeshlessContact::SolveActiveGaps(double * u, const Weight & weight, const std::v
   {
     if (!Factorise())
     {
-      return false;
+      return;
     }
     multipliers = system.factorisation.solve(system.gaps);
   }
   AddDirections(u, weight, multipliers.data());
-  return true;
 }
 
 bool

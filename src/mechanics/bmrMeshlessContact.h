@@ -53,10 +53,10 @@ private:
   template <typename Weight>
   void PrepareRows(const Weight & weight);
   /** Closes the active slaves' gaps by the least mass-weighted change at
-   *  once (a sparse LDL^T of their coupled system); false if that system is
-   *  singular, when the sweeps alone must do it. */
+   *  once (their coupled system, solved); leaves u as it was where that
+   *  system is singular, for the sweeps alone. */
   template <typename Weight>
-  bool SolveActiveGaps(double * u, const Weight & weight, const std::vector<double> & inverseMass, double tolerance);
+  void SolveActiveGaps(double * u, const Weight & weight, const std::vector<double> & inverseMass, double tolerance);
   /** Factorises the active system; false if it is singular. */
   bool Factorise();
   /** Conjugate gradients on the active system preconditioned by the last
