@@ -994,7 +994,7 @@ RegisterBrainShift(const BrainShiftRegistrationInputs &   inputs,
                    const ProgressCallback &               solverProgress,
                    BrainModel *                           prepared)
 {
-  const BrainShiftUpdateInputs update{ inputs.preoperativeImage, inputs.labelMaps, inputs.intraoperative };
+  const BrainShiftUpdateInputs update{ inputs.preoperativeImage, inputs.labelMaps, inputs.intraoperative, WarmStart{} };
   CheckUpdateInputs(update, settings);
   CheckCraniotomyChoice(settings.model.craniotomyRadius, settings.model.craniotomyMask.IsNotNull());
   BrainShiftRegistrationResult result;
