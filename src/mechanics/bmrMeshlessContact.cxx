@@ -370,8 +370,7 @@ MeshlessContact::SolveActiveGaps(double * u, const Weight & weight, const std::v
   system.gaps.resize(rowCount);
   for (Eigen::Index r = 0; r < rowCount; ++r)
   {
-    const Index node = m_Active[system.rows[r]];
-    system.gaps[r] = m_Targets[node] - m_Normals[node].dot(m_NodeShapes.Interpolate(node, u));
+    system.gaps[r] = Gap(m_Active[system.rows[r]], u);
   }
   Eigen::VectorXd multipliers;
   if (!SolveWithEarlierFactorisation(multipliers, tolerance))
@@ -382,7 +381,10 @@ MeshlessContact::SolveActiveGaps(double * u, const Weight & weight, const std::v
     }
     multipliers = system.factorisation.solve(system.gaps);
   }
-  AddDirections(u, weight, multipliers.data());
+  for (Eigen::Index r = 0; r < rowCount; ++r)
+  {
+    AddDirection(u, weight, system.rows[r], multipliers[r]);
+  }
 }
 
 bool
@@ -488,7 +490,7 @@ MeshlessContact::AssembleActiveSystem(const Weight & weight)
   // order, and so is each slave's list of overlaps.
   system.matrix.resize(rowCount, rowCount);
   system.matrix.setZero();
-  system.matrix.reserve(system.matrix.nonZeros() + 32 * rowCount);
+  system.matrix.reserve(32 * static_cast<Eigen::Index>(rowCount));
   for (Index q = 0; q < rowCount; ++q)
   {
     system.matrix.startVec(q);
@@ -570,31 +572,32 @@ MeshlessContact::ComputeOverlaps(Index slave, const std::array<EssentialBoundary
   system.overlapsKnown[slave] = 1;
 }
 
+double
+MeshlessContact::Gap(Index node, const double * u) const
+{
+  return m_Targets[node] - m_Normals[node].dot(m_NodeShapes.Interpolate(node, u));
+}
+
 template <typename Weight>
 void
-MeshlessContact::AddDirections(double * u, const Weight & weight, const double * multipliers) const
+MeshlessContact::AddDirection(double * u, const Weight & weight, std::size_t a, double multiplier) const
 {
-  const std::vector<std::size_t> & rows = m_System->rows;
-  for (std::size_t q = 0; q < rows.size(); ++q)
+  const Index     node = m_Active[a];
+  const Vector3 & n = m_Normals[node];
+  for (Index k = m_NodeShapes.offsets[node]; k < m_NodeShapes.offsets[node + 1]; ++k)
   {
-    const std::size_t a = rows[q];
-    const Index       node = m_Active[a];
-    const Vector3 &   n = m_Normals[node];
-    for (Index k = m_NodeShapes.offsets[node]; k < m_NodeShapes.offsets[node + 1]; ++k)
+    for (int i = 0; i < 3; ++i)
     {
-      for (int i = 0; i < 3; ++i)
-      {
-        const Index d = 3 * m_NodeShapes.nodes[k] + i;
-        u[d] += multipliers[q] * m_NodeShapes.values[k] * n[i] * weight(d);
-      }
+      const Index d = 3 * m_NodeShapes.nodes[k] + i;
+      u[d] += multiplier * m_NodeShapes.values[k] * n[i] * weight(d);
     }
-    for (int i = 0; m_Couplings[a] && i < 3; ++i)
+  }
+  for (int i = 0; m_Couplings[a] && i < 3; ++i)
+  {
+    const EssentialBoundary::Coupling & coupling = (*m_Couplings[a])[i];
+    for (std::size_t j = 0; j < coupling.nodes.size(); ++j)
     {
-      const EssentialBoundary::Coupling & coupling = (*m_Couplings[a])[i];
-      for (std::size_t j = 0; j < coupling.nodes.size(); ++j)
-      {
-        u[3 * coupling.nodes[j] + i] -= multipliers[q] * n[i] * coupling.values[j];
-      }
+      u[3 * coupling.nodes[j] + i] -= multiplier * n[i] * coupling.values[j];
     }
   }
 }
@@ -610,33 +613,11 @@ MeshlessContact::Sweep(double * u, const Weight & weight, double tolerance, long
     double largest = 0.0;
     for (std::size_t a = 0; a < m_Active.size(); ++a)
     {
-      const Index     node = m_Active[a];
-      const Vector3 & n = m_Normals[node];
-      const double    gap = m_Targets[node] - n.dot(m_NodeShapes.Interpolate(node, u));
+      const double gap = Gap(m_Active[a], u);
       largest = std::max(largest, std::abs(gap));
-      if (!(m_RowNorms[a] > 0.0))
+      if (m_RowNorms[a] > 0.0)
       {
-        continue;
-      }
-      const double multiplier = gap / m_RowNorms[a];
-      for (Index k = m_NodeShapes.offsets[node]; k < m_NodeShapes.offsets[node + 1]; ++k)
-      {
-        for (int i = 0; i < 3; ++i)
-        {
-          const Index d = 3 * m_NodeShapes.nodes[k] + i;
-          u[d] += multiplier * m_NodeShapes.values[k] * n[i] * weight(d);
-        }
-      }
-      if (m_Couplings[a])
-      {
-        for (int i = 0; i < 3; ++i)
-        {
-          const EssentialBoundary::Coupling & coupling = (*m_Couplings[a])[i];
-          for (std::size_t j = 0; j < coupling.nodes.size(); ++j)
-          {
-            u[3 * coupling.nodes[j] + i] -= multiplier * n[i] * coupling.values[j];
-          }
-        }
+        AddDirection(u, weight, a, gap / m_RowNorms[a]);
       }
     }
     if (largest <= tolerance)

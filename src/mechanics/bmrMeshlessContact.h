@@ -1,9 +1,9 @@
 // Frictionless rigid contact for the meshless discretization: the rigid
 // surfaces' projections (RigidContact) act on the MLS-interpolated positions
 // of the slave nodes, and the parameters change by the mass-weighted least
-// amount that closes the gaps (a sparse direct solve of the slaves' coupled
-// system, then Kaczmarz sweeps to the tolerance). Private to the core; the solver holds one per meshless
-// model with contact surfaces.
+// amount that closes the gaps (a solve of the slaves' coupled system, then
+// Kaczmarz sweeps to the tolerance). Private to the core; the solver holds
+// one per meshless model with contact surfaces.
 #ifndef bmrMeshlessContact_h
 #define bmrMeshlessContact_h
 
@@ -68,9 +68,13 @@ private:
   /** a_t . P_s per axis for every slave t whose support meets P_s's, s = m_Slaves[slave]. */
   template <typename Weight>
   void ComputeOverlaps(Index slave, const std::array<EssentialBoundary::Coupling, 3> * coupling, const Weight & weight);
-  /** Adds sum_r multipliers_r P_r to u, P_r the sweeps' direction of row r. */
+  /** The gap n . c - n . Phi_s u of a slave in contact. */
+  double Gap(Index node, const double * u) const;
+  /** Adds multiplier P_a to u, P_a the direction of active row a (its
+   *  mass-weighted n . phi_s, less EBCIEM's share): a sweep's correction,
+   *  and the direct solve's change row by row. */
   template <typename Weight>
-  void AddDirections(double * u, const Weight & weight, const double * multipliers) const;
+  void AddDirection(double * u, const Weight & weight, std::size_t a, double multiplier) const;
   template <typename Weight>
   void Sweep(double * u, const Weight & weight, double tolerance, long long & sweeps) const;
 
