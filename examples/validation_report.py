@@ -112,9 +112,31 @@ UNCERTAINTY_ROW = "biomechanical hexahedra 5 mm + fitted gravity, uncertainty 16
 CALIBRATION_TARGET = (0.85, 0.99)
 
 
+def drawn_inputs(distributions):
+    """The ensemble's draws in words, from its report's distributions (those it drew)."""
+    words = []
+    if distributions.get("noise_sigma_mm"):
+        words.append("%g mm measurement noise a component" % distributions["noise_sigma_mm"])
+    if distributions.get("youngs_modulus_log_sd"):
+        words.append("one log-normal factor on every Young's modulus with sd %g" % distributions["youngs_modulus_log_sd"])
+    low, high = distributions.get("poisson_ratio", (0, 0))
+    if low or high:
+        words.append("the parenchyma's Poisson's ratio in %g-%g" % (low, high))
+    low, high = distributions.get("gravity_fraction", (1, 1))
+    if low != high:
+        words.append("gravity's size within %g-%g times the fitted one, or of the smallest size the fit tried when it "
+                     "chose none" % (low, high))
+    if distributions.get("skull_gap_sd_mm"):
+        words.append("the brain-skull gap widened or narrowed by a normal deviate of sd %g mm (the skull's contact "
+                     "offset)" % distributions["skull_gap_sd_mm"])
+    if distributions.get("exposed_radius_sd_mm"):
+        words.append("the craniotomy's radius with sd %g mm" % distributions["exposed_radius_sd_mm"])
+    return ", ".join(words)
+
+
 def calibration_table(runs, other_kind_scenes):
     """The uncertainty map's calibration per scene (the ensemble rows' details), with a summary computed from it."""
-    rows, matched, other, outside, inside = [], [], [], [], []
+    rows, matched, other, outside, inside, draws = [], [], [], [], [], set()
     for entry in runs:
         method = next((m for m in (entry["report"] or {}).get("methods", []) if "uncertainty" in m.get("details", {})), None)
         if method is None:
@@ -125,6 +147,7 @@ def calibration_table(runs, other_kind_scenes):
         (other if entry["name"] in other_kind_scenes else matched).append((fraction, entry["name"]))
         fitted = method["details"].get("gravity_fit", {}).get("gravity_g")
         drawn = ensemble["distributions"]["gravity_fraction"]
+        draws.add(drawn_inputs(ensemble["distributions"]))
         truth_gravity = entry["report"]["ground_truth"]["gravity_g"]
         if entry["name"] not in other_kind_scenes and fitted:
             (outside if not drawn[0] * fitted <= truth_gravity <= drawn[1] * fitted else inside).append(fraction)
@@ -139,14 +162,13 @@ def calibration_table(runs, other_kind_scenes):
     low, high = CALIBRATION_TARGET
     lines = ["", "## Where to trust the update: the uncertainty map's calibration", "",
              "`%s`: the 5 mm hexahedra with fitted gravity again, then an ensemble of 16 solves of the prepared model "
-             "with the uncertain inputs drawn (docs/registration.md, Uncertainty: 0.5 mm measurement noise a "
-             "component, one log-normal factor on every Young's modulus with sd 0.3, the parenchyma's Poisson's "
-             "ratio in 0.45-0.499, gravity's size within 0.5-1.5 times the fitted one, or of the smallest size the "
-             "fit tried when it chose none); the map is the 95th percentile of |u_i - u_mean| per voxel. "
+             "with the uncertain inputs drawn (docs/registration.md, Uncertainty: %s); the map is the 95th percentile "
+             "of |u_i - u_mean| per voxel. "
              "Calibration: the fraction of the sampled voxels (every second of the intraoperative brain, as the "
              "displacement error) whose true error |T(x) - T_truth(x)| lies within the map there, for the "
              "registration's transform and for the ensemble's mean; target %d-%d %%. The 15-25 mm scenes are left "
-             "out (their tetrahedral truths are the study's longest jobs)." % (UNCERTAINTY_ROW, 100 * low, 100 * high),
+             "out (their tetrahedral truths are the study's longest jobs)." % (UNCERTAINTY_ROW, "; in other runs: ".join(
+                 sorted(draws)), 100 * low, 100 * high),
              "", "| scene | truth | time s (of it the ensemble) | members used | fitted gravity g | median map mm | "
              "median true error mm | within the map | within the map (mean transform) |",
              "|---|---|---|---|---|---|---|---|---|", *rows, ""]

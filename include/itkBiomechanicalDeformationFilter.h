@@ -106,6 +106,12 @@ public:
   itkGetConstMacro(ContactBodySideInside, bool);
   itkBooleanMacro(ContactBodySideInside);
 
+  /** Contact offset (mm, bmr::ContactSurface::offset): the body keeps this far
+   *  from the contact surface; negative, it may pass it by that much (a skull
+   *  at another gap without remaking it). 0 by default. */
+  itkSetMacro(ContactOffset, double);
+  itkGetConstMacro(ContactOffset, double);
+
   /** Body acceleration (mm/s^2), e.g. (0, 0, -9810); zero (default): the model's own. */
   itkSetMacro(Gravity, VectorType);
   itkGetConstMacro(Gravity, VectorType);
@@ -202,6 +208,7 @@ private:
   AssembleModel() const;
 
   bool                m_ContactBodySideInside{ true };
+  double              m_ContactOffset{ 0.0 };
   int                 m_CurrentStep{ 0 };
   double              m_CurrentEstimatedError{ 0.0 };
   VectorType          m_Gravity{ 0.0 };

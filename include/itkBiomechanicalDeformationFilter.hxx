@@ -192,6 +192,7 @@ BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::AssembleMod
     contact.name = "contact-surface-input";
     contact.bodySide = m_ContactBodySideInside ? bmr::ContactSurface::Side::Inside : bmr::ContactSurface::Side::Outside;
     contact.slaveNodeSet = model.nodeSets.count("contact") > 0 ? "contact" : "";
+    contact.offset = m_ContactOffset;
     model.contactSurfaces.push_back(std::move(contact));
   }
 
@@ -311,6 +312,7 @@ BiomechanicalDeformationFilter<TDisplacementPointSet, TSurfaceMesh>::PrintSelf(s
 {
   Superclass::PrintSelf(os, indent);
   os << indent << "ContactBodySideInside: " << m_ContactBodySideInside << std::endl;
+  os << indent << "ContactOffset: " << m_ContactOffset << std::endl;
   os << indent << "Gravity: " << m_Gravity << std::endl;
   os << indent << "Tolerance: " << m_SolverSettings.tolerance << " mm" << std::endl;
   os << indent << "MaximumNumberOfSteps: " << m_SolverSettings.maxSteps << std::endl;

@@ -165,6 +165,44 @@ TEST_P(ContactTest, GravityAwayFromPlaneEqualsFreeSolution)
   EXPECT_LT(MaxDifference(result.displacements, reference.displacements), 1e-6 * reference.maxDisplacement);
 }
 
+// (a') A contact offset is the surface moved by it: the compressed block of
+// (a) on the plane z = 0 with an offset of -0.2 mm (the block may pass it by
+// that much) or +0.15 mm (it keeps that far above) gives the solution on the
+// plane z = -0.2 or z = +0.15 mm without one.
+TEST_P(ContactTest, AnOffsetActsAsTheSurfaceMovedByIt)
+{
+  const auto solve = [](double planeHeight, double offset) {
+    Model model = BlockAbovePlane(GetParam(), 0.3);
+    model.contactSurfaces[0] = MakePlane(Vector3(2.0, 2.0, planeHeight), Vector3::UnitZ(), 50.0);
+    model.contactSurfaces[0].bodySide = ContactSurface::Side::Outside;
+    model.contactSurfaces[0].offset = offset;
+    model.fixedConstraints.push_back({ "xmin", { true, false, false } });
+    model.fixedConstraints.push_back({ "ymin", { false, true, false } });
+    Prescribe(model, model.NodeSet("zmax"), [](const Vector3 &) { return Vector3(0, 0, -0.8); }, { false, false, true });
+    Solver      solver(model, TightRelaxation(1e-9));
+    SolveResult result = solver.Solve();
+    EXPECT_TRUE(result.converged) << result.message;
+    EXPECT_EQ(result.contactNodes, static_cast<int>(model.NodeSet("zmin").size()));
+    EXPECT_LE(result.maxPenetration, 1e-6);
+    return std::make_pair(model, result);
+  };
+  for (const double offset : { -0.2, 0.15 })
+  {
+    const auto [model, withOffset] = solve(0.0, offset);
+    const auto [moved, reference] = solve(offset, 0.0);
+    EXPECT_NEAR(LowestDeformedZ(model, withOffset.displacements), offset, 1e-6) << offset;
+    const double difference = MaxDifference(withOffset.displacements, reference.displacements);
+    RecordProperty(offset < 0.0 ? "maxDifferenceWiderMm" : "maxDifferenceNarrowerMm", Sci(difference));
+    EXPECT_LT(difference, 1e-7) << offset;
+    EXPECT_NEAR(SumOver(withOffset.reactionForces, model.NodeSet("zmin")).z(),
+                SumOver(reference.reactionForces, moved.NodeSet("zmin")).z(),
+                1e-6 * std::abs(SumOver(reference.reactionForces, moved.NodeSet("zmin")).z()));
+  }
+  Model bad = BlockAbovePlane(GetParam(), 0.3);
+  bad.contactSurfaces[0].offset = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(Solver(bad, TightRelaxation(1e-9)), Error);
+}
+
 // (d) Block pressed onto a rigid sphere (body outside the closed surface).
 TEST_P(ContactTest, BlockPressedOntoSphereStaysOutside)
 {
@@ -407,6 +445,46 @@ TEST(Contact, BrainInsideSkullUnderGravity)
   EXPECT_LT(outside, 1e-6) << "a node left the skull by " << outside << " mm";
   EXPECT_GT(result.contactNodes, 0);
   EXPECT_GT(MinDeformedJacobian(model, result.displacements), 0.0);
+}
+
+// The same brain with the skull's contact offset: +1 mm keeps every node 1 mm
+// inside the skull (a narrower gap), -0.3 mm lets them 0.3 mm beyond it (a wider
+// one); either way the contact settles, also from the steady state without
+// the offset (slaves on the surface, as an uncertainty member starts).
+TEST(Contact, BrainInsideSkullUnderGravityWithAnOffset)
+{
+  for (const double offset : { 1.0, -0.3 })
+  {
+    Model          model = MakeEllipsoidMesh(Vector3(30.0, 36.0, 26.0), 6.0, GridCells::Tetrahedra);
+    ContactSurface skull = MakeEllipsoidSurface(Vector3(36.0, 42.0, 32.0), 3);
+    skull.bodySide = ContactSurface::Side::Inside;
+    skull.offset = offset;
+    model.contactSurfaces.push_back(skull);
+    std::vector<Index> top;
+    for (Index n : model.NodeSet("surface"))
+      if (model.nodes[n].z() > 20.0)
+        top.push_back(n);
+    model.nodeSets["top"] = top;
+    model.fixedConstraints.push_back({ "top", { true, true, true } });
+    model.bodyAcceleration = Vector3(0.0, 0.0, -9810.0);
+    Model resting = model;
+    resting.contactSurfaces[0].offset = 0.0;
+    Solver            first(resting, TightRelaxation(1e-5));
+    const SolveResult rested = first.Solve();
+    Solver            solver(model, TightRelaxation(1e-5));
+    solver.SetWarmStart(WarmStartFrom(rested)); // slaves on the surface, as an ensemble member starts
+    const SolveResult result = solver.Solve();
+    ASSERT_TRUE(result.converged) << "offset " << offset << ": " << result.message;
+    double shallowest = std::numeric_limits<double>::max();
+    for (std::size_t n = 0; n < model.nodes.size(); ++n)
+      shallowest = std::min(shallowest, DepthInsideConvex(skull, model.nodes[n] + result.displacements[n]));
+    // Inside, the offset goes along the smooth normal, within the
+    // polyhedron's facet angles (about 6 degrees here) of a face's own:
+    // 1 - cos 6 deg is 0.6 %.
+    EXPECT_GT(shallowest, offset - 0.01 * std::abs(offset)) << offset;
+    EXPECT_LT(shallowest, offset + 0.01 * std::abs(offset)) << offset << ": the brain rests on the offset skull";
+    EXPECT_GT(result.contactNodes, 0);
+  }
 }
 
 } // namespace

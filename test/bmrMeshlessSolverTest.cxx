@@ -760,6 +760,37 @@ TEST(MeshlessContact, ABlockUnderItsWeightOnAPlaneRestsAsOnRollers)
   EXPECT_LE(onPlane.parts.contactSweeps, 2 * onPlane.steps);
 }
 
+TEST(MeshlessContact, AnOffsetActsAsThePlaneMovedByIt)
+{
+  // The block above under its weight on the plane z = 0 with a contact offset
+  // of -0.1 mm (it may pass the plane by that much) rests as on the plane
+  // z = -0.1 mm without one: the direct solve's targets carry the offset.
+  const auto solve = [](double planeHeight, double offset) {
+    Model model = MeshlessBlock(MakeMaterial(3000.0, 0.45));
+    model.bodyAcceleration = Vector3(0.0, 0.0, -98100.0);
+    model.fixedConstraints.push_back({ "xmin", { true, false, false } });
+    model.fixedConstraints.push_back({ "ymin", { false, true, false } });
+    AddRigidPlane(model, Vector3(5.0, 4.0, planeHeight), Vector3(0.0, 0.0, 1.0), "zmin");
+    model.contactSurfaces.back().offset = offset;
+    Solver solver(model, TightRelaxation(1e-7, 50000));
+    return solver.Solve();
+  };
+  const SolveResult withOffset = solve(0.0, -0.1);
+  const SolveResult moved = solve(-0.1, 0.0);
+  ASSERT_TRUE(withOffset.converged) << withOffset.message;
+  ASSERT_TRUE(moved.converged) << moved.message;
+  EXPECT_LT(withOffset.maxPenetration, 1e-6);
+  double lowest = 0.0;
+  for (const Vector3 & u : moved.displacements)
+  {
+    lowest = std::min(lowest, u.z());
+  }
+  const double difference = MaxDifference(withOffset.displacements, moved.displacements);
+  RecordProperty("maxDifferenceMm", Sci(difference));
+  EXPECT_LT(lowest, -0.1);
+  EXPECT_LT(difference, 1e-6 * std::abs(lowest));
+}
+
 TEST(MeshlessSolveParts, TimedByPartAndTheForcePassStreamsTheMlsTable)
 {
   // The contact-and-EBCIEM block above: every part of the step runs.

@@ -163,7 +163,7 @@ TEST_F(Uncertainty, GravityMattersAwayFromTheOpeningNoiseAtIt)
   // A wider or narrower gap lets the brain sink further or less, away from
   // the opening; the skull moved by offsets of both signs.
   bmr::UncertaintySettings gap = NothingDrawn(4);
-  gap.skullGapSpread = 1.0;
+  gap.skullGapSpread = 0.5;
   const auto skull = scene.Ensemble(gap);
   ASSERT_EQ(skull.usedMembers, 4);
   const auto [narrowest, widest] = DrawnRange(skull, &bmr::UncertaintyMember::skullOffset);

@@ -335,6 +335,8 @@ BindSurfacesAndLoads(py::module_ & module)
       })
     .def_readwrite("flip_normals", &ContactSurface::flipNormals)
     .def_readwrite("slave_node_set", &ContactSurface::slaveNodeSet)
+    .def_readwrite("offset", &ContactSurface::offset,
+                   "Contact offset (mm): the body keeps this far from the surface; negative: it may pass it by that much.")
     .def("is_closed", &IsClosedOrientedSurface, "True for a closed, consistently oriented surface.")
     .def("enclosed_volume", &EnclosedVolume, "Volume enclosed by a closed surface (mm^3).")
     .def("__repr__", [](const ContactSurface & surface) {

@@ -191,7 +191,7 @@ SceneParser::ParseContact()
   for (std::size_t index = 0; index < list->ArraySize(); ++index)
   {
     const SceneValue entry = list->Element(index);
-    entry.AllowOnly({ "name", "surface", "body_side", "flip_normals", "slave_node_set" });
+    entry.AllowOnly({ "name", "surface", "body_side", "flip_normals", "slave_node_set", "offset" });
     const SceneValue surfaceValue = entry.Required("surface");
     ContactSurface   surface;
     if (surfaceValue.IsString())
@@ -248,6 +248,10 @@ SceneParser::ParseContact()
     if (const auto slaves = entry.Optional("slave_node_set"))
     {
       surface.slaveNodeSet = NodeSetReference(*slaves);
+    }
+    if (const auto offset = entry.Optional("offset"))
+    {
+      surface.offset = offset->Number();
     }
     TheModel().contactSurfaces.push_back(std::move(surface));
   }

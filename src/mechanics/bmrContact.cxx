@@ -13,6 +13,10 @@ namespace bmr
 namespace
 {
 constexpr int kProjectionPasses = 4;
+// A contact offset's projection (RigidContact::Tree::Target): its passes, and
+// how close to the offset (a share of it) the projected node lands.
+constexpr int    kOffsetPasses = 8;
+constexpr double kOffsetTolerance = 1e-6;
 } // namespace
 
 struct RigidContact::Tree
@@ -28,12 +32,13 @@ struct RigidContact::Tree
 
   // Signed distance of x to the surface (positive outside) from its closest
   // point `hit`, which goes to `closest`. `smoothNormal` (when asked, and
-  // set only where x lies beyond the surface, off the body's side): the unit
+  // set only where x lies closer than `offset` to the surface on the body's
+  // side, or beyond it): the unit
   // outward normal of the surface made smooth, the vertices' pseudo-normals
   // interpolated at the closest point; it changes continuously as the
   // closest point crosses an edge, where the facets' normals jump.
   double SignedDistance(const Vector3 & x, const TriangleSurfaceTree::Hit & hit, Vector3 & closest,
-                        Vector3 * smoothNormal = nullptr) const
+                        Vector3 * smoothNormal = nullptr, double offset = 0.0) const
   {
     const auto   t = static_cast<std::size_t>(hit.triangle);
     const auto & c = corners[t];
@@ -73,7 +78,7 @@ struct RigidContact::Tree
     // The pseudo-normal gives the side only: edge and vertex pseudo-normals
     // are sums of face normals, not unit vectors.
     const double distance = (x - closest).dot(normal) < 0.0 ? -(x - closest).norm() : (x - closest).norm();
-    if (smoothNormal != nullptr && sideSign * distance < 0.0)
+    if (smoothNormal != nullptr && sideSign * distance < offset)
     {
       // Only there: most queries find the node on the body's side.
       Vector3 sum = Vector3::Zero();
@@ -89,6 +94,44 @@ struct RigidContact::Tree
   double SignedDistance(const Vector3 & x, Vector3 & closest) const
   {
     return SignedDistance(x, surface->Closest(x), closest);
+  }
+
+  // Where a node at x (signed distance `bodySide` on the body's side,
+  // closest point `closest`, the smooth outward normal there `smooth`) that
+  // came closer than `offset` goes: the closest point of the level set of the
+  // surface's distance at the offset, the constraint whose projection is
+  // normal to it (a projection along any other direction pushes the node
+  // along the surface every step, and it never settles). From the node's
+  // closest point along the line to the node where that line is steady (the
+  // node at least half the offset from the surface, on the offset's side),
+  // else along the smooth normal first; then again from there while the
+  // point is closer than the offset to another part of the surface (a valley
+  // between faces), up to kOffsetPasses times.
+  Vector3 Target(const Vector3 & x, const Vector3 & closest, double bodySide, const Vector3 & smooth,
+                 double offset) const
+  {
+    if (offset == 0.0)
+    {
+      return closest;
+    }
+    const auto along = [&](const Vector3 & point, const Vector3 & near, double side, const Vector3 & normal) {
+      const double length = (point - near).norm();
+      const bool   steady = length >= 0.5 * std::abs(offset) && (side >= 0.0) == (offset > 0.0);
+      return Vector3(near + offset * (steady ? Vector3((side >= 0.0 ? 1.0 : -1.0) / length * (point - near))
+                                             : Vector3(sideSign * normal)));
+    };
+    Vector3 target = along(x, closest, bodySide, smooth);
+    for (int pass = 0; pass < kOffsetPasses; ++pass)
+    {
+      Vector3      near, normal;
+      const double side = sideSign * SignedDistance(target, surface->Closest(target), near, &normal, offset);
+      if (std::abs(side - offset) <= kOffsetTolerance * std::abs(offset))
+      {
+        break;
+      }
+      target = along(target, near, side, normal);
+    }
+    return target;
   }
 };
 
@@ -198,6 +241,11 @@ RigidContact::RigidContact(const ContactSurface & surface, std::vector<Index> sl
   , m_SlaveNodes(std::move(slaveNodes))
 {
   Tree & tree = *m_Tree;
+  if (!std::isfinite(surface.offset))
+  {
+    throw Error("contact surface '" + surface.name + "': the offset is not a finite number; give it in mm (0: none)");
+  }
+  m_Offset = surface.offset;
   tree.corners = surface.OutwardTriangles(&tree.closed);
   tree.sideSign = surface.bodySide == ContactSurface::Side::Inside ? -1.0 : 1.0;
 
@@ -338,11 +386,14 @@ RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std:
       }
       continue;
     }
-    Vector3 closest, smooth;
-    if (tree.sideSign * tree.SignedDistance(x, ClosestOfSlave(i, x), closest, normals ? &smooth : nullptr) >= 0.0)
+    Vector3      closest, smooth;
+    const auto   hit = ClosestOfSlave(i, x);
+    const double bodySide =
+      tree.sideSign * tree.SignedDistance(x, hit, closest, normals || m_Offset != 0.0 ? &smooth : nullptr, m_Offset);
+    if (bodySide >= m_Offset - kOffsetTolerance * std::abs(m_Offset))
     {
       m_LastQueried[i] = x;
-      m_SafeDistance[i] = (x - closest).norm();
+      m_SafeDistance[i] = m_Offset == 0.0 ? (x - closest).norm() : std::max(0.0, bodySide - m_Offset);
       if (clearances != nullptr)
       {
         (*clearances)[static_cast<std::size_t>(i)] = m_SafeDistance[i];
@@ -353,14 +404,15 @@ RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std:
     {
       (*normals)[static_cast<std::size_t>(i)] = m_Rotation * (tree.sideSign * smooth);
     }
-    // Project onto the surface; a node held in some components (a symmetry
-    // plane) moves in the others only: alternate projection and restoring the
-    // held components, which converges for the locally convex surface.
+    // Project onto the surface (its offset); a node held in some components (a
+    // symmetry plane) moves in the others only: alternate projection and
+    // restoring the held components, which converges for the locally convex surface.
     const Vector3 held0(un[0], un[1], un[2]);
     Vector3       position = x;
+    Vector3       target = tree.Target(x, closest, bodySide, smooth, m_Offset);
     for (int pass = 0; pass < kProjectionPasses; ++pass)
     {
-      Vector3 displacement = m_Rotation * closest + m_Translation - m_Reference[i];
+      Vector3 displacement = m_Rotation * target + m_Translation - m_Reference[i];
       for (int k = 0; k < 3; ++k)
       {
         if (held[k])
@@ -369,10 +421,18 @@ RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std:
         }
       }
       position = m_Reference[i] + displacement;
-      if (!(held[0] || held[1] || held[2]) || tree.sideSign * tree.SignedDistance(toSurface(position), closest) >= 0.0)
+      if (!(held[0] || held[1] || held[2]))
       {
         break;
       }
+      const Vector3 at = toSurface(position);
+      const auto    next = tree.surface->Closest(at);
+      const double  side = tree.sideSign * tree.SignedDistance(at, next, closest, &smooth, m_Offset);
+      if (side >= m_Offset - kOffsetTolerance * std::abs(m_Offset))
+      {
+        break;
+      }
+      target = tree.Target(at, closest, side, smooth, m_Offset);
     }
     const Vector3 projected = position - m_Reference[i];
     if (corrections != nullptr)
@@ -403,7 +463,8 @@ RigidContact::FindPenetrations(const double * u, double tolerance) const
     const double * un = u + 3 * static_cast<std::size_t>(m_SlaveNodes[i]);
     Vector3        closest;
     const Vector3  x = m_Rotation.transpose() * (m_Reference[i] + Vector3(un[0], un[1], un[2]) - m_Translation);
-    const double   depth = -m_Tree->sideSign * m_Tree->SignedDistance(x, closest);
+    const double   bodySide = m_Tree->sideSign * m_Tree->SignedDistance(x, closest);
+    const double   depth = m_Offset - kOffsetTolerance * std::abs(m_Offset) - bodySide;
     if (depth > tolerance)
     {
       ++found.count;

@@ -23,8 +23,8 @@ public:
   RigidContact(const RigidContact &) = delete;
   RigidContact & operator=(const RigidContact &) = delete;
 
-  /** Moves penetrating slave nodes (u: 3 per node, mm) onto the surface and
-   *  marks them in `inContact`. Components flagged in `dofConstrained` (3 per
+  /** Moves penetrating slave nodes (u: 3 per node, mm) onto the surface (at
+   *  its offset, ContactSurface::offset) and marks them in `inContact`. Components flagged in `dofConstrained` (3 per
    *  node) keep their value; the node moves in its free components only.
    *  `corrections` (when given): per slave node, the displacement the
    *  projection added (zero for nodes it left alone). `normals` (when given):
@@ -33,7 +33,7 @@ public:
    *  changes continuously across edges), towards the body's side (model
    *  frame; zero for nodes left alone).
    *  `clearances` (when given): per slave node, a lower bound of its
-   *  distance to the surface on the body's side (0 for nodes projected or
+   *  distance to the surface's offset on the body's side (0 for nodes projected or
    *  held in every component): while the pose stays, a node that moves less
    *  than that cannot cross the surface. */
   void Enforce(double * u, const std::vector<char> & dofConstrained, std::vector<char> & inContact, int threads,
@@ -44,10 +44,11 @@ public:
    *  rotation p + translation (a moving tool); identity by default. */
   void SetPose(const Eigen::Matrix3d & rotation, const Vector3 & translation);
 
-  /** Signed distance (mm) of a point (model frame) to the surface, positive on the body's side. */
+  /** Signed distance (mm) of a point (model frame) to the surface itself (not
+   *  its offset), positive on the body's side. */
   double SignedDistance(const Vector3 & point) const;
 
-  /** Slave nodes beyond the surface by more than `tolerance` (mm) at
+  /** Slave nodes beyond the surface's offset by more than `tolerance` (mm) at
    *  displacements u: how many, the deepest and how deep. */
   struct Penetrations
   {
@@ -67,6 +68,7 @@ private:
   struct Tree;
   std::unique_ptr<Tree>  m_Tree;
   std::vector<Index>     m_SlaveNodes;
+  double                 m_Offset = 0.0;  // ContactSurface::offset (mm)
   std::vector<Vector3>   m_Reference;     // reference positions of slave nodes
   Eigen::Matrix3d        m_Rotation = Eigen::Matrix3d::Identity();
   Vector3                m_Translation = Vector3::Zero();

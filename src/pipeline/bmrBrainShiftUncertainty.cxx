@@ -153,11 +153,15 @@ NoisyMeasurements(const IntraoperativeData & data, double sigma, std::mt19937_64
 
 using PointSetType = itk::DisplacementPointSetType<3>;
 
-/** The skull moved by `offset` (mm) along its outward (area-weighted vertex) normals. */
+/** The skull moved `depth` (mm) towards the brain along its area-weighted
+ *  vertex normals: a narrower gap. Towards the body a closed skull's surface
+ *  crosses itself only in pockets narrower than twice the depth (a skull made
+ *  at a 1.5 mm gap after a 1 mm closing has none narrower than 3 mm, and the
+ *  depth stays below 0.9 of the gap). */
 ContactSurface
-WidenedSkull(const ContactSurface & skull, double offset)
+NarrowedSkull(const ContactSurface & skull, double depth)
 {
-  ContactSurface       widened = skull;
+  ContactSurface       narrowed = skull;
   std::vector<Vector3> normals(skull.vertices.size(), Vector3::Zero());
   for (const auto & triangle : skull.OutwardTriangles())
   {
@@ -168,15 +172,15 @@ WidenedSkull(const ContactSurface & skull, double offset)
       normals[static_cast<std::size_t>(vertex)] += normal;
     }
   }
-  const double away = skull.bodySide == ContactSurface::Side::Inside ? 1.0 : -1.0; // from the brain
+  const double towardBody = skull.bodySide == ContactSurface::Side::Inside ? -1.0 : 1.0;
   for (std::size_t v = 0; v < normals.size(); ++v)
   {
     if (normals[v].norm() > 0.0)
     {
-      widened.vertices[v] += away * offset * normals[v].normalized();
+      narrowed.vertices[v] += towardBody * depth * normals[v].normalized();
     }
   }
-  return widened;
+  return narrowed;
 }
 
 /** The model's regions made again for a craniotomy of `radius` (the registration's centre, skull base and
@@ -267,10 +271,23 @@ SolveMember(const BrainModel & model, UncertaintyMember & member, const Vector3 
   }
   if (model.contactSurface.IsNotNull())
   {
-    deformation->SetContactSurface(member.skullOffset == 0.0
-                                     ? model.contactSurface
-                                     : itk::MakeMeshFromContactSurface<itk::BiomechanicalSurfaceMeshType>(
-                                         WidenedSkull(model.surfaces.skull, member.skullOffset)));
+    // The skull at the drawn gap. Wider: the contact's offset, the level set
+    // of the skull's distance behind it (moved along its normals, the skull
+    // kept its ridges where they were and crossed itself in its folds, and
+    // every such member folded a cell or started beyond it). Narrower: the
+    // skull moved towards the brain (the offset's level set on the brain's
+    // side has creases in the skull's valleys, where pressed slaves did not
+    // settle: docs/solver.md, contact offset).
+    if (member.skullOffset < 0.0)
+    {
+      deformation->SetContactSurface(itk::MakeMeshFromContactSurface<itk::BiomechanicalSurfaceMeshType>(
+        NarrowedSkull(model.surfaces.skull, -member.skullOffset)));
+    }
+    else
+    {
+      deformation->SetContactSurface(model.contactSurface);
+      deformation->SetContactOffset(-member.skullOffset);
+    }
   }
   solver.threads = threads;
   deformation->SetSolverSettings(solver);

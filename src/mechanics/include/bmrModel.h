@@ -121,6 +121,11 @@ struct ContactSurface
   Side                        bodySide = Side::Inside;
   bool                        flipNormals = false;
   std::string                 slaveNodeSet; // empty: all boundary nodes of the mesh
+  /** Contact offset (mm): the body keeps this far from the surface on its
+   *  side; negative, it may pass the surface by that much. A projected node
+   *  goes to its closest point moved by the offset along the smooth normal
+   *  there: the surface moved without remaking it (a skull at another gap). */
+  double                      offset = 0.0;
 
   /** The triangles with their normals (right-hand rule) pointing to the
    *  surface's outside: a closed surface oriented outward, an open one as
