@@ -49,12 +49,14 @@ struct UncertaintySettings
   double poissonLow = 0.45;
   double poissonHigh = 0.499;
   /** The brain-skull gap: widened by a normal deviate of this standard
-   *  deviation (mm; negative: narrowed, at most to a tenth of the model's gap,
-   *  BrainModelSettings::skullGap), as the skull's contact offset
-   *  (ContactSurface::offset: the surface moved along its smooth normals
-   *  without remaking it). 0: not perturbed (the default: the gap the model
-   *  was made with is the skull's segmentation plus a margin, and how far that
-   *  margin is from the real one is not measured here). */
+   *  deviation (mm) as the skull's contact offset (ContactSurface::offset, the
+   *  level set of the skull's distance behind it); negative: narrowed, at most
+   *  to a tenth of the model's gap (BrainModelSettings::skullGap), by moving
+   *  the skull's vertices towards the brain (docs/solver.md, contact offset,
+   *  says why each). 0: not perturbed (the default: the gap the model was made
+   *  with is the skull's segmentation plus a margin, and how far that margin
+   *  is from the real one is not measured here; the validation study draws
+   *  it with 0.5 mm). */
   double skullGapSpread = 0.0;
   /** The exposed region: the craniotomy's radius drawn as a normal deviate
    *  of this standard deviation (mm) around the registration's, at least half
