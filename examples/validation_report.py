@@ -180,9 +180,9 @@ def calibration_table(runs, other_kind_scenes):
                 label, len(met), len(values), 100 * low, 100 * high, 100 * min(values)[0], 100 * max(values)[0],
                 min(values)[1]))
     if outside:
-        lines.append("* Where the model's family misses it: on %d of %d of those scenes the truth's gravity lies "
-                     "outside the drawn sizes (the fit's size times the drawn fractions), so the one error source "
-                     "that dominates is drawn too narrowly; there the map covers %.1f-%.1f %%%s." % (
+        lines.append("* Gravity drawn around the fit: on %d of %d of the model family's scenes the truth's gravity "
+                     "lies outside the drawn sizes (the fit's size times the drawn fractions); there the map covers "
+                     "%.1f-%.1f %%%s." % (
                          len(outside), len(outside) + len(inside), 100 * min(outside), 100 * max(outside),
                          ", on the others %.1f-%.1f %%" % (100 * min(inside), 100 * max(inside)) if inside else ""))
     return lines
