@@ -17,6 +17,13 @@ constexpr int kProjectionPasses = 4;
 // how close to the offset (a share of it) the projected node lands.
 constexpr int    kOffsetPasses = 8;
 constexpr double kOffsetTolerance = 1e-6;
+
+/** The least distance (mm, on the body's side) a slave may keep from a surface with this contact offset unprojected. */
+double
+AllowedDistance(double offset)
+{
+  return offset - kOffsetTolerance * std::abs(offset);
+}
 } // namespace
 
 struct RigidContact::Tree
@@ -390,10 +397,10 @@ RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std:
     const auto   hit = ClosestOfSlave(i, x);
     const double bodySide =
       tree.sideSign * tree.SignedDistance(x, hit, closest, normals || m_Offset != 0.0 ? &smooth : nullptr, m_Offset);
-    if (bodySide >= m_Offset - kOffsetTolerance * std::abs(m_Offset))
+    if (bodySide >= AllowedDistance(m_Offset))
     {
       m_LastQueried[i] = x;
-      m_SafeDistance[i] = m_Offset == 0.0 ? (x - closest).norm() : std::max(0.0, bodySide - m_Offset);
+      m_SafeDistance[i] = std::max(0.0, bodySide - m_Offset); // at offset 0: |x - closest|
       if (clearances != nullptr)
       {
         (*clearances)[static_cast<std::size_t>(i)] = m_SafeDistance[i];
@@ -428,7 +435,7 @@ RigidContact::Enforce(double * u, const std::vector<char> & dofConstrained, std:
       const Vector3 at = toSurface(position);
       const auto    next = tree.surface->Closest(at);
       const double  side = tree.sideSign * tree.SignedDistance(at, next, closest, &smooth, m_Offset);
-      if (side >= m_Offset - kOffsetTolerance * std::abs(m_Offset))
+      if (side >= AllowedDistance(m_Offset))
       {
         break;
       }
@@ -464,7 +471,7 @@ RigidContact::FindPenetrations(const double * u, double tolerance) const
     Vector3        closest;
     const Vector3  x = m_Rotation.transpose() * (m_Reference[i] + Vector3(un[0], un[1], un[2]) - m_Translation);
     const double   bodySide = m_Tree->sideSign * m_Tree->SignedDistance(x, closest);
-    const double   depth = m_Offset - kOffsetTolerance * std::abs(m_Offset) - bodySide;
+    const double   depth = AllowedDistance(m_Offset) - bodySide;
     if (depth > tolerance)
     {
       ++found.count;
