@@ -5,6 +5,7 @@
 #define bmrBrainShiftUncertainty_h
 
 #include "bmrBrainShiftRegistration.h"
+#include "bmrEnsemble.h"
 
 #include <cstdint>
 #include <string>
@@ -13,14 +14,18 @@
 namespace bmr
 {
 
-/** The uncertain inputs and how each is drawn; a member draws each one
- *  independently (one random stream, seeded, so the ensemble repeats
- *  exactly). A spread of 0 (or an empty range) turns that input off. */
-struct UncertaintySettings
+/** The uncertain inputs and how each is drawn: the mechanical ones
+ *  (bmr::EnsembleSettings: members, seed, gravity's size, Young's moduli,
+ *  Poisson's ratio, the skull gap, drawn by itk::BiomechanicalUncertaintyFilter)
+ *  and the registration's own: the measurements' noise and the exposed
+ *  region. Gravity's fractions are of the registration's gravity (given or
+ *  fitted); when the gravity fit chose none, they are of the smallest nonzero
+ *  size it tried (which it could not tell from none), with a warning. The
+ *  skull gap is not drawn by default: the gap the model was made with is the
+ *  skull's segmentation plus a margin, and how far that margin is from the
+ *  real one is not measured here; the validation study draws it with 0.5 mm. */
+struct UncertaintySettings : EnsembleSettings
 {
-  /** Ensemble members (at least 2). */
-  int members = 0;
-  std::uint64_t seed = 1;
   /** Measurement noise: a normal deviate of this standard deviation (mm) added
    *  to each component of each measured displacement (sparse points) or
    *  vertex (a displaced surface); 0.5 mm a component is about the 1 mm RMS
@@ -31,33 +36,6 @@ struct UncertaintySettings
    *  cell, the interpolating spline through independently perturbed close
    *  points being rough. */
   double noiseSigma = 0.5;
-  /** Gravity's size as a fraction of the registration's (given or fitted):
-   *  uniform in [gravityLow, gravityHigh]; equal: not perturbed. When the
-   *  gravity fit chose none, the fractions are of the smallest nonzero size
-   *  it tried (which it could not tell from none), with a warning. */
-  double gravityLow = 1.0;
-  double gravityHigh = 1.0;
-  /** Young's moduli: every material's scaled by exp(N(0, youngsModulusSpread^2));
-   *  one factor per member for all materials (the stiffness of the whole
-   *  brain is what the literature's ranges vary, e.g. Miller's 3 kPa within a
-   *  factor of 2). 0: not perturbed. */
-  double youngsModulusSpread = 0.3;
-  /** Poisson's ratio of the nearly incompressible tissues (the materials with
-   *  nu > 0.4; the soft CSF keeps its own): shifted by one offset per member,
-   *  so that the parenchyma's nu is uniform in [poissonLow, poissonHigh].
-   *  Both 0: not perturbed. */
-  double poissonLow = 0.45;
-  double poissonHigh = 0.499;
-  /** The brain-skull gap: widened by a normal deviate of this standard
-   *  deviation (mm) as the skull's contact offset (ContactSurface::offset, the
-   *  level set of the skull's distance behind it); negative: narrowed, at most
-   *  to a tenth of the model's gap (BrainModelSettings::skullGap), by moving
-   *  the skull's vertices towards the brain (docs/solver.md, contact offset,
-   *  says why each). 0: not perturbed (the default: the gap the model was made
-   *  with is the skull's segmentation plus a margin, and how far that margin
-   *  is from the real one is not measured here; the validation study draws
-   *  it with 0.5 mm). */
-  double skullGapSpread = 0.0;
   /** The exposed region: the craniotomy's radius drawn as a normal deviate
    *  of this standard deviation (mm) around the registration's, at least half
    *  of it, and the model's regions (exposed, contact, fixed) made again for
@@ -83,18 +61,10 @@ void
 CheckUncertaintySettings(const UncertaintySettings & settings);
 
 /** What one member drew and how its solve ended. */
-struct UncertaintyMember
+struct UncertaintyMember : EnsembleMember
 {
-  double      noiseSigma = 0.0;     // mm
-  double      gravityFactor = 1.0;  // of the registration's gravity
-  double      modulusFactor = 1.0;
-  double      poissonOffset = 0.0;
-  double      skullOffset = 0.0;    // mm, outward
-  double      exposedRadius = 0.0;  // mm, the craniotomy's drawn radius; 0: the registration's
-  bool        converged = false;
-  bool        failed = false;       // the solve threw (e.g. an inverted cell)
-  int         steps = 0;
-  std::string message;
+  double noiseSigma = 0.0;    // mm
+  double exposedRadius = 0.0; // mm, the craniotomy's drawn radius; 0: the registration's
 };
 
 /** How deep inside the brain (mm) CSF counts as the ventricles' rather than the sulci's. */
@@ -137,10 +107,11 @@ struct BrainShiftUncertaintyResult
 /** The ensemble around an update: `prepared` is the model before its loads
  *  (as UpdateBrainShift takes it), `nominal` the update's result with the
  *  same inputs and settings. Each member loads the prepared model from its
- *  own noisy measurements, takes its drawn gravity and materials, and solves
- *  from the nominal steady state (members differ from it by small
- *  perturbations, so they take fewer steps than a cold solve); members run in
- *  parallel. A member that fails or does not converge is reported and left
+ *  own noisy measurements (and its own exposed region), and
+ *  itk::BiomechanicalUncertaintyFilter solves the members with their drawn
+ *  gravity, materials and skull gap from the nominal steady state (members
+ *  differ from it by small perturbations, so they take fewer steps than a
+ *  cold solve), in parallel. A member that fails or does not converge is reported and left
  *  out of the statistics; fewer than two converged members throw bmr::Error,
  *  as do bad settings. */
 BrainShiftUncertaintyResult
