@@ -49,6 +49,11 @@ struct UncertaintyOptions
                    "Standard deviation of the logarithm of one factor on every Young's modulus; 0: none")
       ->capture_default_str();
     command
+      ->add_option("--uncertainty-tissue-modulus-spread", settings.tissueModulusSpread,
+                   "Standard deviation of the logarithm of a factor per tissue class (CSF, grey, white matter, the "
+                   "tumour) on top of the common one, the materials mixed again; 0: none")
+      ->capture_default_str();
+    command
       ->add_option("--uncertainty-poisson", poisson,
                    "The parenchyma's Poisson's ratio drawn uniformly in this range (default 0.45 0.499; 0 0: none)")
       ->expected(2);

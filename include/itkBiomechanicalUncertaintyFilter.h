@@ -34,8 +34,9 @@ namespace itk
  *    without it the image output stays empty.
  *
  * Settings: SetEnsembleSettings (bmr::EnsembleSettings: members, seed, and
- * the distributions of gravity's size, Young's moduli, Poisson's ratio and
- * the gap to the contact surface; ContactGap is the nominal gap a narrower
+ * the distributions of gravity's size, Young's moduli (all together, and per
+ * tissue class of a model whose materials were mapped from memberships),
+ * Poisson's ratio and the gap to the contact surface; ContactGap is the nominal gap a narrower
  * draw keeps a tenth of), or the draws themselves (SetMemberDraws, one per
  * member, instead of drawing them); SetSolverSettings (the members' solves:
  * tolerance, steps) and SetWarmStart (each member starts from it, e.g. the

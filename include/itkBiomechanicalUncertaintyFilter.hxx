@@ -7,6 +7,7 @@
 #include "itkBiomechanicalImageIO.h"
 
 #include "bmrBSplineField.h"
+#include "bmrMaterialMapping.h"
 
 #include <algorithm>
 #include <exception>
@@ -259,7 +260,16 @@ BiomechanicalUncertaintyFilter<TDisplacementPointSet, TSurfaceMesh, TMaskImage, 
   const bmr::Vector3      gravity =
     m_GravityGiven ? bmr::Vector3(m_Gravity[0], m_Gravity[1], m_Gravity[2]) : model.bodyAcceleration;
   auto drawn = ModelObjectType::New();
-  drawn->SetModel(bmr::DrawnModel(model, outcome, gravity));
+  if (outcome.tissueFactors.empty())
+  {
+    drawn->SetModel(bmr::DrawnModel(model, outcome, gravity));
+  }
+  else
+  {
+    bmr::Model remixed = model;
+    bmr::RemixTissueModuli(remixed, outcome.tissueFactors, threads);
+    drawn->SetModel(bmr::DrawnModel(remixed, outcome, gravity));
+  }
   if (bmr::KeepsMaterials(outcome))
   {
     drawn->SetPrecomputation(object->GetPrecomputation()); // the same reference configuration

@@ -416,6 +416,47 @@ TEST(Contact, ReportedNormalsChangeContinuouslyAcrossARidge)
   }
 }
 
+// Contacts of one surface share its tree (an ensemble's members build it
+// once), and no other surface's: one with a vertex moved, the other body
+// side or the other orientation measures its own distances.
+TEST(Contact, ContactsOfEqualSurfacesShareATreeAndOfOtherSurfacesDoNot)
+{
+  ContactSurface roof;
+  roof.bodySide = ContactSurface::Side::Outside;
+  roof.vertices = { Vector3(-5, -5, 0), Vector3(-5, 5, 0), Vector3(5, -5, 0), Vector3(5, 5, 0) };
+  roof.triangles = { { 0, 2, 3 }, { 0, 3, 1 } }; // normals up, towards the body
+  const std::vector<Vector3> reference = { Vector3(0.0, 0.0, 1.0) };
+  const Vector3              above(1.0, 1.0, 2.0);
+  const RigidContact         first(roof, { 0 }, reference);
+  ContactSurface             copy = roof;
+  copy.name = "another name, the same surface";
+  const RigidContact second(copy, { 0 }, reference);
+  EXPECT_TRUE(second.SharesTreeWith(first));
+  EXPECT_EQ(second.SignedDistance(above), first.SignedDistance(above));
+  EXPECT_DOUBLE_EQ(first.SignedDistance(above), 2.0);
+
+  ContactSurface lowered = roof;
+  for (Vector3 & vertex : lowered.vertices)
+  {
+    vertex.z() -= 1.0;
+  }
+  const RigidContact third(lowered, { 0 }, reference);
+  EXPECT_FALSE(third.SharesTreeWith(first));
+  EXPECT_DOUBLE_EQ(third.SignedDistance(above), 3.0);
+
+  ContactSurface otherSide = roof;
+  otherSide.bodySide = ContactSurface::Side::Inside;
+  const RigidContact fourth(otherSide, { 0 }, reference);
+  EXPECT_FALSE(fourth.SharesTreeWith(first));
+  EXPECT_DOUBLE_EQ(fourth.SignedDistance(above), -2.0);
+
+  ContactSurface flipped = roof;
+  flipped.flipNormals = true;
+  const RigidContact fifth(flipped, { 0 }, reference);
+  EXPECT_FALSE(fifth.SharesTreeWith(first));
+  EXPECT_DOUBLE_EQ(fifth.SignedDistance(above), -2.0);
+}
+
 // An ellipsoidal brain inside a closed rigid skull (contact offset `offset`),
 // its top surface nodes held, gravity pulling the rest down onto the skull.
 Model

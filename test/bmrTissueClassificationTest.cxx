@@ -646,6 +646,83 @@ TEST(MaterialMappingMemberships, PureCellsGetClassValuesExactly)
   EXPECT_NEAR(first.density, 0.3 * 1100.0 + 0.7 * 1000.0, 1e-4);
 }
 
+// The mapping records each site's class shares (Model::tissueMixture), and
+// mixing them again with every class's modulus scaled gives what mapping the
+// memberships with those classes gives, site by site and bit for bit
+// (hexahedra and meshless integration points; grey and white matter with
+// equal values mix apart once their factors differ); unit factors give the
+// mapping's own materials.
+TEST(MaterialMappingMemberships, RemixedClassModuliEqualTheMappingOfScaledClasses)
+{
+  const bmr::ScalarVolume memberships = PiecewiseMemberships();
+  for (const bool meshless : { false, true })
+  {
+    bmr::Model model =
+      bmr::MakeBlockMesh(Vector3(24, 8, 8), { 6, 2, 2 }, bmr::GridCells::Hexahedra, bmr::Material{}, Vector3(3, 4, 4));
+    if (meshless)
+    {
+      bmr::MakeMeshlessFromCells(model, bmr::MlsSettings{}, bmr::IntegrationSettings{});
+    }
+    bmr::MaterialMappingSettings settings;
+    settings.classMaterials = bmr::DefaultClassMaterials(3);
+    bmr::MapMaterialsFromMemberships(model, memberships, settings);
+    const bmr::TissueMixture & mixture = model.tissueMixture;
+    ASSERT_EQ(mixture.classes.size(), 4u) << "three classes and the tumour";
+    const std::size_t sites = model.cells.size() + (meshless ? model.meshless.integrationPoints.size() : 0);
+    ASSERT_EQ(mixture.shares.size(), 4 * sites);
+    for (std::size_t site = 0; site < sites; ++site)
+    {
+      EXPECT_NEAR(mixture.shares[4 * site] + mixture.shares[4 * site + 1] + mixture.shares[4 * site + 2] +
+                    mixture.shares[4 * site + 3],
+                  1.0, 1e-12);
+    }
+    const auto materialOf = [&](const bmr::Model & m, std::size_t site) {
+      return site < m.cells.size() ? m.materials[m.cells[site].material]
+                                   : m.materials[m.meshless.integrationMaterials[site - m.cells.size()]];
+    };
+    const auto expectSameMaterials = [&](const bmr::Model & a, const bmr::Model & b, const char * what) {
+      for (std::size_t site = 0; site < sites; ++site)
+      {
+        const bmr::Material first = materialOf(a, site), second = materialOf(b, site);
+        EXPECT_EQ(first.youngsModulus, second.youngsModulus) << what << ", site " << site;
+        EXPECT_EQ(first.poissonRatio, second.poissonRatio) << what << ", site " << site;
+        EXPECT_EQ(first.density, second.density) << what << ", site " << site;
+        EXPECT_EQ(first.name, second.name) << what << ", site " << site;
+      }
+      EXPECT_EQ(a.materials.size(), b.materials.size()) << what;
+    };
+
+    bmr::Model unit = model;
+    bmr::RemixTissueModuli(unit, { 1.0, 1.0, 1.0, 1.0 });
+    expectSameMaterials(unit, model, "unit factors");
+
+    const std::vector<double> factors = { 0.5, 0.8, 1.6, 2.0 };
+    bmr::Model                remixed = model;
+    bmr::RemixTissueModuli(remixed, factors, 2);
+    bmr::MaterialMappingSettings scaled = settings;
+    for (std::size_t k = 0; k < 3; ++k)
+    {
+      scaled.classMaterials[k].youngsModulus *= factors[k];
+    }
+    scaled.tumour.youngsModulus *= factors[3];
+    bmr::Model mapped = model;
+    bmr::MapMaterialsFromMemberships(mapped, memberships, scaled);
+    expectSameMaterials(remixed, mapped, "scaled classes");
+    // Grey (0.3) and white (0.7) matter at 0.8 and 1.6 times 3 kPa.
+    EXPECT_NEAR(materialOf(remixed, 0).youngsModulus, 0.3 * 2400.0 + 0.7 * 4800.0, 1e-3); // float memberships
+    EXPECT_EQ(remixed.tissueMixture.shares, model.tissueMixture.shares) << "the mixture stays the nominal one";
+  }
+
+  bmr::Model model =
+    bmr::MakeBlockMesh(Vector3(24, 8, 8), { 6, 2, 2 }, bmr::GridCells::Hexahedra, bmr::Material{}, Vector3(3, 4, 4));
+  bmr::MapMaterialsFromMemberships(model, memberships);
+  EXPECT_CONTAINS(ErrorMessage([&] { bmr::RemixTissueModuli(model, { 1.0, 2.0 }); }), "one factor per class");
+  EXPECT_CONTAINS(ErrorMessage([&] { bmr::RemixTissueModuli(model, { 1.0, 0.0, 1.0, 1.0 }); }), "positive");
+  bmr::Model plain =
+    bmr::MakeBlockMesh(Vector3(24, 8, 8), { 6, 2, 2 }, bmr::GridCells::Hexahedra, bmr::Material{}, Vector3(3, 4, 4));
+  EXPECT_CONTAINS(ErrorMessage([&] { bmr::RemixTissueModuli(plain, { 1.0 }); }), "not mixed from tissue classes");
+}
+
 TEST(MaterialMappingMemberships, TumourMaskOverridesMemberships)
 {
   const bmr::ScalarVolume memberships = LinearMemberships();

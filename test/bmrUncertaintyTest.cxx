@@ -6,7 +6,11 @@
 // grey and white matter), on which the validation study calibrates it.
 // And its ITK face, itk::BiomechanicalUncertaintyFilter, on a block whose
 // answers are known: stiffness scaled under displacements gives nothing, a
-// gravity range scales a hanging block's sag by the drawn factors.
+// gravity range scales a hanging block's sag by the drawn factors, two
+// tissue classes in series move their interface as two springs.
+// Over 800 lines on purpose: one translation unit instantiates the
+// uncertainty and deformation filters' slow templates once for the
+// pipeline's tests and the filter's.
 // The ITK filters first: ITK's bundled Eigen before the core's (the deformation filter's header says why).
 #include "itkBiomechanicalUncertaintyFilter.h"
 
@@ -146,6 +150,18 @@ TEST_F(Uncertainty, ModuliScaledTogetherUnderPrescribedDisplacementsGiveNone)
   settings.threads = 1;
   const auto again = scene.Ensemble(settings);
   EXPECT_TRUE(again.nodalUncertainty == result.nodalUncertainty);
+
+  // A factor per tissue class (CSF, grey and white matter, the tumour) does
+  // move it: the tissues' stiffness against each other shapes the field.
+  bmr::UncertaintySettings classes = NothingDrawn(4);
+  classes.tissueModulusSpread = 0.5;
+  classes.threads = 2;
+  const auto perClass = scene.Ensemble(classes);
+  ASSERT_EQ(perClass.usedMembers, 4);
+  EXPECT_EQ(perClass.members.front().tissueFactors.size(), 4u);
+  RecordProperty("perClassInteriorMax", std::to_string(perClass.interiorMax));
+  RecordProperty("perClassBrainP95", std::to_string(perClass.brainP95));
+  EXPECT_GT(perClass.interiorMax, 10 * result.interiorMax + 0.05);
 }
 
 // Gravity's size after CSF loss is unknown: drawn between 0.5 and 1.5 times
@@ -523,6 +539,23 @@ Displacements(const BlockPointSetType * points)
   return values;
 }
 
+/** The mean of `values` and the 95th percentile of their distances from it. */
+std::pair<double, double>
+MeanAndSpread(const std::vector<double> & values)
+{
+  double mean = 0.0;
+  for (const double value : values)
+  {
+    mean += value / static_cast<double>(values.size());
+  }
+  std::vector<double> distances;
+  for (const double value : values)
+  {
+    distances.push_back(std::abs(value - mean));
+  }
+  return { mean, bmr::Percentile(distances, 0.95) };
+}
+
 /** The deformation filter's solution of `model` under `load` (may be null) and `gravity`. */
 std::vector<bmr::Vector3>
 NominalSolve(const bmr::Model & model, const BlockPointSetType * load, const bmr::Vector3 & gravity)
@@ -629,17 +662,7 @@ TEST(BiomechanicalUncertaintyFilter, AGravityRangeScalesAHangingBlocksSagByItsFa
   {
     factors.push_back(member.gravityFactor);
   }
-  double mean = 0.0;
-  for (const double f : factors)
-  {
-    mean += f / static_cast<double>(factors.size());
-  }
-  std::vector<double> distances;
-  for (const double f : factors)
-  {
-    distances.push_back(std::abs(f - mean));
-  }
-  const double spreadOfFactors = bmr::Percentile(distances, 0.95);
+  const double spreadOfFactors = MeanAndSpread(factors).second;
   EXPECT_GT(spreadOfFactors, 0.2) << "the draws must differ for the test to mean anything";
 
   const std::vector<bmr::Vector3> sag = NominalSolve(model, nullptr, gravity);
@@ -715,6 +738,76 @@ TEST(BiomechanicalUncertaintyFilter, MemberInputsReplaceTheSharedOnes)
   {
     EXPECT_LT((mean[n] - expected * unit[n]).norm(), 0.01 * top.norm()) << "node " << n;
   }
+}
+
+// Two tissue classes in series, a bar of 3 mm of 1 kPa under 3 mm of 4 kPa
+// (nu = 0: uniaxial stress is uniaxial strain, so the 1D answer is exact to
+// the small strain's nonlinearity, 0.1 %), its top pressed 6 um on rollers:
+// a member whose classes' moduli are scaled by f_soft and f_stiff moves the
+// interface by U (h / f_soft E_soft) / (h / f_soft E_soft + h / f_stiff
+// E_stiff), two springs in series. The map at the interface is the 95th
+// percentile of those moves' distance from their mean, and a common factor
+// alone would give none.
+TEST(BiomechanicalUncertaintyFilter, TissueModuliOfABarInSeriesMoveItsInterfaceAsTwoSprings)
+{
+  const double   soft = 1000.0, stiff = 4000.0, height = 3.0, pressed = 0.006;
+  bmr::Material  softMaterial = bmr::test::MakeMaterial(soft, 0.0, 1000.0, "soft");
+  bmr::Material  stiffMaterial = bmr::test::MakeMaterial(stiff, 0.0, 1000.0, "stiff");
+  bmr::Model     model = bmr::MakeBlockMesh(bmr::Vector3(4.0, 4.0, 2.0 * height), { 2, 2, 6 }, bmr::GridCells::Hexahedra,
+                                            softMaterial);
+  model.materials = { softMaterial, stiffMaterial };
+  model.tissueMixture.classes = model.materials;
+  for (bmr::Cell & cell : model.cells)
+  {
+    const bool upper = model.nodes[static_cast<std::size_t>(cell.nodes[6])].z() > height + 1e-9; // its top corner
+    cell.material = upper ? 1 : 0;
+    model.tissueMixture.shares.push_back(upper ? 0.0 : 1.0);
+    model.tissueMixture.shares.push_back(upper ? 1.0 : 0.0);
+  }
+  model.fixedConstraints = { { "zmin", { false, false, true } }, { "xmin", { true, false, false } },
+                             { "ymin", { false, true, false } } };
+  bmr::PrescribedDisplacement top;
+  top.nodes = model.NodeSet("zmax");
+  top.displacements.assign(top.nodes.size(), bmr::Vector3(0.0, 0.0, -pressed));
+  top.components = { false, false, true };
+  model.prescribedDisplacements = { top };
+
+  auto filter = EnsembleFilterType::New();
+  filter->SetModel(model);
+  bmr::EnsembleSettings settings = NoDraws(8);
+  settings.tissueModulusSpread = 0.5;
+  settings.seed = 3;
+  filter->SetEnsembleSettings(settings);
+  bmr::SolverSettings solver;
+  solver.tolerance = 1e-9;
+  filter->SetSolverSettings(solver);
+  filter->Update();
+  ASSERT_EQ(filter->GetNumberOfUsedMembers(), 8u);
+
+  std::vector<double> moves;
+  for (const bmr::EnsembleMember & member : filter->GetMembers())
+  {
+    ASSERT_EQ(member.tissueFactors.size(), 2u);
+    const double softCompliance = height / (member.tissueFactors[0] * soft);
+    const double stiffCompliance = height / (member.tissueFactors[1] * stiff);
+    moves.push_back(-pressed * softCompliance / (softCompliance + stiffCompliance));
+  }
+  const auto [meanMove, spread] = MeanAndSpread(moves);
+  EXPECT_GT(spread, 0.1 * pressed) << "the draws must move the interface for the test to mean anything";
+
+  const std::vector<double>       uncertainty = NodalUncertainty(filter);
+  const std::vector<bmr::Vector3> mean = Displacements(filter->GetOutput());
+  int                             interfaceNodes = 0;
+  for (std::size_t n = 0; n < model.nodes.size(); ++n)
+  {
+    if (std::abs(model.nodes[n].z() - height) < 1e-9)
+    {
+      ++interfaceNodes;
+      EXPECT_NEAR(uncertainty[n], spread, 0.02 * spread) << "node " << n;
+      EXPECT_NEAR(mean[n].z(), meanMove, 0.002 * pressed) << "node " << n;
+    }
+  }
+  EXPECT_EQ(interfaceNodes, 9);
 }
 
 // Bad settings and an ensemble with too few converged members throw

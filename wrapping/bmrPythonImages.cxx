@@ -698,6 +698,8 @@ BindBrainModel(py::module_ & module)
     .def_readwrite("gravity_low", &UncertaintySettings::gravityLow)
     .def_readwrite("gravity_high", &UncertaintySettings::gravityHigh)
     .def_readwrite("youngs_modulus_spread", &UncertaintySettings::youngsModulusSpread)
+    .def_readwrite("tissue_modulus_spread", &UncertaintySettings::tissueModulusSpread,
+                   "log-sd of a factor per tissue class, on top of the common one (0: none)")
     .def_readwrite("poisson_low", &UncertaintySettings::poissonLow)
     .def_readwrite("poisson_high", &UncertaintySettings::poissonHigh)
     .def_readwrite("skull_gap_spread", &UncertaintySettings::skullGapSpread)

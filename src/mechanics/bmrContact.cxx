@@ -6,6 +6,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
+#include <mutex>
+#include <utility>
 
 namespace bmr
 {
@@ -28,6 +31,11 @@ AllowedDistance(double offset)
 
 struct RigidContact::Tree
 {
+  // What it was made from (SharedTree compares it).
+  std::vector<std::array<Index, 3>>          triangles; // as given
+  bool                                       flipNormals = false;
+  ContactSurface::Side                       bodySide = ContactSurface::Side::Inside;
+
   std::vector<Vector3>                       vertices;
   std::vector<std::array<Index, 3>>          corners; // after the orientation flip
   std::vector<Vector3>                       faceNormals;
@@ -243,19 +251,65 @@ ContactSurface::OutwardTriangles(bool * closedOut) const
   return outward;
 }
 
-RigidContact::RigidContact(const ContactSurface & surface, std::vector<Index> slaveNodes, const std::vector<Vector3> & reference)
-  : m_Tree(std::make_unique<Tree>())
-  , m_SlaveNodes(std::move(slaveNodes))
+namespace
 {
-  Tree & tree = *m_Tree;
-  if (!std::isfinite(surface.offset))
+/** 64-bit FNV-1a over a surface's vertices, triangles, orientation and body side. */
+std::uint64_t
+SurfaceKey(const ContactSurface & surface)
+{
+  std::uint64_t hash = 14695981039346656037ull;
+  const auto    add = [&](const void * data, std::size_t bytes) { // a word at a time, the tail zero-padded
+    const auto * byte = static_cast<const unsigned char *>(data);
+    for (std::size_t b = 0; b < bytes; b += sizeof(std::uint64_t))
+    {
+      std::uint64_t word = 0;
+      std::memcpy(&word, byte + b, std::min(sizeof(word), bytes - b));
+      hash = (hash ^ word) * 1099511628211ull;
+    }
+  };
+  add(surface.vertices.data(), surface.vertices.size() * sizeof(Vector3));
+  add(surface.triangles.data(), surface.triangles.size() * sizeof(surface.triangles.front()));
+  add(&surface.flipNormals, sizeof(surface.flipNormals));
+  add(&surface.bodySide, sizeof(surface.bodySide));
+  return hash;
+}
+} // namespace
+
+std::shared_ptr<const RigidContact::Tree>
+RigidContact::SharedTree(const ContactSurface & surface)
+{
+  // The trees of the contacts alive, by their surfaces' keys: a tree is the
+  // costly part of a contact (Colin27's skull, 262k triangles: its edges
+  // sorted, its normals, CGAL's AABB and k-d trees) and depends on the
+  // surface alone. Weak: a tree lives as long as a contact uses it.
+  static std::mutex                                                    mutex;
+  static std::vector<std::pair<std::uint64_t, std::weak_ptr<const Tree>>> trees;
+  const std::uint64_t key = SurfaceKey(surface);
+  const auto          same = [&](const Tree & tree) {
+    return tree.flipNormals == surface.flipNormals && tree.bodySide == surface.bodySide &&
+           tree.triangles == surface.triangles && tree.vertices == surface.vertices;
+  };
   {
-    throw Error("contact surface '" + surface.name + "': the offset is not a finite number; give it in mm (0: none)");
+    const std::lock_guard<std::mutex> lock(mutex);
+    trees.erase(std::remove_if(trees.begin(), trees.end(), [](const auto & entry) { return entry.second.expired(); }),
+                trees.end());
+    for (const auto & [entryKey, entry] : trees)
+    {
+      if (const auto tree = entry.lock(); entryKey == key && tree && same(*tree))
+      {
+        return tree;
+      }
+    }
   }
-  m_Offset = surface.offset;
+
+  // Built outside the lock (two contacts may build the same tree at once; both are right).
+  auto   made = std::make_shared<Tree>();
+  Tree & tree = *made;
+  tree.triangles = surface.triangles;
+  tree.flipNormals = surface.flipNormals;
+  tree.bodySide = surface.bodySide;
   tree.corners = surface.OutwardTriangles(&tree.closed);
   tree.sideSign = surface.bodySide == ContactSurface::Side::Inside ? -1.0 : 1.0;
-
   tree.vertexNormals.assign(surface.vertices.size(), Vector3::Zero());
   for (std::size_t t = 0; t < tree.corners.size(); ++t)
   {
@@ -302,6 +356,20 @@ RigidContact::RigidContact(const ContactSurface & surface, std::vector<Index> sl
   tree.vertices = surface.vertices;
   tree.surface =
     std::make_unique<TriangleSurfaceTree>(tree.vertices, tree.corners, "contact surface '" + surface.name + "'");
+  const std::lock_guard<std::mutex> lock(mutex);
+  trees.emplace_back(key, made);
+  return made;
+}
+
+RigidContact::RigidContact(const ContactSurface & surface, std::vector<Index> slaveNodes, const std::vector<Vector3> & reference)
+  : m_SlaveNodes(std::move(slaveNodes))
+{
+  if (!std::isfinite(surface.offset))
+  {
+    throw Error("contact surface '" + surface.name + "': the offset is not a finite number; give it in mm (0: none)");
+  }
+  m_Offset = surface.offset;
+  m_Tree = SharedTree(surface);
 
   for (const Index node : m_SlaveNodes)
   {

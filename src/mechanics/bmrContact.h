@@ -16,8 +16,11 @@ namespace bmr
 class RigidContact
 {
 public:
-  /** Builds the AABB tree and pseudo-normals. Closed surfaces are oriented
-   *  outward; open ones keep their orientation (normals point outside). */
+  /** Builds the AABB tree and pseudo-normals, or shares those of a contact
+   *  alive with the same surface (vertices, triangles, orientation and body
+   *  side: an ensemble's members, a gravity fit's solves). Closed surfaces
+   *  are oriented outward; open ones keep their orientation (normals point
+   *  outside). */
   RigidContact(const ContactSurface & surface, std::vector<Index> slaveNodes, const std::vector<Vector3> & reference);
   ~RigidContact();
   RigidContact(const RigidContact &) = delete;
@@ -62,11 +65,15 @@ public:
   double MaxPenetration(const double * u) const { return FindPenetrations(u).depth; }
 
   bool IsClosed() const;
+  /** Whether the two contacts share one tree (SharedTree: equal surfaces). */
+  bool SharesTreeWith(const RigidContact & other) const { return m_Tree == other.m_Tree; }
   const std::vector<Index> & SlaveNodes() const { return m_SlaveNodes; }
 
 private:
   struct Tree;
-  std::unique_ptr<Tree>  m_Tree;
+  /** The tree of `surface`: a live contact's when one has the same surface, else a new one. */
+  static std::shared_ptr<const Tree> SharedTree(const ContactSurface & surface);
+  std::shared_ptr<const Tree> m_Tree; // immutable, shared
   std::vector<Index>     m_SlaveNodes;
   double                 m_Offset = 0.0;  // ContactSurface::offset (mm)
   std::vector<Vector3>   m_Reference;     // reference positions of slave nodes

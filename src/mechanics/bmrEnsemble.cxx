@@ -41,6 +41,13 @@ CheckEnsembleSettings(const EnsembleSettings & settings)
             << "] is not within (0, 0.5) with low <= high; give e.g. 0.45 0.499, or 0 0 to keep the model's";
     fail(message.str());
   }
+  if (!(settings.tissueModulusSpread >= 0.0))
+  {
+    std::ostringstream message;
+    message << "the tissue classes' modulus spread is " << settings.tissueModulusSpread
+            << "; give the standard deviation of its logarithm, 0 or more";
+    fail(message.str());
+  }
   if (!(settings.skullGapSpread >= 0.0))
   {
     std::ostringstream message;
@@ -71,6 +78,7 @@ EnsembleDrawer::EnsembleDrawer(const EnsembleSettings & settings, const Model & 
   : m_Settings(settings)
   , m_NominalPoisson(NominalPoissonRatio(nominal))
   , m_ContactGap(contactGap)
+  , m_TissueClasses(nominal.tissueMixture.classes.size())
   , m_Random(settings.seed)
   , m_Gravity(settings.gravityLow, settings.gravityHigh)
   , m_Poisson(settings.poissonLow, settings.poissonHigh)
@@ -83,6 +91,12 @@ EnsembleDrawer::EnsembleDrawer(const EnsembleSettings & settings, const Model & 
             << contactGap << " mm; give the gap between the body and its contact surface (a narrower draw keeps a "
             << "tenth of it)";
     throw Error(message.str());
+  }
+  if (settings.tissueModulusSpread > 0.0 && m_TissueClasses == 0)
+  {
+    throw Error("uncertainty: the tissue classes' moduli are drawn but the model's materials are not mixed from "
+                "tissue classes (a scene or a label map); draw one factor for all of them (the Young's modulus "
+                "spread) instead");
   }
 }
 
@@ -98,6 +112,13 @@ EnsembleDrawer::Next()
   draw.skullOffset = m_Settings.skullGapSpread > 0.0
                        ? std::max(m_Settings.skullGapSpread * StandardNormal(), -0.9 * m_ContactGap)
                        : 0.0;
+  if (m_Settings.tissueModulusSpread > 0.0)
+  {
+    for (std::size_t k = 0; k < m_TissueClasses; ++k)
+    {
+      draw.tissueFactors.push_back(std::exp(m_Settings.tissueModulusSpread * StandardNormal()));
+    }
+  }
   return draw;
 }
 

@@ -435,23 +435,33 @@ private:
   std::map<std::vector<double>, Index> m_Index;
 };
 
-void
-AssignMaterials(Model & model, const Sites & sites, const std::vector<Material> & siteMaterial)
+/** The model's cells, then (meshless) its integration points: the sites that carry a material. */
+std::size_t
+SiteCount(const Model & model)
 {
-  MaterialTable table;
-  std::vector<Index> index(sites.Count());
-  for (std::size_t site = 0; site < sites.Count(); ++site)
+  return model.cells.size() +
+         (model.discretization == Discretization::Meshless ? model.meshless.integrationPoints.size() : 0);
+}
+
+void
+AssignMaterials(Model & model, const std::vector<Material> & siteMaterial)
+{
+  MaterialTable      table;
+  const std::size_t  count = SiteCount(model);
+  std::vector<Index> index(count);
+  for (std::size_t site = 0; site < count; ++site)
   {
     index[site] = table.Add(siteMaterial[site]);
   }
   model.materials = table.Take();
-  for (std::size_t cell = 0; cell < sites.CellCount(); ++cell)
+  for (std::size_t cell = 0; cell < model.cells.size(); ++cell)
   {
     model.cells[cell].material = index[cell];
   }
-  if (sites.Meshless())
+  if (model.discretization == Discretization::Meshless)
   {
-    model.meshless.integrationMaterials.assign(index.begin() + sites.CellCount(), index.end());
+    model.meshless.integrationMaterials.assign(index.begin() + static_cast<std::ptrdiff_t>(model.cells.size()),
+                                               index.end());
   }
 }
 
@@ -584,6 +594,32 @@ struct MaterialGroups
   std::vector<int> groupOf; // per class (the tumour last)
   std::vector<int> first;   // per group, its first class
 };
+
+/** Each site's material mixed from `materials` (the classes, the tumour
+ *  last) by its shares (SiteCount(model) rows of materials.size()). */
+void
+MixMaterials(Model & model, const std::vector<Material> & materials, const std::vector<double> & shares, int threads)
+{
+  const MaterialGroups  groups(materials);
+  const std::size_t     extended = materials.size();
+  const std::size_t     count = SiteCount(model);
+  std::vector<Material> siteMaterial(count);
+#pragma omp parallel num_threads(threads)
+  {
+    std::vector<double> groupWeight(groups.Count());
+#pragma omp for schedule(static)
+    for (std::ptrdiff_t s = 0; s < static_cast<std::ptrdiff_t>(count); ++s)
+    {
+      std::fill(groupWeight.begin(), groupWeight.end(), 0.0);
+      for (std::size_t k = 0; k < extended; ++k)
+      {
+        groupWeight[groups.groupOf[k]] += shares[static_cast<std::size_t>(s) * extended + k];
+      }
+      siteMaterial[s] = groups.Mixture(materials, groupWeight);
+    }
+  }
+  AssignMaterials(model, siteMaterial);
+}
 
 // Memberships of a voxel with the tumour as an extra class; removed tissue
 // (inside the brain: where the memberships or the tumour are) is the CSF
@@ -801,7 +837,6 @@ MapMaterialsFromMemberships(Model &                         model,
   // The tumour is the last class.
   materials.push_back(settings.tumour);
   const int                  extended = classes + 1;
-  const MaterialGroups       groups(materials);
   const MembershipVoxels     voxels{ memberships, tumourMask, resectionMask, settings.csfClass };
   const std::size_t          count = sites.Count();
   std::vector<double>        average(count * extended, 0.0);
@@ -815,22 +850,38 @@ MapMaterialsFromMemberships(Model &                         model,
                         "the nearest mask voxel; the mesh reaches outside the brain mask");
   }
 
-  std::vector<Material> siteMaterial(count);
-#pragma omp parallel num_threads(ThreadCount(settings.sampling.threads))
+  MixMaterials(model, materials, average, ThreadCount(settings.sampling.threads));
+  model.tissueMixture.classes = std::move(materials);
+  model.tissueMixture.shares = std::move(average);
+}
+
+void
+RemixTissueModuli(Model & model, const std::vector<double> & factors, int threads)
+{
+  const TissueMixture & mixture = model.tissueMixture;
+  if (mixture.Empty())
   {
-    std::vector<double> groupWeight(groups.Count());
-#pragma omp for schedule(static)
-    for (std::ptrdiff_t s = 0; s < static_cast<std::ptrdiff_t>(count); ++s)
-    {
-      std::fill(groupWeight.begin(), groupWeight.end(), 0.0);
-      for (int k = 0; k < extended; ++k)
-      {
-        groupWeight[groups.groupOf[k]] += average[s * extended + k];
-      }
-      siteMaterial[s] = groups.Mixture(materials, groupWeight);
-    }
+    throw Error("tissue moduli: the model's materials are not mixed from tissue classes (a scene or a label map); "
+                "map them from class memberships (MapMaterialsFromMemberships) or scale every modulus together");
   }
-  AssignMaterials(model, sites, siteMaterial);
+  if (factors.size() != mixture.classes.size() || mixture.shares.size() != SiteCount(model) * factors.size())
+  {
+    throw Error("tissue moduli: " + std::to_string(factors.size()) + " factors for " +
+                std::to_string(mixture.classes.size()) + " classes and " + std::to_string(mixture.shares.size()) +
+                " shares for " + std::to_string(SiteCount(model)) + " cells and integration points; give one factor "
+                "per class of the model's tissue mixture");
+  }
+  std::vector<Material> scaled = mixture.classes;
+  for (std::size_t k = 0; k < scaled.size(); ++k)
+  {
+    if (!(factors[k] > 0.0) || !std::isfinite(factors[k]))
+    {
+      throw Error("tissue moduli: the factor of class " + std::to_string(k) + " is " + std::to_string(factors[k]) +
+                  "; give positive factors");
+    }
+    scaled[k].youngsModulus *= factors[k];
+  }
+  MixMaterials(model, scaled, mixture.shares, ThreadCount(threads));
 }
 
 void
@@ -955,8 +1006,7 @@ MapMaterialsFromLabels(Model &                         model,
   if (!missingLabels.empty())
   {
     std::ostringstream text;
-    text << who << ": label";
-    text << (missingLabels.size() > 1 ? "s " : " ");
+    text << who << ": label" << (missingLabels.size() > 1 ? "s " : " ");
     for (auto it = missingLabels.begin(); it != missingLabels.end(); ++it)
     {
       text << (it == missingLabels.begin() ? "" : ", ") << *it;
@@ -982,7 +1032,8 @@ MapMaterialsFromLabels(Model &                         model,
       siteMaterial[s].name = "label " + std::to_string(winner[s]);
     }
   }
-  AssignMaterials(model, sites, siteMaterial);
+  AssignMaterials(model, siteMaterial);
+  model.tissueMixture = {}; // one material per label, no mixture
 }
 
 } // namespace bmr

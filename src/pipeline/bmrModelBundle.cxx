@@ -67,6 +67,55 @@ ReadSurfaceBinary(BinaryReader & in)
   return surface;
 }
 
+void
+WriteMaterials(BinaryWriter & out, const std::vector<Material> & materials)
+{
+  out.Value<std::uint64_t>(materials.size());
+  for (const Material & material : materials)
+  {
+    out.Text(material.name);
+    out.Value(material.youngsModulus);
+    out.Value(material.poissonRatio);
+    out.Value(material.density);
+    out.Value(material.law);
+    for (const MaterialParameter & parameter : MaterialParameters()) // a new one changes the format: a new version
+    {
+      out.Value(material.*parameter.value);
+    }
+  }
+}
+
+/** The inverse of WriteMaterials; `laws`: from version 3 on (before, every material is neo-Hookean). */
+std::vector<Material>
+ReadMaterials(BinaryReader & in, bool laws)
+{
+  std::vector<Material> materials(
+    in.Count(8 + 3 * sizeof(double) + (laws ? sizeof(MaterialLaw) + MaterialParameters().size() * sizeof(double) : 0)));
+  for (Material & material : materials)
+  {
+    material.name = in.Text();
+    material.youngsModulus = in.Value<double>();
+    material.poissonRatio = in.Value<double>();
+    material.density = in.Value<double>();
+    if (laws)
+    {
+      try
+      {
+        material.law = MaterialLawOfCode(in.Value<std::uint8_t>());
+      }
+      catch (const Error & error)
+      {
+        in.Fail("material '" + material.name + "': " + error.what());
+      }
+      for (const MaterialParameter & parameter : MaterialParameters())
+      {
+        material.*parameter.value = in.Value<double>();
+      }
+    }
+  }
+  return materials;
+}
+
 /** The prepared model and its surfaces; what the mechanics needs, bit for bit. */
 std::string
 ModelBytes(const BrainModel & brain)
@@ -90,19 +139,7 @@ ModelBytes(const BrainModel & brain)
     out.Value(cell.nodes);
     out.Value(cell.material);
   }
-  out.Value<std::uint64_t>(model.materials.size());
-  for (const Material & material : model.materials)
-  {
-    out.Text(material.name);
-    out.Value(material.youngsModulus);
-    out.Value(material.poissonRatio);
-    out.Value(material.density);
-    out.Value(material.law);
-    for (const MaterialParameter & parameter : MaterialParameters()) // a new one changes the format: a new version
-    {
-      out.Value(material.*parameter.value);
-    }
-  }
+  WriteMaterials(out, model.materials);
   out.Value<std::uint64_t>(model.nodeSets.size());
   for (const auto & [name, nodes] : model.nodeSets)
   {
@@ -127,6 +164,8 @@ ModelBytes(const BrainModel & brain)
   WriteSurfaceBinary(out, brain.surfaces.brain);
   WriteSurfaceBinary(out, brain.surfaces.skull);
   WriteSurfaceBinary(out, brain.cortex);
+  WriteMaterials(out, model.tissueMixture.classes); // version 4
+  out.Values(model.tissueMixture.shares);
   return out.Bytes();
 }
 
@@ -157,30 +196,7 @@ ReadModelBytes(BinaryReader & in, BrainModel & brain)
     cell.nodes = in.Value<decltype(cell.nodes)>();
     cell.material = in.Value<Index>();
   }
-  model.materials.resize(
-    in.Count(8 + 3 * sizeof(double) + (laws ? sizeof(MaterialLaw) + MaterialParameters().size() * sizeof(double) : 0)));
-  for (Material & material : model.materials)
-  {
-    material.name = in.Text();
-    material.youngsModulus = in.Value<double>();
-    material.poissonRatio = in.Value<double>();
-    material.density = in.Value<double>();
-    if (laws)
-    {
-      try
-      {
-        material.law = MaterialLawOfCode(in.Value<std::uint8_t>());
-      }
-      catch (const Error & error)
-      {
-        in.Fail("material '" + material.name + "': " + error.what());
-      }
-      for (const MaterialParameter & parameter : MaterialParameters())
-      {
-        material.*parameter.value = in.Value<double>();
-      }
-    }
-  }
+  model.materials = ReadMaterials(in, laws);
   const std::size_t sets = in.Count(16);
   for (std::size_t k = 0; k < sets; ++k)
   {
@@ -205,6 +221,11 @@ ReadModelBytes(BinaryReader & in, BrainModel & brain)
   brain.surfaces.brain = ReadSurfaceBinary(in);
   brain.surfaces.skull = ReadSurfaceBinary(in);
   brain.cortex = ReadSurfaceBinary(in);
+  if (version >= 4)
+  {
+    model.tissueMixture.classes = ReadMaterials(in, laws);
+    model.tissueMixture.shares = in.Values<double>();
+  }
   if (!in.AtEnd())
   {
     in.Fail("bytes after the model's end");

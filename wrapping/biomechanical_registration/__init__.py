@@ -236,6 +236,7 @@ _UNCERTAINTY_KEYWORDS = {  # keyword: (UncertaintySettings field(s), conversion)
     "uncertainty_noise": (("noise_sigma",), float),
     "uncertainty_gravity": (("gravity_low", "gravity_high"), float),
     "uncertainty_modulus_spread": (("youngs_modulus_spread",), float),
+    "uncertainty_tissue_modulus_spread": (("tissue_modulus_spread",), float),
     "uncertainty_poisson": (("poisson_low", "poisson_high"), float),
     "uncertainty_skull_gap": (("skull_gap_spread",), float),
     "uncertainty_exposed_radius": (("exposed_radius_spread",), float),
@@ -371,7 +372,8 @@ def update(
 
     ``uncertainty=N``, as ``biomech update --uncertainty N``: an ensemble of N solves with
     the uncertain inputs drawn (``uncertainty_noise`` mm, ``uncertainty_gravity`` (low,
-    high) fractions, ``uncertainty_modulus_spread``, ``uncertainty_poisson`` (low, high),
+    high) fractions, ``uncertainty_modulus_spread``, ``uncertainty_tissue_modulus_spread``,
+    ``uncertainty_poisson`` (low, high),
     ``uncertainty_skull_gap`` mm, ``uncertainty_exposed_radius`` mm, ``uncertainty_tolerance`` mm,
     ``uncertainty_seed``;
     defaults and meaning in docs/registration.md, Uncertainty).

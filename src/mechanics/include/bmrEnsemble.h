@@ -36,6 +36,14 @@ struct EnsembleSettings
    *  brain is what the literature's ranges vary, e.g. Miller's 3 kPa within a
    *  factor of 2). 0: not perturbed. */
   double youngsModulusSpread = 0.3;
+  /** Young's moduli per tissue class: each class of the model's tissue
+   *  mixture (Model::tissueMixture: e.g. CSF, grey and white matter, the
+   *  tumour) scaled by its own factor exp(N(0, tissueModulusSpread^2)) on top
+   *  of the common one, and the materials mixed again from the classes
+   *  (RemixTissueModuli): how stiff the tissues are against each other, e.g.
+   *  grey against white matter or a tumour against the brain. 0: not
+   *  perturbed (the default; a model without a mixture cannot draw it). */
+  double tissueModulusSpread = 0.0;
   /** Poisson's ratio of the nearly incompressible tissues (the materials with
    *  nu > 0.4; the soft CSF keeps its own): shifted by one offset per member,
    *  so that the parenchyma's nu is uniform in [poissonLow, poissonHigh].
@@ -62,6 +70,8 @@ struct EnsembleDraw
   double modulusFactor = 1.0;
   double poissonOffset = 0.0;
   double skullOffset = 0.0; // mm, outward: a wider gap
+  /** Per class of the model's tissue mixture (empty: not drawn). */
+  std::vector<double> tissueFactors;
 };
 
 /** A member's draws and how its solve ended. */
@@ -78,8 +88,8 @@ struct EnsembleMember : EnsembleDraw
 constexpr double kIncompressibleFrom = 0.4;
 
 /** The members' draws in order from one seeded stream: per member the
- *  modulus, gravity, Poisson's ratio and gap, each only when its
- *  distribution is on. A caller that draws more per member (the
+ *  modulus, gravity, Poisson's ratio, gap and the classes' moduli, each only
+ *  when its distribution is on. A caller that draws more per member (the
  *  registration's noise and exposed radius) draws it from the same stream
  *  after Next(). */
 class EnsembleDrawer
@@ -87,8 +97,9 @@ class EnsembleDrawer
 public:
   /** `nominal`: the model whose largest Poisson's ratio the offsets are
    *  measured from; `contactGap`: its gap to the contact surface (mm), which
-   *  a narrower draw keeps at least a tenth of. Checks the settings, and
-   *  that a gap spread comes with a positive gap. */
+   *  a narrower draw keeps at least a tenth of. Checks the settings, that
+   *  a gap spread comes with a positive gap and a spread of the classes'
+   *  moduli with a tissue mixture. */
   EnsembleDrawer(const EnsembleSettings & settings, const Model & nominal, double contactGap);
 
   EnsembleDraw
@@ -109,15 +120,18 @@ private:
   EnsembleSettings                       m_Settings;
   double                                 m_NominalPoisson;
   double                                 m_ContactGap;
+  std::size_t                            m_TissueClasses;
   std::mt19937_64                        m_Random;
   std::normal_distribution<double>       m_Standard{ 0.0, 1.0 }; // times each spread
   std::uniform_real_distribution<double> m_Gravity;
   std::uniform_real_distribution<double> m_Poisson;
 };
 
-/** The model with the draw's materials (moduli scaled, the nearly
- *  incompressible tissues' Poisson's ratio shifted, within [0.4, 0.4999])
- *  and body acceleration (its factor times `gravity`). */
+/** The model with the draw's materials (moduli scaled by the common
+ *  factor, the nearly incompressible tissues' Poisson's ratio shifted,
+ *  within [0.4, 0.4999]) and body acceleration (its factor times `gravity`).
+ *  The classes' factors are not applied here: the mixing rule is the
+ *  material mapping's (RemixTissueModuli, before this). */
 Model
 DrawnModel(const Model & model, const EnsembleDraw & draw, const Vector3 & gravity);
 
@@ -126,7 +140,7 @@ DrawnModel(const Model & model, const EnsembleDraw & draw, const Vector3 & gravi
 inline bool
 KeepsMaterials(const EnsembleDraw & draw)
 {
-  return draw.modulusFactor == 1.0 && draw.poissonOffset == 0.0;
+  return draw.modulusFactor == 1.0 && draw.poissonOffset == 0.0 && draw.tissueFactors.empty();
 }
 
 /** `surface` moved `depth` (mm) towards the body along its area-weighted

@@ -237,6 +237,20 @@ enum class Discretization : std::uint8_t
   Meshless
 };
 
+/** What a model's materials were mixed from (MapMaterialsFromMemberships):
+ *  the tissue classes' materials (the tumour last) and, per cell and then per
+ *  meshless integration point, each class's share (rows of classes.size()
+ *  values summing to 1). Empty: the materials are not a mixture of classes
+ *  (a scene, a label map). The uncertainty ensemble draws a stiffness per
+ *  class from it (bmrEnsemble.h, RemixTissueModuli in bmrMaterialMapping.h). */
+struct TissueMixture
+{
+  std::vector<Material> classes;
+  std::vector<double>   shares;
+
+  bool Empty() const { return classes.empty(); }
+};
+
 struct Model
 {
   std::vector<Vector3>                        nodes; // mm
@@ -259,6 +273,7 @@ struct Model
 
   Discretization         discretization = Discretization::FiniteElement;
   MeshlessDiscretization meshless; // used when discretization == Meshless
+  TissueMixture          tissueMixture;
 
   /** Checks indices, cell shapes (no degenerate or inverted cell), materials and
    *  node-set references; throws bmr::Error naming the first offending object. */

@@ -106,7 +106,9 @@ CsfClassMaterial(const MaterialMappingSettings & settings);
  *  negative or non-finite membership; classMaterials
  *  whose count differs from the image's components; a tumour or resection
  *  mask on another grid; a membership image with no voxel inside the mask; a cell or point
- *  entirely outside the image (the model is not in the image's physical space). */
+ *  entirely outside the image (the model is not in the image's physical space).
+ *
+ *  Records the classes and each site's shares in model.tissueMixture. */
 void
 MapMaterialsFromMemberships(Model &                         model,
                             const ScalarVolume &            memberships,
@@ -114,6 +116,16 @@ MapMaterialsFromMemberships(Model &                         model,
                             const LabelVolume *             tumourMask = nullptr,
                             std::vector<std::string> *      warnings = nullptr,
                             const LabelVolume *             resectionMask = nullptr);
+
+/** The model's materials mixed again from its tissue mixture (which
+ *  MapMaterialsFromMemberships records: Model::tissueMixture) with each
+ *  class's Young's modulus scaled by its factor (one per class, the tumour
+ *  last), as MapMaterialsFromMemberships mixes them: factors of 1 give its
+ *  materials bit for bit. The mixture itself stays the nominal one. Throws
+ *  bmr::Error for a model without a mixture, a factor count or a shares'
+ *  size that does not fit, or a factor that is not positive. */
+void
+RemixTissueModuli(Model & model, const std::vector<double> & factors, int threads = 0);
 
 /** Sets the same outputs from a hard label map: each cell (or integration
  *  point) takes the material of the label covering most of its samples

@@ -43,7 +43,7 @@ namespace bmr
 {
 
 /** The bundle format's version: a bundle of another version is not read. */
-constexpr int kModelBundleVersion = 3; // 2: precomputation.bin; 3: the materials' laws (2 is still read)
+constexpr int kModelBundleVersion = 4; // 2: precomputation.bin; 3: the materials' laws; 4: the tissue mixture (2 and 3 are still read)
 constexpr int kOldestModelBundleVersion = 2;
 
 struct ModelBundle
