@@ -211,7 +211,8 @@ def other_kind_reading(runs, methods, p95, other_kind_scenes):
     if not lines:
         return []
     return ["* **Truths of another kind** (physics the registration does not model: partial CSF drainage, a bonded "
-            "skull base, grey and white matter of their own moduli; 95th percentile error in mm, the matched "
+            "skull base, grey and white matter of their own moduli, a Mooney-Rivlin law; 95th percentile error in mm, "
+            "the matched "
             "parietal-10mm scene's in brackets):", *lines]
 
 
@@ -527,7 +528,9 @@ def markdown(runs, machine, large_scenes, other_kind_scenes=()):
              "tissue below it still buoyed (weightless; Miga et al. 1999); `-bonded-base`: the skull-contact nodes "
              "beyond 100 mm below the craniotomy's centre bonded to the skull instead of sliding; `-grey-white`: grey "
              "and white matter of 1.39 and 1.90 kPa on three tissue classes (Budday et al. 2015), where the "
-             "registration has one parenchyma of 3 kPa. Peers: the module's ITK "
+             "registration has one parenchyma of 3 kPa; `-mooney-rivlin`: the parenchyma and tumour Mooney-Rivlin "
+             "with half the small-strain shear modulus on the second invariant (C01 / (C10 + C01) = 0.5, the same "
+             "small-strain moduli), where the registration is neo-Hookean. Peers: the module's ITK "
              "B-spline registration, elastix (affine then B-spline, Mattes mutual information, the parameter files "
              "in examples/elastix, not tuned on the truth) as Debian's binary and through itk-elastix from Python "
              "(the same files), and ANTs SyN through antspyx (`ants.registration(type_of_transform=\"SyN\")`, its "
