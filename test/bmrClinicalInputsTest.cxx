@@ -116,6 +116,17 @@ PrepareWriteReadAndUpdate(const bmr::RegistrationImage * image, const bmr::Regis
   bmr::WriteModelBundle(folder / "bundle", bundle);
   const bmr::ModelBundle read = bmr::ReadModelBundle(folder / "bundle");
   EXPECT_TRUE(read.model.pipelineModel->GetPrecomputation() != nullptr);
+  // The tissue mixture (the ensemble's per-class moduli) comes back whole.
+  const bmr::TissueMixture & written = bundle.model.pipelineModel->GetModel().tissueMixture;
+  const bmr::TissueMixture & readBack = read.model.pipelineModel->GetModel().tissueMixture;
+  EXPECT_FALSE(written.Empty());
+  EXPECT_EQ(readBack.shares, written.shares);
+  EXPECT_EQ(readBack.classes.size(), written.classes.size());
+  for (std::size_t k = 0; k < std::min(written.classes.size(), readBack.classes.size()); ++k)
+  {
+    EXPECT_EQ(readBack.classes[k].youngsModulus, written.classes[k].youngsModulus);
+    EXPECT_EQ(readBack.classes[k].name, written.classes[k].name);
+  }
   bmr::BrainShiftUpdateInputs inputs;
   inputs.preoperativeImage = read.preoperativeImage;
   inputs.intraoperative.sparse = sag;

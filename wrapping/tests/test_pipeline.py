@@ -495,7 +495,7 @@ def test_prepare_then_update_gives_the_one_call_registration(tmp_path, colin27):
     bundle = bmr.prepare(image, brain_mask=mask, output=tmp_path / "plan", **CRANIOTOMY)
     assert (tmp_path / "plan" / "manifest.json").exists()
     assert bundle.brain_model.csf_class["contrast"] == "t1" and bundle.brain_model.csf_class["class"] == 1
-    assert bundle.manifest["version"] == 3  # 2: with the solver's precomputation; 3: the materials' laws
+    assert bundle.manifest["version"] == 4  # 2: with the solver's precomputation; 3: the materials' laws; 4: the tissue mixture
     assert "precomputation.bin" in [entry["name"] for entry in bundle.manifest["files"]]
     assert "precompute" in bundle.manifest["prepare"]["seconds"]
     from_folder = bmr.update(tmp_path / "plan", sparse_points=points, sparse_displacements=displacements)
