@@ -417,7 +417,8 @@ TEST(Contact, ReportedNormalsChangeContinuouslyAcrossARidge)
 }
 
 // Contacts of one surface share its tree (an ensemble's members build it
-// once), and no other surface's: one with a vertex moved, the other body
+// once; the last one used serves the next contact of its surface, as a
+// gravity fit's solves follow each other), and no other surface's: one with a vertex moved, the other body
 // side or the other orientation measures its own distances.
 TEST(Contact, ContactsOfEqualSurfacesShareATreeAndOfOtherSurfacesDoNot)
 {
@@ -427,11 +428,17 @@ TEST(Contact, ContactsOfEqualSurfacesShareATreeAndOfOtherSurfacesDoNot)
   roof.triangles = { { 0, 2, 3 }, { 0, 3, 1 } }; // normals up, towards the body
   const std::vector<Vector3> reference = { Vector3(0.0, 0.0, 1.0) };
   const Vector3              above(1.0, 1.0, 2.0);
-  const RigidContact         first(roof, { 0 }, reference);
+  const std::uint64_t        builtBefore = RigidContact::TreesBuilt();
+  {
+    const RigidContact earlier(roof, { 0 }, reference); // gone before the next: its tree is kept as the last used
+  }
+  const RigidContact first(roof, { 0 }, reference);
+  EXPECT_EQ(RigidContact::TreesBuilt(), builtBefore + 1) << "the last tree used serves the next contact";
   ContactSurface             copy = roof;
   copy.name = "another name, the same surface";
   const RigidContact second(copy, { 0 }, reference);
   EXPECT_TRUE(second.SharesTreeWith(first));
+  EXPECT_EQ(RigidContact::TreesBuilt(), builtBefore + 1);
   EXPECT_EQ(second.SignedDistance(above), first.SignedDistance(above));
   EXPECT_DOUBLE_EQ(first.SignedDistance(above), 2.0);
 
@@ -455,6 +462,7 @@ TEST(Contact, ContactsOfEqualSurfacesShareATreeAndOfOtherSurfacesDoNot)
   const RigidContact fifth(flipped, { 0 }, reference);
   EXPECT_FALSE(fifth.SharesTreeWith(first));
   EXPECT_DOUBLE_EQ(fifth.SignedDistance(above), -2.0);
+  EXPECT_EQ(RigidContact::TreesBuilt(), builtBefore + 4);
 }
 
 // An ellipsoidal brain inside a closed rigid skull (contact offset `offset`),

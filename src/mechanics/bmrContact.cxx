@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <atomic>
 #include <cstring>
 #include <mutex>
 #include <utility>
@@ -275,15 +276,20 @@ SurfaceKey(const ContactSurface & surface)
 }
 } // namespace
 
+std::atomic<std::uint64_t> RigidContact::s_TreesBuilt{ 0 };
+
 std::shared_ptr<const RigidContact::Tree>
 RigidContact::SharedTree(const ContactSurface & surface)
 {
   // The trees of the contacts alive, by their surfaces' keys: a tree is the
   // costly part of a contact (Colin27's skull, 262k triangles: its edges
   // sorted, its normals, CGAL's AABB and k-d trees) and depends on the
-  // surface alone. Weak: a tree lives as long as a contact uses it.
+  // surface alone. Weak: a tree lives as long as a contact uses it, and the
+  // last one used a while longer, for the next solve of the same surface
+  // (a gravity fit's sizes, solved one after another).
   static std::mutex                                                    mutex;
   static std::vector<std::pair<std::uint64_t, std::weak_ptr<const Tree>>> trees;
+  static std::shared_ptr<const Tree>                                   lastUsed;
   const std::uint64_t key = SurfaceKey(surface);
   const auto          same = [&](const Tree & tree) {
     return tree.flipNormals == surface.flipNormals && tree.bodySide == surface.bodySide &&
@@ -297,6 +303,7 @@ RigidContact::SharedTree(const ContactSurface & surface)
     {
       if (const auto tree = entry.lock(); entryKey == key && tree && same(*tree))
       {
+        lastUsed = tree;
         return tree;
       }
     }
@@ -358,6 +365,8 @@ RigidContact::SharedTree(const ContactSurface & surface)
     std::make_unique<TriangleSurfaceTree>(tree.vertices, tree.corners, "contact surface '" + surface.name + "'");
   const std::lock_guard<std::mutex> lock(mutex);
   trees.emplace_back(key, made);
+  lastUsed = made;
+  ++s_TreesBuilt;
   return made;
 }
 

@@ -7,6 +7,8 @@
 #include "bmrClosestPoint.h"
 #include "bmrModel.h"
 
+#include <atomic>
+#include <cstdint>
 #include <memory>
 #include <vector>
 
@@ -18,7 +20,8 @@ class RigidContact
 public:
   /** Builds the AABB tree and pseudo-normals, or shares those of a contact
    *  alive with the same surface (vertices, triangles, orientation and body
-   *  side: an ensemble's members, a gravity fit's solves). Closed surfaces
+   *  side: an ensemble's members) or of the last contact made (a gravity
+   *  fit's solves, one after another). Closed surfaces
    *  are oriented outward; open ones keep their orientation (normals point
    *  outside). */
   RigidContact(const ContactSurface & surface, std::vector<Index> slaveNodes, const std::vector<Vector3> & reference);
@@ -67,6 +70,8 @@ public:
   bool IsClosed() const;
   /** Whether the two contacts share one tree (SharedTree: equal surfaces). */
   bool SharesTreeWith(const RigidContact & other) const { return m_Tree == other.m_Tree; }
+  /** Trees built so far in this process (the others were shared). */
+  static std::uint64_t TreesBuilt() { return s_TreesBuilt.load(); }
   const std::vector<Index> & SlaveNodes() const { return m_SlaveNodes; }
 
 private:
@@ -74,6 +79,7 @@ private:
   /** The tree of `surface`: a live contact's when one has the same surface, else a new one. */
   static std::shared_ptr<const Tree> SharedTree(const ContactSurface & surface);
   std::shared_ptr<const Tree> m_Tree; // immutable, shared
+  static std::atomic<std::uint64_t> s_TreesBuilt;
   std::vector<Index>     m_SlaveNodes;
   double                 m_Offset = 0.0;  // ContactSurface::offset (mm)
   std::vector<Vector3>   m_Reference;     // reference positions of slave nodes
