@@ -1,5 +1,6 @@
 #include "bmrContact.h"
 #include "bmrClosestPoint.h"
+#include "bmrFingerprint.h"
 
 #include <Eigen/Geometry>
 
@@ -7,7 +8,6 @@
 #include <cmath>
 #include <cstdint>
 #include <atomic>
-#include <cstring>
 #include <mutex>
 #include <utility>
 
@@ -254,25 +254,25 @@ ContactSurface::OutwardTriangles(bool * closedOut) const
 
 namespace
 {
-/** 64-bit FNV-1a over a surface's vertices, triangles, orientation and body side. */
+/** A fingerprint of a surface's vertices, triangles, orientation and body side. */
 std::uint64_t
 SurfaceKey(const ContactSurface & surface)
 {
-  std::uint64_t hash = 14695981039346656037ull;
-  const auto    add = [&](const void * data, std::size_t bytes) { // a word at a time, the tail zero-padded
-    const auto * byte = static_cast<const unsigned char *>(data);
-    for (std::size_t b = 0; b < bytes; b += sizeof(std::uint64_t))
+  Fingerprint key;
+  for (const Vector3 & vertex : surface.vertices)
+  {
+    key.Add(vertex);
+  }
+  for (const auto & triangle : surface.triangles)
+  {
+    for (const Index vertex : triangle)
     {
-      std::uint64_t word = 0;
-      std::memcpy(&word, byte + b, std::min(sizeof(word), bytes - b));
-      hash = (hash ^ word) * 1099511628211ull;
+      key.Add(vertex);
     }
-  };
-  add(surface.vertices.data(), surface.vertices.size() * sizeof(Vector3));
-  add(surface.triangles.data(), surface.triangles.size() * sizeof(surface.triangles.front()));
-  add(&surface.flipNormals, sizeof(surface.flipNormals));
-  add(&surface.bodySide, sizeof(surface.bodySide));
-  return hash;
+  }
+  key.Add(surface.flipNormals);
+  key.Add(surface.bodySide);
+  return key.Value();
 }
 } // namespace
 

@@ -5,6 +5,7 @@
 #include "bmrSolverImpl.h"
 
 #include "bmrBinaryStream.h"
+#include "bmrFingerprint.h"
 
 #include <omp.h>
 
@@ -20,30 +21,6 @@ namespace
 constexpr char        kPrecomputationMagic[8] = { 'B', 'M', 'R', 'P', 'R', 'E', 'C', 'O' };
 // 2: the materials' laws (the second-invariant moduli); 1 (every material neo-Hookean) is still read.
 constexpr std::uint32_t kPrecomputationVersion = 2;
-
-/** 64-bit FNV-1a over 64-bit words: each value of up to 8 bytes is one word. */
-class Fingerprint
-{
-public:
-  template <typename T>
-  void Add(const T & value)
-  {
-    static_assert(std::is_trivially_copyable_v<T> && sizeof(T) <= sizeof(std::uint64_t));
-    std::uint64_t word = 0;
-    std::memcpy(&word, &value, sizeof(T));
-    m_Hash = (m_Hash ^ word) * 1099511628211ull;
-  }
-  void Add(const Vector3 & point)
-  {
-    Add(point.x());
-    Add(point.y());
-    Add(point.z());
-  }
-  std::uint64_t Value() const { return m_Hash; }
-
-private:
-  std::uint64_t m_Hash = 14695981039346656037ull;
-};
 
 /** Throws the reader's error unless every index lies in [0, bound). */
 template <typename Container>
