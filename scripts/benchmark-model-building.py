@@ -233,10 +233,10 @@ def meshless_target_section(row, machine):
         "solve from 2,008 to 5,886 steps, since the tissue classes reach the points after the blocks are chosen "
         "(2026-11-28); a block test that also asks for one tissue class would coarsen about 1.5 % of the points "
         "(2026-11-29). Background cells of "
-        "5 mm instead of 4.25 mm (111,292 points) took 5,364 steps instead of 2,681 (2026-11-27); an MLS "
-        "dilatation of 1.8 or 1.6 instead of 2.0 (fewer neighbours a point) took 12.8 s in 2,176 steps and 14.8 s "
-        "in 2,873 steps (2026-11-29, accuracy not checked, not kept). The kernel's own rate and roofline: the "
-        "brain-sized meshless rows above.",
+        "5 mm instead of 4.25 mm (111,292 points) took 5,364 steps instead of 2,681 (2026-11-27). The MLS "
+        "dilatation of clouds made from images is 1.7 since 2026-12-07 (2.0 before; 1.7 gives about 20 neighbours "
+        "a point instead of 32 and fewer steps; 1.6 took more steps again, 1.5 does not cover the brain: "
+        "docs/model-building.md). The kernel's own rate and roofline: the brain-sized meshless rows above.",
     ]
 
 

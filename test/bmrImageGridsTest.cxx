@@ -280,6 +280,38 @@ TEST(ImageGridMeshless, CloudCoversTheBody)
   EXPECT_EQ(static_cast<std::size_t>(table.PointCount()), grid.model.meshless.integrationPoints.size());
 }
 
+// A cloud that the dilatation does not cover is made again at the fallback's,
+// with a warning; without a fallback it is an error naming the dilatation.
+TEST(ImageGridMeshless, UncoveredCloudFallsBackToTheLargerDilatation)
+{
+  const bmr::LabelVolume labels = MakeEllipsoidLabels();
+  bmr::ImageGridSettings settings = Settings(bmr::ImageGridKind::Meshless, 6.0);
+  EXPECT_EQ(settings.meshlessShapeFunctions.dilatation, 1.7);
+  settings.meshlessShapeFunctions.dilatation = 1.02;
+  settings.meshlessFallbackDilatation = 1.7;
+  std::vector<std::string> warnings;
+  const bmr::ImageGrid     grid = MakeGridFromLabels(labels, settings, &warnings);
+  EXPECT_EQ(grid.model.meshless.shapeFunctions.dilatation, 1.7);
+  const auto fellBack = std::count_if(warnings.begin(), warnings.end(), [](const std::string & warning) {
+    return warning.find("at MLS dilatation 1.02 does not cover the body") != std::string::npos &&
+           warning.find("with dilatation 1.7 instead") != std::string::npos;
+  });
+  EXPECT_EQ(fellBack, 1);
+  EXPECT_GE(grid.quality.minNeighboursPerPoint, 4.0);
+
+  settings.meshlessFallbackDilatation = 0.0;
+  try
+  {
+    MakeGridFromLabels(labels, settings);
+    ADD_FAILURE() << "no error at dilatation 1.02 without a fallback";
+  }
+  catch (const bmr::Error & error)
+  {
+    EXPECT_NE(std::string(error.what()).find("does not cover the body"), std::string::npos) << error.what();
+    EXPECT_NE(std::string(error.what()).find("dilatation (now 1.02)"), std::string::npos) << error.what();
+  }
+}
+
 TEST(ImageGridBadInput, ClearErrors)
 {
   auto expectError = [](const bmr::LabelVolume & labels, const bmr::ImageGridSettings & settings,

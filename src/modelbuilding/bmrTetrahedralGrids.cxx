@@ -215,6 +215,77 @@ MakeTetrahedralGrid(const Body & body, const ImageGridSettings & settings, std::
 // ----------------------------------------------------------------------------
 // Meshless point cloud
 
+namespace
+{
+/** The integration points of the cloud `result.model` over `region`, with its
+ *  shape functions at the settings' dilatation or, where that leaves an
+ *  integration point of a thin part uncovered, at the fallback's. */
+void
+IntegrateCloud(const BodyRegion & region, const ImageGridSettings & settings, ImageGrid & result,
+               std::vector<std::string> * warnings)
+{
+  Model & model = result.model;
+  MlsSettings mlsSettings = settings.meshlessShapeFunctions;
+  for (;;)
+  {
+    try
+    {
+      const MovingLeastSquares mls(model.nodes, mlsSettings);
+      IntegrationPoints        points =
+        MakeIntegrationPoints(region, mls, settings.meshlessIntegration, settings.threads);
+      if (points.positions.empty())
+      {
+        throw Error("no integration point lies inside the body");
+      }
+      // The supports the solver will use: widened where the points are sparser than the nodes.
+      const MovingLeastSquares covered(model.nodes, mlsSettings, points.positions);
+      const ShapeFunctionTable table = covered.Evaluate(points.positions, false, settings.threads, "integration point");
+      double minimum = std::numeric_limits<double>::max(), sum = 0.0;
+      for (Index p = 0; p < table.PointCount(); ++p)
+      {
+        const double neighbours = table.offsets[p + 1] - table.offsets[p];
+        minimum = std::min(minimum, neighbours);
+        sum += neighbours;
+      }
+      result.quality.minNeighboursPerPoint = minimum;
+      result.quality.meanNeighboursPerPoint = sum / table.PointCount();
+      double spacing = 0.0;
+      for (Index n = 0; n < mls.NodeCount(); ++n)
+        spacing += mls.NodalSpacing(n);
+      result.quality.meanEdgeLength = spacing / mls.NodeCount();
+      model.meshless.shapeFunctions = mlsSettings;
+      model.meshless.integrationPoints = std::move(points.positions);
+      model.meshless.integrationWeights = std::move(points.weights);
+      model.meshless.integrationMaterials = std::move(points.materials);
+      model.discretization = Discretization::Meshless;
+      break;
+    }
+    catch (const Error & error)
+    {
+      const double fallback = settings.meshlessFallbackDilatation;
+      if (fallback > mlsSettings.dilatation)
+      {
+        if (warnings)
+        {
+          warnings->push_back("grid: the meshless cloud of spacing " + Number(settings.elementSize) +
+                              " mm at MLS dilatation " + Number(mlsSettings.dilatation) +
+                              " does not cover the body (" + error.what() +
+                              "); made it with dilatation " + Number(fallback) +
+                              " instead (more neighbours a point: a slower solve).");
+        }
+        mlsSettings.dilatation = fallback;
+        continue;
+      }
+      throw Error(std::string("MakeGridFromLabels: the meshless point cloud of spacing ") +
+                  Number(settings.elementSize) + " mm does not cover the body: " + error.what() +
+                  " Increase meshlessShapeFunctions.dilatation (now " + Number(mlsSettings.dilatation) +
+                  ") or use a smaller element size.");
+    }
+  }
+}
+
+} // namespace
+
 ImageGrid
 MakeMeshlessGrid(const Body & body, const ImageGridSettings & settings, std::vector<std::string> * warnings)
 {
@@ -307,44 +378,7 @@ MakeMeshlessGrid(const Body & body, const ImageGridSettings & settings, std::vec
   for (std::size_t n = 0; n < surfaceNodes.size(); ++n)
     surface[n] = static_cast<Index>(n);
 
-  const MlsSettings & mlsSettings = settings.meshlessShapeFunctions;
-  try
-  {
-    const MovingLeastSquares mls(model.nodes, mlsSettings);
-    IntegrationPoints        points = MakeIntegrationPoints(region, mls, settings.meshlessIntegration, settings.threads);
-    if (points.positions.empty())
-    {
-      throw Error("no integration point lies inside the body");
-    }
-    // The supports the solver will use: widened where the points are sparser than the nodes.
-    const MovingLeastSquares covered(model.nodes, mlsSettings, points.positions);
-    const ShapeFunctionTable table = covered.Evaluate(points.positions, false, settings.threads, "integration point");
-    double minimum = std::numeric_limits<double>::max(), sum = 0.0;
-    for (Index p = 0; p < table.PointCount(); ++p)
-    {
-      const double neighbours = table.offsets[p + 1] - table.offsets[p];
-      minimum = std::min(minimum, neighbours);
-      sum += neighbours;
-    }
-    result.quality.minNeighboursPerPoint = minimum;
-    result.quality.meanNeighboursPerPoint = sum / table.PointCount();
-    double spacing = 0.0;
-    for (Index n = 0; n < mls.NodeCount(); ++n)
-      spacing += mls.NodalSpacing(n);
-    result.quality.meanEdgeLength = spacing / mls.NodeCount();
-    model.meshless.shapeFunctions = mlsSettings;
-    model.meshless.integrationPoints = std::move(points.positions);
-    model.meshless.integrationWeights = std::move(points.weights);
-    model.meshless.integrationMaterials = std::move(points.materials);
-    model.discretization = Discretization::Meshless;
-  }
-  catch (const Error & error)
-  {
-    throw Error(std::string("MakeGridFromLabels: the meshless point cloud of spacing ") + Number(h) +
-                " mm does not cover the body: " + error.what() +
-                " Increase meshlessShapeFunctions.dilatation (now " + Number(mlsSettings.dilatation) +
-                ") or use a smaller element size.");
-  }
+  IntegrateCloud(region, settings, result, warnings);
   // The tetrahedra stay with the grid as the body's description (surfaces, rasterisation).
   result.meshlessBody = tetrahedra.model;
   return result;

@@ -68,15 +68,24 @@ struct ImageGridSettings
   std::uint32_t seed = 1;
 
   // Meshless.
-  /** MLS shape functions; the default dilatation here is 2.0 (the core's is
-   *  1.6): a cloud of grid nodes plus surface-mesh nodes leaves integration
-   *  points in thin parts of a brain (gyri, brain stem) with 4 nearly coplanar
-   *  neighbours at 1.6 (Colin27 at 7 mm fails); 2.0 gives at least 9. */
+  /** MLS shape functions; the default dilatation here is 1.7 (the core's is
+   *  1.6, where a cloud of grid nodes plus surface-mesh nodes leaves
+   *  integration points in thin parts of a brain with 4 nearly coplanar
+   *  neighbours: Colin27 at 7 mm fails). Fewer neighbours than the 2.0 used
+   *  before both cheapen each step and condition the stiffness better:
+   *  Colin27's 5 mm cloud (the update benchmark's bundle, 2 threads,
+   *  2026-12-07) solves in 1,062 steps and 6.5 s instead of 1,594 steps and
+   *  13.5 s, 0.03 mm (p95) from the 2.0 solution (docs/model-building.md). */
   MlsSettings meshlessShapeFunctions = [] {
     MlsSettings shapeFunctions;
-    shapeFunctions.dilatation = 2.0;
+    shapeFunctions.dilatation = 1.7;
     return shapeFunctions;
   }();
+  /** Where the cloud does not cover the body at that dilatation (a point
+   *  with fewer than 4 neighbours, or nearly coplanar ones, in a thin part),
+   *  it is made again at this one, with a warning; at most the dilatation
+   *  itself (e.g. 0): an error instead. */
+  double meshlessFallbackDilatation = 2.0;
   /** Background integration grid: cells of the median nodal spacing, 2x2x2
    *  Gauss points, and here no coarse interior blocks: the tissue classes
    *  reach the points from the image after the points are made, so the
