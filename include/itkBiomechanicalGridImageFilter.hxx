@@ -131,7 +131,8 @@ BiomechanicalGridImageFilter<TLabelImage>::PrintSelf(std::ostream & os, Indent i
   os << indent << "CellRadiusEdgeRatio: " << m_Settings.cellRadiusEdgeRatio << std::endl;
   os << indent << "Optimise: " << m_Settings.optimise << std::endl;
   os << indent << "Seed: " << m_Settings.seed << std::endl;
-  os << indent << "MLS dilatation: " << m_Settings.meshlessShapeFunctions.dilatation << std::endl;
+  os << indent << "MLS dilatation: " << m_Settings.meshlessShapeFunctions.dilatation
+     << " (where it does not cover the body: " << m_Settings.meshlessFallbackDilatation << ")" << std::endl;
   os << indent << "Nodes: " << m_Grid.model.nodes.size() << ", cells: " << m_Grid.model.cells.size() << std::endl;
 }
 

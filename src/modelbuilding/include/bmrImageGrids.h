@@ -71,11 +71,10 @@ struct ImageGridSettings
   /** MLS shape functions; the default dilatation here is 1.7 (the core's is
    *  1.6, where a cloud of grid nodes plus surface-mesh nodes leaves
    *  integration points in thin parts of a brain with 4 nearly coplanar
-   *  neighbours: Colin27 at 7 mm fails). Fewer neighbours than the 2.0 used
-   *  before both cheapen each step and condition the stiffness better:
-   *  Colin27's 5 mm cloud (the update benchmark's bundle, 2 threads,
-   *  2026-12-07) solves in 1,062 steps and 6.5 s instead of 1,594 steps and
-   *  13.5 s, 0.03 mm (p95) from the 2.0 solution (docs/model-building.md). */
+   *  neighbours: Colin27 at 7 mm fails). About 20 neighbours a point
+   *  instead of the 32 of the 2.0 used before halve a step's cost; the
+   *  solves measured took 0.7 to 1.2 times the steps and 0.4 to 0.9 times
+   *  the time, equally accurate (docs/model-building.md). */
   MlsSettings meshlessShapeFunctions = [] {
     MlsSettings shapeFunctions;
     shapeFunctions.dilatation = 1.7;
