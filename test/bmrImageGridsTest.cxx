@@ -310,6 +310,19 @@ TEST(ImageGridMeshless, UncoveredCloudFallsBackToTheLargerDilatation)
     EXPECT_NE(std::string(error.what()).find("does not cover the body"), std::string::npos) << error.what();
     EXPECT_NE(std::string(error.what()).find("dilatation (now 1.02)"), std::string::npos) << error.what();
   }
+  // A dilatation out of range is the settings' error: named, not replaced by the fallback.
+  settings.meshlessShapeFunctions.dilatation = 0.5;
+  settings.meshlessFallbackDilatation = 2.0;
+  try
+  {
+    MakeGridFromLabels(labels, settings);
+    ADD_FAILURE() << "no error at dilatation 0.5";
+  }
+  catch (const bmr::Error & error)
+  {
+    EXPECT_NE(std::string(error.what()).find("MLS dilatation 0.5 is out of range"), std::string::npos)
+      << error.what();
+  }
 }
 
 TEST(ImageGridBadInput, ClearErrors)

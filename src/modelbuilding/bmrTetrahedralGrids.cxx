@@ -228,10 +228,11 @@ IntegrateCloud(const BodyRegion & region, const ImageGridSettings & settings, Im
   MlsSettings mlsSettings = settings.meshlessShapeFunctions;
   for (;;)
   {
+    // Out-of-range settings are the caller's error, not the cloud's: no fallback.
+    const MovingLeastSquares mls(model.nodes, mlsSettings);
     try
     {
-      const MovingLeastSquares mls(model.nodes, mlsSettings);
-      IntegrationPoints        points =
+      IntegrationPoints points =
         MakeIntegrationPoints(region, mls, settings.meshlessIntegration, settings.threads);
       if (points.positions.empty())
       {
