@@ -115,8 +115,10 @@ def main():
                             "-o", folder], check=True, env=environment)
             with open(os.path.join(folder, "registration-report.json")) as handle:
                 report = json.load(handle)
-            steps[kind] = {"steps": report["solve"]["steps"], "dofs": report["model"]["dofs"],
-                           "seconds": report["solve"]["seconds"], "converged": report["solve"]["converged"]}
+            solve = report["solve"]
+            steps[kind] = {"steps": solve["steps"], "dofs": report["model"]["dofs"], "seconds": solve["seconds"],
+                           "converged": solve["converged"], "lowest": solve["lowest_eigenvalue"],
+                           "contact": solve["contact_nodes"]}
         rows.append((name, steps))
     load_after = os.getloadavg()[0]
 
@@ -127,17 +129,24 @@ def main():
         "skull contact, 2 threads). Machine: %s, %d cores, load average %.2f before and %.2f after; GOMP_SPINCOUNT=%s; "
         "measured %s UTC." % (DEPTH, platform.machine(), os.cpu_count(), load_before, load_after,
                               environment["GOMP_SPINCOUNT"], time.strftime("%Y-%m-%d %H:%M", time.gmtime())), "",
-        "| brain | grid | DOF | steps | solve s | steps / hexahedra's | target | converged |",
-        "|---|---|---|---|---|---|---|---|"]
+        "The steps of dynamic relaxation grow as the inverse square root of the lowest eigenvalue of `M^-1 K` "
+        "(the masses put the largest near 2.3 on every grid): the column *sqrt(lowest of the hexahedra / lowest)* is "
+        "the step ratio that conditioning alone predicts, from the damping's final estimate (the report's "
+        "`lowest_eigenvalue`); contact nodes: nodes on the skull at the end.", "",
+        "| brain | grid | DOF | steps | solve s | steps / hexahedra's | target | lowest eigenvalue | "
+        "sqrt(lowest of the hexahedra / lowest) | contact nodes | converged |",
+        "|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, steps in rows:
         hexahedra = steps["hexahedra"]["steps"]
+        hexahedra_lowest = steps["hexahedra"]["lowest"]
         for kind, size in GRIDS:
             entry = steps[kind]
             ratio = entry["steps"] / hexahedra
             verdict = "" if kind == "hexahedra" else (
                 "<= %.1f: **met**" % TARGET if ratio <= TARGET else "<= %.1f: **missed** by %.2f" % (TARGET, ratio - TARGET))
-            lines.append("| %s | %s %g mm | %s | %d | %.2f | %.2f | %s | %s |" % (
+            lines.append("| %s | %s %g mm | %s | %d | %.2f | %.2f | %s | %.3g | %.2f | %d | %s |" % (
                 name, kind, size, format(entry["dofs"], ","), entry["steps"], entry["seconds"], ratio, verdict,
+                entry["lowest"], (hexahedra_lowest / entry["lowest"]) ** 0.5, entry["contact"],
                 "yes" if entry["converged"] else "**no**"))
     write_section(arguments.benchmarks, "real-brain-steps", lines)
     print("\n".join(lines))

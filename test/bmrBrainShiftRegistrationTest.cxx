@@ -502,6 +502,10 @@ TEST_F(RegisterCommandTest, SparseDisplacementsOnColin27)
   const json report = json::parse(bmr::test::ReadText(output / "registration-report.json"));
   EXPECT_TRUE(report["solve"]["converged"].get<bool>());
   EXPECT_LE(report["solve"]["estimated_error_mm"].get<double>(), 0.01);
+  // The damping's lowest-eigenvalue estimate of M^-1 K: positive and below
+  // the largest, which the masses put at (2 safety_factor)^2 / 1.1 = 2.33.
+  EXPECT_GT(report["solve"]["lowest_eigenvalue"].get<double>(), 0.0);
+  EXPECT_LT(report["solve"]["lowest_eigenvalue"].get<double>(), 2.33);
   EXPECT_LE(report["fit"]["max_residual_mm"].get<double>(), 0.1);
   EXPECT_EQ(report["loads"]["used"].get<int>(), 61); // every point of the CSV lies on the brain surface
   // The CSV's sag peaks at 5 mm; the loaded nodes take the interpolated values.

@@ -672,6 +672,7 @@ TEST_F(SceneTest, ReportHoldsEveryResultField)
   result.wallSeconds = 0.75;
   result.estimatedError = 0.125;
   result.convergenceRate = 0.999;
+  result.lowestEigenvalue = 2.5e-5;
   result.maxDisplacement = 1.0;
   result.strainEnergy = 2e-6;
   result.hourglassEnergy = 3e-9;
@@ -693,6 +694,7 @@ TEST_F(SceneTest, ReportHoldsEveryResultField)
   EXPECT_EQ(report["wall_seconds"], 0.75);
   EXPECT_EQ(report["estimated_error_mm"], 0.125);
   EXPECT_EQ(report["convergence_rate"], 0.999);
+  EXPECT_EQ(report["lowest_eigenvalue"], 2.5e-5);
   EXPECT_EQ(report["max_displacement_mm"], 1.0);
   EXPECT_EQ(report["strain_energy_J"], 2e-6);
   EXPECT_EQ(report["hourglass_energy_J"], 3e-9);

@@ -175,6 +175,7 @@ MakeReportJson(const Scene & scene, const SolveResult & result, const std::strin
   report["parts"] = json::parse(MakeSolvePartsJson(result));
   report["estimated_error_mm"] = result.estimatedError;
   report["convergence_rate"] = result.convergenceRate;
+  report["lowest_eigenvalue"] = result.lowestEigenvalue;
   report["restarts"] = result.restarts;
   report["max_displacement_mm"] = result.maxDisplacement;
   report["strain_energy_J"] = result.strainEnergy;

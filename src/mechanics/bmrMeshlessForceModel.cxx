@@ -264,7 +264,8 @@ MeshlessForceModel::AddPointForces(Index first, Index last)
     const Lanes column[3] = { { stress[0][local], stress[3][local], stress[6][local], 0.0 },
                               { stress[1][local], stress[4][local], stress[7][local], 0.0 },
                               { stress[2][local], stress[5][local], stress[8][local], 0.0 } };
-    for (Index k = m_KernelOffsets[q]; k < m_KernelOffsets[q + 1]; ++k)
+    const Index end = m_KernelOffsets[q + 1]; // a local: the stores below may alias any member for GCC
+    for (Index k = m_KernelOffsets[q]; k < end; ++k)
     {
       double *       fI = paddedF + 4 * static_cast<std::size_t>(nodes[k]);
       const Lanes    g = LoadGradient(gradients + 3 * static_cast<std::size_t>(k));

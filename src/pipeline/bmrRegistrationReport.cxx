@@ -161,6 +161,7 @@ RegistrationReportJson(const BrainShiftRegistrationResult & result, const BrainS
                       { "estimated_error_mm", solve.estimatedError },
                       { "tolerance_mm", settings.solver.tolerance },
                       { "restarts", solve.restarts },
+                      { "lowest_eigenvalue", solve.lowestEigenvalue },
                       { "warm_started", solve.warmStarted },
                       { "max_displacement_mm", solve.maxDisplacement },
                       { "contact_nodes", solve.contactNodes },
